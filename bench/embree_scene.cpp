@@ -1,0 +1,1 @@
+// placeholder: the Embree baseline adapter (issue 3) goes here.

@@ -1,0 +1,67 @@
+// slimrt input meshes: PolyMesh, the loaders and the procedural scenes.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "slimrt/error.h"
+#include "slimrt/math.h"
+
+namespace slim {
+
+// A polygon mesh exactly as its author made it: polygons are kept (not triangulated).
+// Face f has face_sizes[f] >= 3 corners, stored consecutively in face_indices.
+struct PolyMesh {
+  std::string name;                     // file name or procedural scene name
+  std::vector<Vec3f> positions;         // float3 positions
+  std::vector<uint32_t> face_sizes;     // corners per face
+  std::vector<uint32_t> face_indices;   // corner -> position index, all faces concatenated
+  // Optional attributes. normals/uvs are indexed per corner through normal_indices/uv_indices
+  // (parallel to face_indices, as OBJ's v/t/n). If an index array is empty but the attribute array
+  // has one entry per position, the attribute is per vertex (indexed by face_indices).
+  std::vector<Vec3f> normals;
+  std::vector<uint32_t> normal_indices;
+  std::vector<Vec2f> uvs;
+  std::vector<uint32_t> uv_indices;
+  // Optional per-face object id (OBJ 'o'/'g' groups, glTF meshes); empty means all 0.
+  std::vector<uint32_t> face_object;
+  std::vector<std::string> object_names;
+
+  size_t face_count() const { return face_sizes.size(); }
+  size_t vertex_count() const { return positions.size(); }
+  // Triangles after fan triangulation: sum over faces of (size - 2).
+  uint64_t fan_triangle_count() const;
+  // Prefix sums of face_sizes (face_count()+1 entries): face f's corners are
+  // face_indices[offsets[f] .. offsets[f+1]).
+  std::vector<uint64_t> face_offsets() const;
+  Box3f bounds() const;  // over finite positions only
+};
+
+// Throws slim::Error (naming the mesh, the face and the problem) if the mesh is malformed:
+// fewer than 3 corners in a face, an index out of range, array sizes that do not agree.
+// NaN/Inf positions are not an error here (see MeshSummary::nonfinite_vertices).
+void check_mesh(const PolyMesh& mesh);
+
+struct MeshSummary {
+  uint64_t vertices = 0, faces = 0, triangles = 0, quads = 0, ngons = 0;
+  uint64_t fan_triangles = 0;       // after fan triangulation
+  uint64_t degenerate_faces = 0;    // faces with zero area or a repeated index
+  uint64_t nonfinite_vertices = 0;  // NaN/Inf positions (faces using them are skipped at build)
+  Box3f bounds;
+};
+MeshSummary summarize(const PolyMesh& mesh);
+
+// Loads a mesh file (.obj, .ply, .gltf, .glb, any of them with .xz) or makes a procedural scene
+// ("terrain:N", "torus:N", "canyon:N"). Throws slim::Error with file, line or byte offset and
+// the reason on malformed input; the result passes check_mesh().
+PolyMesh load(const std::string& path_or_scene);
+
+// True if the name is a procedural scene name (kind:N).
+bool is_procedural(const std::string& name);
+// Procedural scenes (BENCHMARK.md): deterministic in (n, seed), all quads.
+PolyMesh make_terrain(int n, uint32_t seed = 1);  // n x n quads heightfield, fractal noise
+PolyMesh make_torus(int n, uint32_t seed = 1);    // n x n/2 quads displaced torus (closed)
+PolyMesh make_canyon(int n, uint32_t seed = 1);   // n x n quads, steep ridged noise
+
+}  // namespace slim

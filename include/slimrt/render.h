@@ -1,0 +1,146 @@
+// slimrt rendering: the benchmark camera, the diffuse path tracer (BENCHMARK.md workloads 1 and 2),
+// debug shadings and images. The path tracer is a template over any "tracer" with
+//   slim::Hit intersect(const slim::Ray&) const;
+// so that slimrt scenes and the Embree baseline run exactly the same rays.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "slimrt/math.h"
+#include "slimrt/scene.h"
+
+namespace slim {
+
+// Pinhole camera. Rays start at `eye`; pixel (x, y) maps to eye + dir00 + du * (x+0.5) + dv * (y+0.5).
+struct Camera {
+  Vec3f eye;
+  Vec3f dir00;  // direction to the top-left image corner
+  Vec3f du, dv; // per-pixel steps
+  int width = 1024, height = 1024;
+};
+
+// The benchmark camera: looks at the box from a fixed direction (from +x,+y,+z-ish, z or y up
+// chosen by the box's flattest axis) and frames the whole box.
+Camera frame_box(const Box3f& box, int width, int height);
+
+SLIM_INLINE Ray camera_ray(const Camera& c, float px, float py) {
+  Ray r;
+  r.org = c.eye;
+  r.dir = normalize(c.dir00 + c.du * px + c.dv * py);
+  r.tnear = 0.0f;
+  r.tfar = kInf;
+  return r;
+}
+
+// Small, fast, deterministic per-pixel random numbers (PCG32).
+struct Rng {
+  uint64_t state;
+  explicit Rng(uint64_t seed, uint64_t stream = 0) : state(0) {
+    inc = (stream << 1u) | 1u;
+    next();
+    state += seed;
+    next();
+  }
+  uint32_t next() {
+    uint64_t old = state;
+    state = old * 6364136223846793005ULL + inc;
+    uint32_t xorshifted = uint32_t(((old >> 18u) ^ old) >> 27u);
+    uint32_t rot = uint32_t(old >> 59u);
+    return (xorshifted >> rot) | (xorshifted << ((32 - rot) & 31));
+  }
+  float uniform() { return float(next() >> 8) * (1.0f / 16777216.0f); }  // [0,1)
+  uint64_t inc;
+};
+
+// Orthonormal basis around n (Duff et al. 2017).
+SLIM_INLINE void onb(Vec3f n, Vec3f& t, Vec3f& b) {
+  float s = std::copysign(1.0f, n.z);
+  float a = -1.0f / (s + n.z);
+  float c = n.x * n.y * a;
+  t = {1.0f + s * n.x * n.x * a, s * c, -s * n.x};
+  b = {c, s + n.y * n.y * a, -n.y};
+}
+
+// Scale used to offset secondary ray origins off the surface they start on.
+SLIM_INLINE float ray_offset_scale(const Box3f& box) {
+  return 2e-5f * std::max(reduce_max(abs(box.lo)), reduce_max(abs(box.hi)));
+}
+
+struct PathResult {
+  Vec3f radiance;
+  uint32_t rays = 0;  // rays traced for this path (primary + bounces)
+  Hit primary;        // the primary hit
+};
+
+// BENCHMARK.md workload 2: a primary ray and up to `max_bounces` cosine-weighted diffuse bounces,
+// albedo 0.7, lit by a white-blue sky; every ray traced is counted.
+template <class Tracer>
+PathResult trace_path(const Tracer& tracer, Ray ray, Rng& rng, int max_bounces, float offset) {
+  PathResult res;
+  Vec3f throughput(1.0f);
+  for (int bounce = 0; bounce <= max_bounces; ++bounce) {
+    Hit h = tracer.intersect(ray);
+    res.rays++;
+    if (bounce == 0) res.primary = h;
+    if (!h.valid()) {
+      float up = 0.5f + 0.5f * ray.dir.z;
+      Vec3f sky = Vec3f(1.0f) * (1.0f - up) + Vec3f(0.5f, 0.7f, 1.0f) * up;
+      res.radiance += throughput * sky;
+      break;
+    }
+    if (bounce == max_bounces) break;
+    Vec3f n = h.Ng;
+    float len = length(n);
+    if (!(len > 0.0f)) break;
+    n = n * (1.0f / len);
+    if (dot(n, ray.dir) > 0.0f) n = -n;
+    Vec3f p = ray.org + ray.dir * h.t;
+    float eps = offset + 1e-6f * reduce_max(abs(p));
+    Vec3f t, b;
+    onb(n, t, b);
+    float r1 = rng.uniform(), r2 = rng.uniform();
+    float phi = 6.28318530718f * r1;
+    float sr = std::sqrt(r2);
+    Vec3f d = t * (std::cos(phi) * sr) + b * (std::sin(phi) * sr) + n * std::sqrt(std::max(0.0f, 1.0f - r2));
+    ray.org = p + n * eps;
+    ray.dir = normalize(d);
+    ray.tnear = 0.0f;
+    ray.tfar = kInf;
+    throughput = throughput * 0.7f;
+  }
+  return res;
+}
+
+// Per-pixel RNG seed used by the renderer and the benchmark (deterministic).
+SLIM_INLINE uint64_t pixel_seed(int x, int y, int sample) {
+  return (uint64_t(uint32_t(y)) << 32 | uint32_t(x)) * 0x9E3779B97F4A7C15ULL + uint64_t(sample);
+}
+
+enum class Shade { Diffuse, Normals, Kind };
+
+struct RenderOptions {
+  int width = 1024, height = 1024;
+  int spp = 1;
+  int max_bounces = 8;
+  Shade shade = Shade::Diffuse;
+  int threads = 0;        // 0 = all cores
+  bool progress = false;  // progress bar on stderr
+};
+
+// Linear RGB float image, row-major, top row first.
+struct Image {
+  int width = 0, height = 0;
+  std::vector<float> rgb;  // 3 floats per pixel
+};
+
+// Renders the scene with the camera, tiles spread over the threads.
+Image render(const Scene& scene, const Camera& cam, const RenderOptions& opt);
+// Writes PNG (8-bit sRGB) or EXR (float) by the file extension; throws slim::Error otherwise.
+void write_image(const Image& img, const std::string& path);
+// PSNR in dB of b against a (both tone-mapped to 8-bit sRGB as in the PNG); +inf if identical.
+double psnr(const Image& a, const Image& b);
+
+}  // namespace slim

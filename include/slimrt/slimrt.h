@@ -1,0 +1,8 @@
+// slimrt: compact CPU ray tracing of huge triangle and quad meshes. Umbrella header.
+#pragma once
+
+#include "slimrt/error.h"
+#include "slimrt/math.h"
+#include "slimrt/mesh.h"
+#include "slimrt/render.h"
+#include "slimrt/scene.h"

@@ -1,0 +1,123 @@
+// A scene that is one BVH8 over the blocks of one leaf format: the common case for every format.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "api/scene_impl.h"
+#include "bvh/build.h"
+#include "bvh/bvh8.h"
+#include "bvh/traverse.h"
+
+namespace slim {
+
+// Order-independent fingerprint of a multiset of 64-bit primitive keys: validate() compares the
+// keys found in the leaves with the keys of the source primitives (each exactly once).
+struct Fingerprint {
+  uint64_t count = 0, sum = 0, sum_sq = 0, xor_all = 0;
+  void add(uint64_t k) {
+    count++;
+    sum += k;
+    sum_sq += k * k;
+    xor_all ^= k * 0x9E3779B97F4A7C15ULL;
+  }
+  bool operator==(const Fingerprint& o) const {
+    return count == o.count && sum == o.sum && sum_sq == o.sum_sq && xor_all == o.xor_all;
+  }
+};
+
+inline NodeKind node_kind(Bvh b) {
+  switch (b) {
+    case Bvh::Bvh8: return NodeKind::Bvh8;
+    case Bvh::Quantized8: return NodeKind::QBvh8;
+    default: return NodeKind::CompressedLeaf;
+  }
+}
+
+template <class Leaf>
+class BvhScene : public Scene::Impl {
+ public:
+  Bvh8 bvh;
+  typename Leaf::Context ctx{};
+  Fingerprint expected;  // of the source primitives
+  std::shared_ptr<const void> keepalive;  // data the context points into (counted in mem)
+
+  void intersect(TravRay& ray, HitRecord& hit) const override {
+    NoStats st;
+    traverse_bvh8<Leaf, false>(bvh, ctx, ray, hit, st);
+  }
+  bool occluded(TravRay& ray) const override {
+    NoStats st;
+    HitRecord h;
+    return traverse_bvh8<Leaf, true>(bvh, ctx, ray, h, st);
+  }
+  void intersect_counted(TravRay& ray, HitRecord& hit, TraversalCounters& c) const override {
+    CountStats st{&c};
+    traverse_bvh8<Leaf, false>(bvh, ctx, ray, hit, st);
+  }
+  bool validate(std::string* why) const override {
+    Fingerprint got;
+    auto leaf = [&](const uint8_t* block, Box3f& bounds, std::string*) {
+      Leaf::visit(ctx, block, [&](const Box3f& b, uint64_t key) {
+        bounds.extend(b);
+        got.add(key);
+      });
+      return true;
+    };
+    if (!validate_bvh8(bvh, leaf, why)) return false;
+    if (!(got == expected)) {
+      if (why)
+        *why = "primitives in the leaves (" + std::to_string(got.count) +
+               ") differ from the source primitives (" + std::to_string(expected.count) +
+               "): some missing, duplicated or altered";
+      return false;
+    }
+    return true;
+  }
+
+  // Builds the BVH over `prim_count` primitives of `src` (Leaf::encode, Leaf::source_key and
+  // Leaf::source_bounds read it), fills bvh, expected, bounds and the BVH part of stats/mem.
+  template <class Source>
+  void build(const Source& src, uint32_t prim_count, const BuildOptions& opt) {
+    std::vector<PrimRef> refs(prim_count);
+    for (uint32_t i = 0; i < prim_count; ++i) {
+      refs[i] = {Leaf::source_bounds(src, i), i};
+      expected.add(Leaf::source_key(src, i));
+    }
+    Bvh2BuildConfig cfg;
+    cfg.bins = opt.sah_bins;
+    cfg.max_leaf_size = std::max<uint32_t>(1, std::min<uint32_t>(opt.max_leaf_size, Leaf::kBlockPrims * kMaxLeafBlocks));
+    cfg.block_prims = Leaf::kBlockPrims;
+    cfg.threads = opt.threads;
+    Bvh2 b2 = build_bvh2(std::move(refs), cfg);
+    LeafEncoder enc;
+    enc.block_prims = Leaf::kBlockPrims;
+    enc.block_bytes = Leaf::kBlockBytes;
+    enc.encode = [&](const uint32_t* prims, uint32_t n, uint8_t* out) {
+      Leaf::encode(src, prims, n, out);
+    };
+    bvh = collapse_bvh8(b2, node_kind(opt.bvh), enc);
+    bounds = bvh.bounds;
+    mem.bvh_bytes = bvh.node_bytes + bvh.multileaf_bytes;
+    mem.geometry_bytes += bvh.leaf_data_bytes;
+    stats.primitives = prim_count;
+    const Bvh8Stats& s = bvh.stats;
+    auto& d = stats.details;
+    d.emplace_back("bvh2_depth", double(b2.depth));
+    d.emplace_back("bvh8_depth", double(s.depth));
+    d.emplace_back("node8_count", double(s.node8));
+    d.emplace_back("qnode8_count", double(s.qnode8));
+    d.emplace_back("multileaf_count", double(s.multileaf));
+    d.emplace_back("leaf_count", double(s.leaves));
+    d.emplace_back("leaves_in_multileaf", double(s.leaves_in_multileaf));
+    d.emplace_back("leaf_blocks", double(s.leaf_blocks));
+    d.emplace_back("leaf_fill", s.leaf_fill);
+    d.emplace_back("sah_cost", s.sah_cost);
+    d.emplace_back("node_bytes", double(bvh.node_bytes));
+    d.emplace_back("multileaf_bytes", double(bvh.multileaf_bytes));
+    d.emplace_back("leaf_data_bytes", double(bvh.leaf_data_bytes));
+  }
+};
+
+}  // namespace slim

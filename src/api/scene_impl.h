@@ -1,0 +1,31 @@
+// The inside of slim::Scene: one implementation per geometry format behind a small virtual
+// interface (one indirect call per query).
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/ray.h"
+#include "slimrt/scene.h"
+
+namespace slim {
+
+struct Scene::Impl {
+  BuildOptions opt;
+  SceneStats stats;
+  MemoryStats mem;
+  Box3f bounds;
+
+  virtual ~Impl() = default;
+  virtual void intersect(TravRay& ray, HitRecord& hit) const = 0;
+  virtual bool occluded(TravRay& ray) const = 0;
+  virtual void intersect_counted(TravRay& ray, HitRecord& hit, TraversalCounters& c) const = 0;
+  virtual bool validate(std::string* why) const = 0;
+};
+
+// Format builders (one per file under api/). Each fills stats/mem/bounds except build time.
+std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMesh*>& meshes,
+                                                  const BuildOptions& opt);
+
+}  // namespace slim

@@ -1,0 +1,43 @@
+// Triangle formats: bvh8-tri4v/tri4i, qbvh8-tri4v/tri4i, clbvh-tri4v/tri4i.
+#include "api/bvh_scene.h"
+#include "mesh/triangulate.h"
+#include "prim/triangles.h"
+
+namespace slim {
+
+namespace {
+
+template <class Leaf>
+std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& opt) {
+  auto s = std::make_unique<BvhScene<Leaf>>();
+  TriangleSource src{tm.vertices.data(), tm.tris.data(), tm.geom_ids.data(), tm.prim_ids.data()};
+  s->build(src, uint32_t(tm.tri_count()), opt);
+  if constexpr (std::is_same_v<Leaf, Tri4i>) {
+    // The scene keeps the shared vertex array (geometry); the index data lives in the leaves.
+    auto verts = std::make_shared<std::vector<Vec3f>>(std::move(tm.vertices));
+    verts->shrink_to_fit();
+    s->ctx.vertices = verts->data();
+    s->mem.geometry_bytes += verts->size() * sizeof(Vec3f);
+    s->keepalive = verts;
+  }
+  return s;
+}
+
+}  // namespace
+
+std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMesh*>& meshes,
+                                                  const BuildOptions& opt) {
+  TriangleMesh tm = triangulate_fan(meshes);
+  std::unique_ptr<Scene::Impl> s;
+  if (opt.geometry == Geometry::IndexedTriangles)
+    s = build_with<Tri4i>(tm, opt);
+  else
+    s = build_with<Tri4v>(tm, opt);
+  s->stats.input_faces = tm.input_faces;
+  s->stats.triangles = tm.input_triangles;
+  s->stats.skipped_faces = tm.skipped_faces;
+  s->mem.triangles = tm.input_triangles;
+  return s;
+}
+
+}  // namespace slim

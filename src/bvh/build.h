@@ -1,0 +1,44 @@
+// Binned SAH builder (top-down, parallel with TBB) producing a binary BVH over primitive boxes.
+// The builder knows nothing of primitives: it sees boxes and returns a permutation of their ids
+// plus a BVH2 whose leaves are ranges of that permutation (madmann91/bvh style: data apart from
+// algorithms). bvh8.h collapses the result into 8-wide nodes.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "slimrt/math.h"
+
+namespace slim {
+
+struct PrimRef {
+  Box3f box;
+  uint32_t id;  // index of the primitive in its source
+};
+
+struct Bvh2Node {
+  Box3f box;
+  uint32_t first = 0;  // leaf: first index into Bvh2::prim_ids; inner: index of the left child
+  uint32_t count = 0;  // leaf: number of primitives (> 0); inner: 0 (right child = first + 1)
+  bool is_leaf() const { return count != 0; }
+};
+
+struct Bvh2BuildConfig {
+  int bins = 32;               // SAH bins per axis (DESIGN.md: 32 or more)
+  uint32_t max_leaf_size = 4;  // leaves never hold more primitives than this
+  uint32_t block_prims = 4;    // leaf cost counts blocks of this many primitives (SIMD width)
+  float trav_cost = 1.0f;      // cost of one node visit relative to one primitive block test
+  int max_depth = 96;          // deeper nodes are split at the object median
+  int threads = 0;             // 0 = all
+};
+
+struct Bvh2 {
+  std::vector<Bvh2Node> nodes;     // nodes[0] is the root (if any primitive)
+  std::vector<uint32_t> prim_ids;  // primitive ids in leaf order
+  int depth = 0;
+};
+
+// Builds a BVH2 over the references (consumed). Empty input gives an empty BVH (no nodes).
+Bvh2 build_bvh2(std::vector<PrimRef>&& refs, const Bvh2BuildConfig& cfg);
+
+}  // namespace slim

@@ -1,0 +1,152 @@
+// 8-wide BVH: node layouts, child references, and the BVH2 -> BVH8 collapse.
+//
+// Node formats (byte budgets are part of DESIGN.md's spec):
+//   Node8       256 B  8 float boxes SoA + 8 child refs (Embree's BVH8 multi-node).
+//   QNode8      136 B  float3 start + float3 extent + 8 boxes as 8-bit fixed point + 8 refs
+//                      (Embree's QBVH8; compressed-leaf-bvh.txt section 4.1, Listing 1).
+//   MultiLeaf8   72 B  start/extent + 8 quantized boxes, no refs: the leaf blocks of its (up to)
+//                      8 children follow it in memory (compressed-leaf-bvh.txt section 4.2).
+#pragma once
+
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "bvh/build.h"
+#include "slimrt/math.h"
+
+namespace slim {
+
+// ---- child references -----------------------------------------------------------------------
+// 64 bits: bits 0-2 tag, bits 3-7 leaf block count (1..31), bits 8-63 byte offset into the
+// node arena (Node8, QNode8) or the leaf arena (Leaf, MultiLeaf).
+enum RefTag : uint32_t { kRefEmpty = 0, kRefNode8 = 1, kRefQNode8 = 2, kRefLeaf = 3, kRefMulti = 4 };
+
+struct NodeRef {
+  static SLIM_INLINE uint64_t make(RefTag tag, uint64_t offset, uint32_t blocks = 0) {
+    return (offset << 8) | (uint64_t(blocks) << 3) | tag;
+  }
+  static SLIM_INLINE uint32_t tag(uint64_t r) { return uint32_t(r & 7); }
+  static SLIM_INLINE uint32_t blocks(uint64_t r) { return uint32_t(r >> 3) & 31; }
+  static SLIM_INLINE uint64_t offset(uint64_t r) { return r >> 8; }
+};
+constexpr uint32_t kMaxLeafBlocks = 31;
+
+// ---- node layouts ---------------------------------------------------------------------------
+// Box planes are stored so that the plane of axis a, side s (0 = lower, 1 = upper) is array
+// 2*a+s: the traversal picks near/far planes by byte offset from the ray direction signs.
+struct alignas(64) Node8 {
+  float bounds[6][8];  // 192 B: lo_x, hi_x, lo_y, hi_y, lo_z, hi_z; empty slot: lo=+inf, hi=-inf
+  uint64_t child[8];   // 64 B: child refs (kRefEmpty for unused slots)
+};
+static_assert(sizeof(Node8) == 256, "BVH8 multi-node is 256 bytes");
+
+// Quantized boxes of 8 children relative to one float box: value = start + q * extent, q in
+// 0..255, rounded conservatively (floor for lower, ceil for upper) at encoding.
+struct QuantBoxes8 {
+  float start[3];    // 12 B
+  float extent[3];   // 12 B: per-step size ((hi - start) / 255, rounded up)
+  uint8_t q[6][8];   // 48 B: lo_x, hi_x, lo_y, hi_y, lo_z, hi_z; empty slot: lo=255, hi=0
+};
+static_assert(sizeof(QuantBoxes8) == 72, "quantized box block is 72 bytes");
+
+struct QNode8 {
+  QuantBoxes8 boxes;  // 72 B
+  uint64_t child[8];  // 64 B
+};
+static_assert(sizeof(QNode8) == 136, "QBVH8 multi-node is 136 bytes");
+
+using MultiLeaf8 = QuantBoxes8;  // 72 B; leaf blocks of child i follow at + 72 + i * block bytes
+
+// Quantizes 8 boxes (n used, others empty) inside `parent`. The decoded boxes contain the
+// originals (checked by SLIM_ASSERT in debug builds and by validate()).
+void quantize_boxes(const Box3f& parent, const Box3f* boxes, int n, QuantBoxes8& out);
+// Decodes child i exactly as the traversal does (for validation and tests).
+Box3f dequantize_box(const QuantBoxes8& q, int i);
+
+// ---- 64-byte aligned byte arena -------------------------------------------------------------
+class AlignedBytes {
+ public:
+  AlignedBytes() = default;
+  ~AlignedBytes() { std::free(data_); }
+  AlignedBytes(const AlignedBytes&) = delete;
+  AlignedBytes& operator=(const AlignedBytes&) = delete;
+  AlignedBytes(AlignedBytes&& o) noexcept { swap(o); }
+  AlignedBytes& operator=(AlignedBytes&& o) noexcept {
+    swap(o);
+    return *this;
+  }
+  void swap(AlignedBytes& o) noexcept {
+    std::swap(data_, o.data_);
+    std::swap(size_, o.size_);
+    std::swap(cap_, o.cap_);
+  }
+  // Appends n zero bytes aligned to `align` (power of two <= 64); returns their offset.
+  uint64_t append(uint64_t n, uint64_t align = 16);
+  void reserve(uint64_t n);
+  void shrink_to_fit();
+  uint8_t* data() { return data_; }
+  const uint8_t* data() const { return data_; }
+  uint64_t size() const { return size_; }
+  uint64_t capacity() const { return cap_; }
+
+ private:
+  uint8_t* data_ = nullptr;
+  uint64_t size_ = 0, cap_ = 0;
+};
+
+// ---- the BVH8 -------------------------------------------------------------------------------
+enum class NodeKind : uint8_t {
+  Bvh8,        // Node8 everywhere
+  QBvh8,       // QNode8 everywhere
+  CompressedLeaf,  // Node8 inner nodes, MultiLeaf8 for small subtrees (compressed-leaf-bvh.txt)
+};
+
+// How the collapse writes leaves: blocks of up to block_prims primitives, block_bytes each.
+struct LeafEncoder {
+  uint32_t block_prims = 4;
+  uint32_t block_bytes = 0;
+  // Writes the block of primitives prims[0..n) (1 <= n <= block_prims) to out (zeroed).
+  std::function<void(const uint32_t* prims, uint32_t n, uint8_t* out)> encode;
+};
+
+struct Bvh8Stats {
+  uint64_t node8 = 0, qnode8 = 0, multileaf = 0, leaves = 0, leaf_blocks = 0;
+  uint64_t leaves_in_multileaf = 0;  // leaves stored inside multi-leaf nodes
+  uint64_t prims = 0;
+  double sah_cost = 0;       // SAH cost of the BVH8 (node visit = 1, block test = 1)
+  double leaf_fill = 0;      // average primitives per leaf block / block_prims
+  int depth = 0;
+};
+
+struct Bvh8 {
+  AlignedBytes nodes;   // Node8 / QNode8 (inner nodes)
+  AlignedBytes leaves;  // leaf blocks; multi-leaf nodes with their blocks
+  uint64_t root = 0;    // NodeRef of the root (kRefEmpty for an empty scene)
+  Box3f bounds;
+  uint32_t block_bytes = 0;
+  uint64_t node_bytes = 0;       // inner node bytes (BVH memory)
+  uint64_t multileaf_bytes = 0;  // MultiLeaf8 headers inside `leaves` (BVH memory)
+  uint64_t leaf_data_bytes = 0;  // leaf blocks (geometry memory)
+  Bvh8Stats stats;
+};
+
+// Collapses a BVH2 into 8-wide nodes of the given kind (opening the largest-area child first,
+// DESIGN.md), writing leaves through the encoder. For CompressedLeaf, every subtree with fewer
+// than 8 x block_prims primitives that can be packed into at most 8 blocks becomes one multi-leaf
+// (compressed-leaf-bvh.txt section 4.3).
+Bvh8 collapse_bvh8(const Bvh2& bvh2, NodeKind kind, const LeafEncoder& enc);
+
+// Checks a leaf block and returns the bounds of its primitives in `bounds`.
+using LeafValidator = std::function<bool(const uint8_t* block, Box3f& bounds, std::string* why)>;
+
+// Checks the node invariants: every box the traversal tests (quantized boxes decoded exactly as
+// the traversal decodes them) contains all primitives below it, Node8 child boxes lie inside their
+// parent box, offsets stay inside the arenas, and every leaf block passes `leaf`. Returns false
+// and sets `why` on the first violation.
+bool validate_bvh8(const Bvh8& bvh, const LeafValidator& leaf, std::string* why);
+
+}  // namespace slim

@@ -1,0 +1,211 @@
+// Single-ray BVH8 traversal: one template over (leaf format, closest/any hit, statistics).
+// Node formats (Node8, QNode8, MultiLeaf8) are told apart by the tag of the child reference, so
+// one loop serves BVH8, QBVH8 and the compressed-leaf BVH.
+//
+// A leaf format L provides:
+//   struct L::Context;                          // scene data the leaves refer to (may be empty)
+//   template <bool kAny, class Stats>
+//   static bool intersect(const L::Context&, const uint8_t* block, TravRay&, HitRecord&, Stats&);
+// intersect() tests one block; for closest hit it lowers ray.tfar and fills the hit record when it
+// finds a closer hit and returns true; for any hit it returns true on the first hit.
+#pragma once
+
+#include <cstdint>
+
+#include "bvh/bvh8.h"
+#include "core/simd.h"
+#include "core/ray.h"
+#include "slimrt/scene.h"
+
+namespace slim {
+
+namespace detail {
+
+// 8 float boxes (Node8): returns the hit mask and the entry distances.
+SLIM_INLINE uint32_t intersect_node8(const Node8* n, const TravRay& r, simd::vfloat8& dist) {
+  using namespace simd;
+  const float* b = &n->bounds[0][0];
+  const uint32_t nx = r.near_plane[0], ny = r.near_plane[1], nz = r.near_plane[2];
+  vfloat8 tnx = fmsub(vfloat8::load(b + nx * 8), vfloat8(r.rdir.x), vfloat8(r.c_near[0]));
+  vfloat8 tny = fmsub(vfloat8::load(b + ny * 8), vfloat8(r.rdir.y), vfloat8(r.c_near[1]));
+  vfloat8 tnz = fmsub(vfloat8::load(b + nz * 8), vfloat8(r.rdir.z), vfloat8(r.c_near[2]));
+  vfloat8 tfx = fmsub(vfloat8::load(b + (nx ^ 1) * 8), vfloat8(r.rdir.x), vfloat8(r.c_far[0]));
+  vfloat8 tfy = fmsub(vfloat8::load(b + (ny ^ 1) * 8), vfloat8(r.rdir.y), vfloat8(r.c_far[1]));
+  vfloat8 tfz = fmsub(vfloat8::load(b + (nz ^ 1) * 8), vfloat8(r.rdir.z), vfloat8(r.c_far[2]));
+  vfloat8 tn = max(max(tnx, tny), max(tnz, vfloat8(r.tnear)));
+  vfloat8 tf = min(min(tfx, tfy), min(tfz, vfloat8(r.tfar)));
+  dist = tn;
+  return (tn <= tf).mask();
+}
+
+// 8 quantized boxes (QNode8, MultiLeaf8): decode start + q * extent, then the same slab test.
+SLIM_INLINE uint32_t intersect_quant8(const QuantBoxes8* q, const TravRay& r, simd::vfloat8& dist) {
+  using namespace simd;
+  auto plane = [&](uint32_t p, int a) {
+    return fmadd(to_float(vint8::load_u8(q->q[p])), vfloat8(q->extent[a]), vfloat8(q->start[a]));
+  };
+  const uint32_t nx = r.near_plane[0], ny = r.near_plane[1], nz = r.near_plane[2];
+  vfloat8 tnx = fmsub(plane(nx, 0), vfloat8(r.rdir.x), vfloat8(r.c_near[0]));
+  vfloat8 tny = fmsub(plane(ny, 1), vfloat8(r.rdir.y), vfloat8(r.c_near[1]));
+  vfloat8 tnz = fmsub(plane(nz, 2), vfloat8(r.rdir.z), vfloat8(r.c_near[2]));
+  vfloat8 tfx = fmsub(plane(nx ^ 1, 0), vfloat8(r.rdir.x), vfloat8(r.c_far[0]));
+  vfloat8 tfy = fmsub(plane(ny ^ 1, 1), vfloat8(r.rdir.y), vfloat8(r.c_far[1]));
+  vfloat8 tfz = fmsub(plane(nz ^ 1, 2), vfloat8(r.rdir.z), vfloat8(r.c_far[2]));
+  vfloat8 tn = max(max(tnx, tny), max(tnz, vfloat8(r.tnear)));
+  vfloat8 tf = min(min(tfx, tfy), min(tfz, vfloat8(r.tfar)));
+  dist = tn;
+  return (tn <= tf).mask();
+}
+
+}  // namespace detail
+
+// Stack depth bound: the BVH2 builder limits depth to 64 SAH levels + 32 median levels, and a
+// BVH8 node pushes at most 7 entries per level.
+constexpr int kTraversalStackSize = 7 * 96 + 8;
+
+template <class Leaf, bool kAny, class Stats>
+SLIM_INLINE bool intersect_leaf_blocks(const typename Leaf::Context& ctx, const uint8_t* p,
+                                       uint32_t blocks, uint32_t block_bytes, TravRay& ray,
+                                       HitRecord& hit, Stats& st) {
+  bool found = false;
+  for (uint32_t b = 0; b < blocks; ++b) {
+    if (Leaf::template intersect<kAny>(ctx, p + uint64_t(b) * block_bytes, ray, hit, st)) {
+      found = true;
+      if constexpr (kAny) return true;
+    }
+  }
+  return found;
+}
+
+// Multi-leaf (compressed-leaf-bvh.txt section 4.4): test the 8 quantized boxes, then the blocks
+// of the children hit; no ordering (the paper found it does not pay off).
+template <class Leaf, bool kAny, class Stats>
+SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const uint8_t* p,
+                                     uint32_t children, uint32_t block_bytes, TravRay& ray,
+                                     HitRecord& hit, Stats& st) {
+  simd::vfloat8 dist;
+  const auto* ml = reinterpret_cast<const MultiLeaf8*>(p);
+  uint32_t mask = detail::intersect_quant8(ml, ray, dist) & ((1u << children) - 1);
+  st.node(children);
+  bool found = false;
+  const uint8_t* blocks = p + sizeof(MultiLeaf8);
+  while (mask) {
+    int i = simd::pop_lowest(mask);
+    if (Leaf::template intersect<kAny>(ctx, blocks + uint64_t(i) * block_bytes, ray, hit, st)) {
+      found = true;
+      if constexpr (kAny) return true;
+    }
+  }
+  return found;
+}
+
+// Traverses the BVH from bvh.root. Closest hit: returns true if `hit` was filled (ray.tfar = t).
+// Any hit: returns true as soon as one primitive is hit.
+template <class Leaf, bool kAny, class Stats>
+bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& ray,
+                   HitRecord& hit, Stats& st) {
+  struct Entry {
+    uint64_t ref;
+    float dist;
+  };
+  Entry stack[kTraversalStackSize];
+  int sp = 0;
+  const uint8_t* nodes = bvh.nodes.data();
+  const uint8_t* leaves = bvh.leaves.data();
+  const uint32_t block_bytes = bvh.block_bytes;
+  bool found = false;
+  uint64_t cur = bvh.root;
+
+  for (;;) {
+    // Descend through inner nodes, nearest child first.
+    for (;;) {
+      const uint32_t tag = NodeRef::tag(cur);
+      if (tag != kRefNode8 && tag != kRefQNode8) break;
+      simd::vfloat8 dist;
+      uint32_t mask;
+      const uint64_t* child;
+      const uint8_t* np = nodes + NodeRef::offset(cur);
+      if (tag == kRefNode8) {
+        const auto* n = reinterpret_cast<const Node8*>(np);
+        mask = detail::intersect_node8(n, ray, dist);
+        child = n->child;
+      } else {
+        const auto* n = reinterpret_cast<const QNode8*>(np);
+        mask = detail::intersect_quant8(&n->boxes, ray, dist);
+        child = n->child;
+        // Rounding padding can let an empty slot (lo > hi) through; drop those.
+        for (uint32_t m = mask; m;) {
+          int i = simd::pop_lowest(m);
+          if (child[i] == 0) mask &= ~(1u << i);
+        }
+      }
+      st.node(8);
+      if (mask == 0) goto pop;
+      alignas(32) float d[8];
+      dist.store(d);
+      int i0 = simd::pop_lowest(mask);
+      if (mask == 0) {  // one child hit: descend
+        cur = child[i0];
+        continue;
+      }
+      int i1 = simd::pop_lowest(mask);
+      if (mask == 0) {  // two: push the far one
+        if (d[i0] <= d[i1]) {
+          stack[sp++] = {child[i1], d[i1]};
+          cur = child[i0];
+        } else {
+          stack[sp++] = {child[i0], d[i0]};
+          cur = child[i1];
+        }
+        continue;
+      }
+      // Three or more: push all, sort the pushed entries far to near, pop the nearest.
+      int base = sp;
+      stack[sp++] = {child[i0], d[i0]};
+      stack[sp++] = {child[i1], d[i1]};
+      while (mask) {
+        int i = simd::pop_lowest(mask);
+        stack[sp++] = {child[i], d[i]};
+      }
+      for (int k = base + 1; k < sp; ++k) {
+        Entry e = stack[k];
+        int j = k;
+        while (j > base && stack[j - 1].dist < e.dist) {
+          stack[j] = stack[j - 1];
+          --j;
+        }
+        stack[j] = e;
+      }
+      cur = stack[--sp].ref;
+    }
+
+    // Leaf.
+    {
+      const uint32_t tag = NodeRef::tag(cur);
+      if (tag == kRefLeaf) {
+        if (intersect_leaf_blocks<Leaf, kAny>(ctx, leaves + NodeRef::offset(cur),
+                                              NodeRef::blocks(cur), block_bytes, ray, hit, st)) {
+          found = true;
+          if constexpr (kAny) return true;
+        }
+      } else if (tag == kRefMulti) {
+        if (intersect_multileaf<Leaf, kAny>(ctx, leaves + NodeRef::offset(cur),
+                                            NodeRef::blocks(cur), block_bytes, ray, hit, st)) {
+          found = true;
+          if constexpr (kAny) return true;
+        }
+      }
+    }
+
+  pop:
+    for (;;) {
+      if (sp == 0) return found;
+      const Entry& e = stack[--sp];
+      if (!kAny && e.dist > ray.tfar) continue;  // farther than the closest hit so far
+      cur = e.ref;
+      break;
+    }
+  }
+}
+
+}  // namespace slim

@@ -1,0 +1,253 @@
+// Triangle leaf formats (Embree's Triangle4v / Triangle4i counterparts):
+//   Tri4v  176 B  4 triangles with pre-gathered vertices, SoA, + geomID/primID per triangle
+//   Tri4i   80 B  4 triangles as 3 vertex indices into one shared vertex array + geomID/primID
+// Both are tested 4 at a time with the watertight test (core/watertight.h). Blocks with fewer
+// than 4 triangles repeat their last triangle (the duplicate gives the same hit, so no lane mask
+// is needed on the hot path).
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+#include <string>
+#include <type_traits>
+
+#include "core/ray.h"
+#include "core/simd.h"
+#include "core/watertight.h"
+#include "slimrt/math.h"
+#include "slimrt/scene.h"
+
+namespace slim {
+
+// Triangles prepared from the input meshes (mesh/triangulate.h): the build-time source.
+struct TriangleSource {
+  const Vec3f* vertices = nullptr;
+  const uint32_t* tris = nullptr;      // 3 vertex indices per triangle
+  const uint32_t* geom_ids = nullptr;  // input mesh per triangle
+  const uint32_t* prim_ids = nullptr;  // input face per triangle
+};
+
+// 64-bit key of a triangle (vertex bits + ids) for validate()'s "every triangle referenced once"
+// fingerprint; never 0.
+inline uint64_t triangle_key(const Vec3f& a, const Vec3f& b, const Vec3f& c, uint32_t geom,
+                             uint32_t prim) {
+  auto mix = [](uint64_t h, uint64_t x) {
+    h ^= x + 0x9E3779B97F4A7C15ULL + (h << 6) + (h >> 2);
+    return h * 0xFF51AFD7ED558CCDULL;
+  };
+  uint32_t w[9];
+  std::memcpy(w, &a, 12);
+  std::memcpy(w + 3, &b, 12);
+  std::memcpy(w + 6, &c, 12);
+  uint64_t h = 0x1234567;
+  for (uint32_t x : w) h = mix(h, x);
+  h = mix(h, geom);
+  return mix(h, prim) | 1;
+}
+
+namespace detail {
+
+// Ray-space transform of 4 vertices stored SoA as p[axis][lane].
+SLIM_INLINE RayVertex<simd::vfloat4> to_ray_space4(const WatertightRay& r, const float (*p)[4]) {
+  using namespace simd;
+  vfloat4 ax = vfloat4::loadu(p[r.kx]) - vfloat4(r.org[r.kx]);
+  vfloat4 ay = vfloat4::loadu(p[r.ky]) - vfloat4(r.org[r.ky]);
+  vfloat4 az = vfloat4::loadu(p[r.kz]) - vfloat4(r.org[r.kz]);
+  return {fnmadd(vfloat4(r.Sx), az, ax), fnmadd(vfloat4(r.Sy), az, ay), vfloat4(r.Sz) * az};
+}
+
+// Number of lanes that are real triangles, not repeats of the previous lane (statistics and
+// validation only). v[corner][axis][lane].
+SLIM_INLINE int distinct_lanes(const uint32_t* geom, const uint32_t* prim, const float (*v)[3][4]) {
+  int n = 1;
+  for (int i = 1; i < 4; ++i) {
+    bool same = geom[i] == geom[i - 1] && prim[i] == prim[i - 1];
+    for (int k = 0; k < 3 && same; ++k)
+      for (int a = 0; a < 3; ++a) same = same && v[k][a][i] == v[k][a][i - 1];
+    n += !same;
+  }
+  return n;
+}
+
+// Lane of m with the smallest t.
+SLIM_INLINE int closest_lane(uint32_t m, const simd::vfloat4& t) {
+  alignas(16) float tt[4];
+  t.storeu(tt);
+  int best = simd::pop_lowest(m);
+  while (m) {
+    int i = simd::pop_lowest(m);
+    if (tt[i] < tt[best]) best = i;
+  }
+  return best;
+}
+
+// Fills the hit record from lane i (vertices p0, p1, p2 of that triangle).
+SLIM_INLINE void record_hit(float t, float u, float v, Vec3f p0, Vec3f p1, Vec3f p2,
+                            uint32_t geom, uint32_t prim, TravRay& ray, HitRecord& hit) {
+  hit.t = t;
+  hit.u = u;
+  hit.v = v;
+  hit.Ng = cross(p1 - p0, p2 - p0);
+  hit.geomID = geom;
+  hit.primID = prim;
+  hit.kind = PrimKind::Triangle;
+  ray.tfar = t;
+}
+
+}  // namespace detail
+
+// Build-side helpers shared by the triangle leaf formats.
+struct TriangleSourceOps {
+  static Box3f source_bounds(const TriangleSource& s, uint32_t t) {
+    Box3f b;
+    for (int k = 0; k < 3; ++k) b.extend(s.vertices[s.tris[3 * t + k]]);
+    return b;
+  }
+  static uint64_t source_key(const TriangleSource& s, uint32_t t) {
+    const uint32_t* v = &s.tris[3 * t];
+    return triangle_key(s.vertices[v[0]], s.vertices[v[1]], s.vertices[v[2]], s.geom_ids[t],
+                        s.prim_ids[t]);
+  }
+};
+
+struct Tri4vBlock {
+  float v[3][3][4];  // 144 B: [corner][axis][lane]
+  uint32_t geom[4];  // 16 B
+  uint32_t prim[4];  // 16 B
+};
+static_assert(sizeof(Tri4vBlock) == 176, "Triangle4v block is 176 bytes");
+
+// Leaf format: 4 pre-gathered triangles.
+struct Tri4v : TriangleSourceOps {
+  struct Context {};
+  static constexpr uint32_t kBlockPrims = 4;
+  static constexpr uint32_t kBlockBytes = sizeof(Tri4vBlock);
+
+  static void encode(const TriangleSource& src, const uint32_t* prims, uint32_t n, uint8_t* out) {
+    auto* b = reinterpret_cast<Tri4vBlock*>(out);
+    for (uint32_t l = 0; l < 4; ++l) {
+      uint32_t t = prims[l < n ? l : n - 1];
+      for (int k = 0; k < 3; ++k) {
+        const Vec3f& p = src.vertices[src.tris[3 * t + k]];
+        b->v[k][0][l] = p.x;
+        b->v[k][1][l] = p.y;
+        b->v[k][2][l] = p.z;
+      }
+      b->geom[l] = src.geom_ids[t];
+      b->prim[l] = src.prim_ids[t];
+    }
+  }
+
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect(const Context&, const uint8_t* p, TravRay& ray, HitRecord& hit,
+                                    Stats& st) {
+    using namespace simd;
+    const auto* b = reinterpret_cast<const Tri4vBlock*>(p);
+    if constexpr (!std::is_same_v<Stats, NoStats>) st.prims(detail::distinct_lanes(b->geom, b->prim, b->v));
+    RayVertex<vfloat4> A = detail::to_ray_space4(ray.wt, b->v[0]);
+    RayVertex<vfloat4> B = detail::to_ray_space4(ray.wt, b->v[1]);
+    RayVertex<vfloat4> C = detail::to_ray_space4(ray.wt, b->v[2]);
+    vfloat4 t(0.0f), u(0.0f), v(0.0f);
+    uint32_t m = intersect_triangles(A, B, C, 0xF, ray.tnear, ray.tfar, t, u, v);
+    if (!m) return false;
+    if constexpr (kAny) return true;
+    int i = detail::closest_lane(m, t);
+    auto vert = [&](int k) { return Vec3f(b->v[k][0][i], b->v[k][1][i], b->v[k][2][i]); };
+    detail::record_hit(t[i], u[i], v[i], vert(0), vert(1), vert(2), b->geom[i], b->prim[i], ray,
+                       hit);
+    return true;
+  }
+
+  // Bounds and key of each distinct triangle of a block (validation).
+  template <class F>
+  static void visit(const Context&, const uint8_t* p, F&& fn) {
+    const auto* b = reinterpret_cast<const Tri4vBlock*>(p);
+    int n = detail::distinct_lanes(b->geom, b->prim, b->v);
+    for (int i = 0; i < n; ++i) {
+      Vec3f c[3];
+      Box3f box;
+      for (int k = 0; k < 3; ++k) {
+        c[k] = Vec3f(b->v[k][0][i], b->v[k][1][i], b->v[k][2][i]);
+        box.extend(c[k]);
+      }
+      fn(box, triangle_key(c[0], c[1], c[2], b->geom[i], b->prim[i]));
+    }
+  }
+};
+
+struct Tri4iBlock {
+  uint32_t v[3][4];  // 48 B: [corner][lane] vertex indices into the shared vertex array
+  uint32_t geom[4];  // 16 B
+  uint32_t prim[4];  // 16 B
+};
+static_assert(sizeof(Tri4iBlock) == 80, "Triangle4i block is 80 bytes");
+
+// Leaf format: 4 triangles as vertex indices into one shared vertex array.
+struct Tri4i : TriangleSourceOps {
+  struct Context {
+    const Vec3f* vertices = nullptr;
+  };
+  static constexpr uint32_t kBlockPrims = 4;
+  static constexpr uint32_t kBlockBytes = sizeof(Tri4iBlock);
+
+  static void encode(const TriangleSource& src, const uint32_t* prims, uint32_t n, uint8_t* out) {
+    auto* b = reinterpret_cast<Tri4iBlock*>(out);
+    for (uint32_t l = 0; l < 4; ++l) {
+      uint32_t t = prims[l < n ? l : n - 1];
+      for (int k = 0; k < 3; ++k) b->v[k][l] = src.tris[3 * t + k];
+      b->geom[l] = src.geom_ids[t];
+      b->prim[l] = src.prim_ids[t];
+    }
+  }
+
+  static SLIM_INLINE void gather(const Context& ctx, const Tri4iBlock* b, float (*out)[3][4]) {
+    for (int k = 0; k < 3; ++k)
+      for (int l = 0; l < 4; ++l) {
+        const Vec3f& p = ctx.vertices[b->v[k][l]];
+        out[k][0][l] = p.x;
+        out[k][1][l] = p.y;
+        out[k][2][l] = p.z;
+      }
+  }
+
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect(const Context& ctx, const uint8_t* p, TravRay& ray,
+                                    HitRecord& hit, Stats& st) {
+    using namespace simd;
+    const auto* b = reinterpret_cast<const Tri4iBlock*>(p);
+    alignas(16) float vv[3][3][4];
+    gather(ctx, b, vv);
+    if constexpr (!std::is_same_v<Stats, NoStats>) st.prims(detail::distinct_lanes(b->geom, b->prim, vv));
+    RayVertex<vfloat4> A = detail::to_ray_space4(ray.wt, vv[0]);
+    RayVertex<vfloat4> B = detail::to_ray_space4(ray.wt, vv[1]);
+    RayVertex<vfloat4> C = detail::to_ray_space4(ray.wt, vv[2]);
+    vfloat4 t(0.0f), u(0.0f), v(0.0f);
+    uint32_t m = intersect_triangles(A, B, C, 0xF, ray.tnear, ray.tfar, t, u, v);
+    if (!m) return false;
+    if constexpr (kAny) return true;
+    int i = detail::closest_lane(m, t);
+    detail::record_hit(t[i], u[i], v[i], ctx.vertices[b->v[0][i]], ctx.vertices[b->v[1][i]],
+                       ctx.vertices[b->v[2][i]], b->geom[i], b->prim[i], ray, hit);
+    return true;
+  }
+
+  template <class F>
+  static void visit(const Context& ctx, const uint8_t* p, F&& fn) {
+    const auto* b = reinterpret_cast<const Tri4iBlock*>(p);
+    alignas(16) float vv[3][3][4];
+    gather(ctx, b, vv);
+    int n = detail::distinct_lanes(b->geom, b->prim, vv);
+    for (int i = 0; i < n; ++i) {
+      const Vec3f& a = ctx.vertices[b->v[0][i]];
+      const Vec3f& c1 = ctx.vertices[b->v[1][i]];
+      const Vec3f& c2 = ctx.vertices[b->v[2][i]];
+      Box3f box;
+      box.extend(a);
+      box.extend(c1);
+      box.extend(c2);
+      fn(box, triangle_key(a, c1, c2, b->geom[i], b->prim[i]));
+    }
+  }
+};
+
+}  // namespace slim

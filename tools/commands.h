@@ -1,10 +1,22 @@
-// slimrt CLI subcommands. Each returns the process exit code; errors are printed by main().
+// slimrt CLI subcommands. Each returns the process exit code; errors are thrown as slim::Error
+// and printed by main().
 #pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "slimrt/mesh.h"
 
 namespace slim::cli {
 
 int cmd_info(int argc, char** argv);
 int cmd_render(int argc, char** argv);
 int cmd_bench(int argc, char** argv);
+
+// `slimrt info` sections of the technique issues, each in its own file (info_*.cpp). Each
+// prints a human-readable section to stdout, or fills `out` when json is true.
+void info_pairs(const PolyMesh& mesh, bool json, nlohmann::json& out);  // info_pairs.cpp
+void info_costa(const PolyMesh& mesh, bool json, nlohmann::json& out);  // info_costa.cpp
+void info_grids(const PolyMesh& mesh, bool json, nlohmann::json& out);  // info_grids.cpp
 
 }  // namespace slim::cli

@@ -26,8 +26,17 @@ Scene Scene::build(const std::vector<const PolyMesh*>& meshes, const BuildOption
     case Geometry::IndexedTriangles:
       impl = build_triangle_scene(meshes, opt);
       break;
-    default:
-      throw Error("configuration " + opt.config_name() + " is not implemented yet");
+    case Geometry::Pairs:
+      impl = build_pair_scene(meshes, opt);
+      break;
+    case Geometry::Grids:
+    case Geometry::LossyGrids:
+    case Geometry::LossyGridsE2:
+      impl = build_grid_scene(meshes, opt);
+      break;
+    case Geometry::Quantized:
+      impl = build_costa_scene(meshes, opt);
+      break;
   }
   impl->opt = opt;
   impl->stats.build_seconds =

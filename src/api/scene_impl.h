@@ -25,7 +25,14 @@ struct Scene::Impl {
 };
 
 // Format builders (one per file under api/). Each fills stats/mem/bounds except build time.
+// Throw slim::Error("<config>: does not apply: <reason>") when the input does not suit the format.
 std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMesh*>& meshes,
-                                                  const BuildOptions& opt);
+                                                  const BuildOptions& opt);  // scene_triangles.cpp
+std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>& meshes,
+                                              const BuildOptions& opt);  // scene_pairs.cpp
+std::unique_ptr<Scene::Impl> build_grid_scene(const std::vector<const PolyMesh*>& meshes,
+                                              const BuildOptions& opt);  // scene_grids.cpp
+std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*>& meshes,
+                                               const BuildOptions& opt);  // scene_costa.cpp
 
 }  // namespace slim

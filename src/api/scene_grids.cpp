@@ -1,0 +1,8 @@
+// placeholder until the grids formats land
+#include "api/scene_impl.h"
+
+namespace slim {
+std::unique_ptr<Scene::Impl> build_grid_scene(const std::vector<const PolyMesh*>&, const BuildOptions& opt) {
+  throw Error(opt.config_name() + ": not implemented yet");
+}
+}  // namespace slim

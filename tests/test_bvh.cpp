@@ -74,7 +74,8 @@ TEST_P(TriangleConfigs, MixedPolygonsAndSeveralMeshes) {
 
 INSTANTIATE_TEST_SUITE_P(Bvh, TriangleConfigs,
                          ::testing::Values("bvh8-tri4v", "bvh8-tri4i", "qbvh8-tri4v",
-                                           "qbvh8-tri4i", "clbvh-tri4v", "clbvh-tri4i"));
+                                           "qbvh8-tri4i", "clbvh-tri4v", "clbvh-tri4i",
+                                           "clbvh-compact"));
 
 TEST(Bvh, BadRaysMiss) {
   PolyMesh m = random_soup(100, 1);

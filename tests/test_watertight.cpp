@@ -95,6 +95,6 @@ TEST_P(Watertight, NoRayEscapesAClosedSphere) {
 
 INSTANTIATE_TEST_SUITE_P(Bvh, Watertight,
                          ::testing::Values("bvh8-tri4v", "bvh8-tri4i", "qbvh8-tri4v",
-                                           "clbvh-tri4v", "clbvh-tri4i"));
+                                           "clbvh-tri4v", "clbvh-tri4i", "clbvh-compact"));
 
 }  // namespace

@@ -65,7 +65,16 @@ class BvhScene : public Scene::Impl {
       });
       return true;
     };
-    if (!validate_bvh8(bvh, leaf, why)) return false;
+    MultiLeafValidator multi;
+    if constexpr (HasMultiLeafLayout<Leaf>)
+      multi = [&](const uint8_t* data, uint32_t k, uint32_t i, Box3f& bounds, std::string*) {
+        Leaf::visit_in_multileaf(ctx, data, k, int(i), [&](const Box3f& b, uint64_t key) {
+          bounds.extend(b);
+          got.add(key);
+        });
+        return true;
+      };
+    if (!validate_bvh8(bvh, leaf, why, multi)) return false;
     if (!(got == expected)) {
       if (why)
         *why = "primitives in the leaves (" + std::to_string(got.count) +
@@ -97,6 +106,10 @@ class BvhScene : public Scene::Impl {
     enc.encode = [&](const uint32_t* prims, uint32_t n, uint8_t* out) {
       Leaf::encode(src, prims, n, out);
     };
+    if constexpr (HasMultiLeafLayout<Leaf>)
+      enc.encode_multileaf = [&](const uint32_t* const* prims, const uint32_t* counts, int k) {
+        return Leaf::encode_multileaf(src, prims, counts, k);
+      };
     bvh = collapse_bvh8(b2, node_kind(opt.bvh), enc);
     bounds = bvh.bounds;
     mem.bvh_bytes = bvh.node_bytes + bvh.multileaf_bytes;

@@ -12,7 +12,7 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   auto s = std::make_unique<BvhScene<Leaf>>();
   TriangleSource src{tm.vertices.data(), tm.tris.data(), tm.geom_ids.data(), tm.prim_ids.data()};
   s->build(src, uint32_t(tm.tri_count()), opt);
-  if constexpr (std::is_same_v<Leaf, Tri4i>) {
+  if constexpr (std::is_base_of_v<Tri4i, Leaf>) {
     // The scene keeps the shared vertex array (geometry); the index data lives in the leaves.
     auto verts = std::make_shared<std::vector<Vec3f>>(std::move(tm.vertices));
     verts->shrink_to_fit();
@@ -29,8 +29,13 @@ std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMe
                                                   const BuildOptions& opt) {
   TriangleMesh tm = triangulate_fan(meshes);
   std::unique_ptr<Scene::Impl> s;
-  if (opt.geometry == Geometry::IndexedTriangles)
+  if (opt.geometry == Geometry::IndexedTriangles && opt.bvh == Bvh::CompressedLeafCompact)
+    s = build_with<Tri4iCompact>(tm, opt);
+  else if (opt.geometry == Geometry::IndexedTriangles)
     s = build_with<Tri4i>(tm, opt);
+  else if (opt.bvh == Bvh::CompressedLeafCompact)
+    throw Error(opt.config_name() + ": does not apply: the compact layout stores vertex indices "
+                "(use clbvh-compact)");
   else
     s = build_with<Tri4v>(tm, opt);
   s->stats.input_faces = tm.input_faces;

@@ -4,6 +4,8 @@
 // parallel and both halves build as parallel tasks (TBB).
 #include "bvh/build.h"
 
+#include "core/simd.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
@@ -17,28 +19,45 @@
 namespace slim {
 namespace {
 
-constexpr int kMaxBins = 64;
-constexpr uint32_t kParallelBinThreshold = 1u << 16;  // refs per node to bin in parallel
-constexpr uint32_t kParallelTaskThreshold = 1u << 12; // refs per node to build children as tasks
-constexpr int kSahDepth = 64;                          // deeper: object median splits
+using simd::vfloat4;
+using simd::vint4;
 
-struct CentroidBounds {
-  Vec3f lo{kInf, kInf, kInf}, hi{-kInf, -kInf, -kInf};
-  void extend(Vec3f c) {
-    lo = min(lo, c);
-    hi = max(hi, c);
+constexpr int kMaxBins = 64;
+constexpr uint32_t kParallelBinThreshold = 1u << 16;   // refs per node to bin in parallel
+constexpr uint32_t kParallelTaskThreshold = 1u << 12;  // refs per node to build children as tasks
+constexpr int kSahDepth = 64;                           // deeper: object median splits
+
+// A PrimRef's box as two 4-wide vectors (the 4th lanes hold unrelated bytes and are ignored).
+SLIM_INLINE vfloat4 ref_lo(const PrimRef& r) { return vfloat4::loadu(&r.box.lo.x); }
+SLIM_INLINE vfloat4 ref_hi(const PrimRef& r) { return vfloat4::loadu(&r.box.hi.x); }
+
+struct Box4 {
+  vfloat4 lo{kInf}, hi{-kInf};
+  SLIM_INLINE void extend(vfloat4 l, vfloat4 h) {
+    lo = simd::min(lo, l);
+    hi = simd::max(hi, h);
   }
-  void extend(const CentroidBounds& o) {
-    lo = min(lo, o.lo);
-    hi = max(hi, o.hi);
+  SLIM_INLINE void extend(const Box4& b) { extend(b.lo, b.hi); }
+  SLIM_INLINE Box3f box3() const {
+    return Box3f({lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]});
+  }
+  SLIM_INLINE float half_area() const {
+    vfloat4 d = hi - lo;
+    float x = d[0], y = d[1], z = d[2];
+    return x >= 0.0f ? x * y + y * z + z * x : 0.0f;
   }
 };
 
-SLIM_INLINE Vec3f centroid2(const Box3f& b) { return b.lo + b.hi; }  // 2x the centroid
-
 struct Bins {
-  std::array<std::array<Box3f, kMaxBins>, 3> box;
-  std::array<std::array<uint32_t, kMaxBins>, 3> count{};
+  Box4 box[3][kMaxBins];
+  uint32_t count[3][kMaxBins];
+  void clear(int nb) {
+    for (int a = 0; a < 3; ++a)
+      for (int i = 0; i < nb; ++i) {
+        box[a][i] = Box4();
+        count[a][i] = 0;
+      }
+  }
   void merge(const Bins& o, int nb) {
     for (int a = 0; a < 3; ++a)
       for (int i = 0; i < nb; ++i) {
@@ -48,12 +67,17 @@ struct Bins {
   }
 };
 
+// Centroid (times 2) -> bin, for the 3 axes at once.
 struct Binner {
-  Vec3f lo, scale;  // bin index = (centroid2 - lo) * scale
+  vfloat4 lo, scale;
   int nb;
-  SLIM_INLINE int bin(float c2, int axis) const {
-    int b = int((c2 - lo[axis]) * scale[axis]);
-    return std::clamp(b, 0, nb - 1);
+  SLIM_INLINE vint4 bins(vfloat4 c2) const {
+    return simd::clamp(simd::to_int_trunc((c2 - lo) * scale), vint4(0), vint4(nb - 1));
+  }
+  SLIM_INLINE int bin(const PrimRef& r, int axis) const {
+    float c = (r.box.lo[axis] + r.box.hi[axis] - lo[axis]) * scale[axis];
+    int b = int(c);
+    return b < 0 ? 0 : (b > nb - 1 ? nb - 1 : b);
   }
 };
 
@@ -61,6 +85,11 @@ struct Split {
   int axis = -1;
   int pos = 0;  // primitives with bin < pos go left
   float cost = kInf;
+};
+
+struct Range {
+  Box4 box;  // primitive bounds
+  Box4 cb;   // centroid (x2) bounds
 };
 
 class Builder {
@@ -75,10 +104,7 @@ class Builder {
     if (n == 0) return;
     out_.nodes.resize(2 * size_t(n) - 1);
     node_count_ = 1;
-    Box3f box;
-    CentroidBounds cb;
-    bounds_of(0, n, box, cb);
-    build(0, 0, n, box, cb, 0);
+    build(0, 0, n, range_of(0, n), 0);
     out_.nodes.resize(node_count_.load());
     out_.prim_ids.resize(n);
     for (uint32_t i = 0; i < n; ++i) out_.prim_ids[i] = refs_[i].id;
@@ -88,63 +114,56 @@ class Builder {
  private:
   float blocks(uint32_t n) const { return float((n + cfg_.block_prims - 1) / cfg_.block_prims); }
 
-  void bounds_of(uint32_t begin, uint32_t end, Box3f& box, CentroidBounds& cb) const {
-    struct Acc {
-      Box3f box;
-      CentroidBounds cb;
-    };
-    auto body = [&](const tbb::blocked_range<uint32_t>& r, Acc a) {
+  Range range_of(uint32_t begin, uint32_t end) const {
+    auto body = [&](const tbb::blocked_range<uint32_t>& r, Range a) {
       for (uint32_t i = r.begin(); i < r.end(); ++i) {
-        a.box.extend(refs_[i].box);
-        a.cb.extend(centroid2(refs_[i].box));
+        vfloat4 l = ref_lo(refs_[i]), h = ref_hi(refs_[i]);
+        a.box.extend(l, h);
+        vfloat4 c = l + h;
+        a.cb.extend(c, c);
       }
       return a;
     };
-    Acc a;
-    if (end - begin >= kParallelBinThreshold) {
-      a = tbb::parallel_reduce(
-          tbb::blocked_range<uint32_t>(begin, end, 8192), Acc{}, body, [](Acc x, const Acc& y) {
-            x.box.extend(y.box);
-            x.cb.extend(y.cb);
-            return x;
-          });
-    } else {
-      a = body(tbb::blocked_range<uint32_t>(begin, end), Acc{});
-    }
-    box = a.box;
-    cb = a.cb;
+    if (end - begin >= kParallelBinThreshold)
+      return tbb::parallel_reduce(tbb::blocked_range<uint32_t>(begin, end, 8192), Range{}, body,
+                                  [](Range x, const Range& y) {
+                                    x.box.extend(y.box);
+                                    x.cb.extend(y.cb);
+                                    return x;
+                                  });
+    return body(tbb::blocked_range<uint32_t>(begin, end), Range{});
   }
 
   void bin_range(const Binner& b, uint32_t begin, uint32_t end, Bins& bins) const {
+    alignas(16) int32_t k[4];
     for (uint32_t i = begin; i < end; ++i) {
-      const Box3f& box = refs_[i].box;
-      Vec3f c = centroid2(box);
+      vfloat4 l = ref_lo(refs_[i]), h = ref_hi(refs_[i]);
+      b.bins(l + h).storeu(k);
       for (int a = 0; a < 3; ++a) {
-        int k = b.bin(c[a], a);
-        bins.box[a][k].extend(box);
-        bins.count[a][k]++;
+        bins.box[a][k[a]].extend(l, h);
+        bins.count[a][k[a]]++;
       }
     }
   }
 
-  Split find_split(const Binner& b, const Bins& bins, const Vec3f& cext) const {
+  Split find_split(const Bins& bins, int nb, const Vec3f& cext) const {
     Split best;
     for (int a = 0; a < 3; ++a) {
       if (!(cext[a] > 0.0f)) continue;
       // Sweep from the right: cost and count of everything at or right of bin i.
-      std::array<float, kMaxBins> rcost;
-      std::array<uint32_t, kMaxBins> rcnt;
-      Box3f rb;
+      float rcost[kMaxBins];
+      uint32_t rcnt[kMaxBins];
+      Box4 rb;
       uint32_t rc = 0;
-      for (int i = nb_ - 1; i > 0; --i) {
+      for (int i = nb - 1; i > 0; --i) {
         rb.extend(bins.box[a][i]);
         rc += bins.count[a][i];
         rcost[i] = rb.half_area() * blocks(rc);
         rcnt[i] = rc;
       }
-      Box3f lb;
+      Box4 lb;
       uint32_t lc = 0;
-      for (int i = 1; i < nb_; ++i) {
+      for (int i = 1; i < nb; ++i) {
         lb.extend(bins.box[a][i - 1]);
         lc += bins.count[a][i - 1];
         if (lc == 0 || rcnt[i] == 0) continue;
@@ -153,6 +172,61 @@ class Builder {
       }
     }
     return best;
+  }
+
+  // In-place partition by bin < pos on the split axis, computing both children's bounds.
+  uint32_t partition(const Binner& b, const Split& s, uint32_t begin, uint32_t end, Range& left,
+                     Range& right) {
+    uint32_t i = begin, j = end;
+    auto add = [](Range& r, const PrimRef& p) {
+      vfloat4 l = ref_lo(p), h = ref_hi(p);
+      r.box.extend(l, h);
+      vfloat4 c = l + h;
+      r.cb.extend(c, c);
+    };
+    for (;;) {
+      while (i < j && b.bin(refs_[i], s.axis) < s.pos) add(left, refs_[i++]);
+      while (i < j && b.bin(refs_[j - 1], s.axis) >= s.pos) add(right, refs_[--j]);
+      if (i >= j) break;
+      std::swap(refs_[i], refs_[j - 1]);
+      add(left, refs_[i++]);
+      add(right, refs_[--j]);
+    }
+    return i;
+  }
+
+  // Bins the range and returns the best SAH split. Not inlined so that the bins (several KB) do
+  // not live in the frame of the recursive build(). Small nodes use fewer bins (one per
+  // primitive at most), which keeps the per-node cost proportional to the node.
+  __attribute__((noinline)) Split bin_and_split(uint32_t begin, uint32_t end, const Box3f& cbox,
+                                                Binner& b) const {
+    const uint32_t n = end - begin;
+    const Vec3f cext = cbox.hi - cbox.lo;
+    const int nb = int(std::min<uint32_t>(uint32_t(nb_), std::max<uint32_t>(n, 2)));
+    b.nb = nb;
+    float lo4[4] = {cbox.lo.x, cbox.lo.y, cbox.lo.z, 0.0f}, sc4[4] = {0, 0, 0, 0};
+    for (int a = 0; a < 3; ++a) sc4[a] = cext[a] > 0.0f ? float(nb) * 0.99999f / cext[a] : 0.0f;
+    b.lo = vfloat4::loadu(lo4);
+    b.scale = vfloat4::loadu(sc4);
+    if (n >= kParallelBinThreshold) {
+      Bins empty;
+      empty.clear(nb);
+      Bins bins = tbb::parallel_reduce(
+          tbb::blocked_range<uint32_t>(begin, end, 16384), empty,
+          [&](const tbb::blocked_range<uint32_t>& r, Bins acc) {
+            bin_range(b, r.begin(), r.end(), acc);
+            return acc;
+          },
+          [&](Bins x, const Bins& y) {
+            x.merge(y, nb);
+            return x;
+          });
+      return find_split(bins, nb, cext);
+    }
+    Bins bins;
+    bins.clear(nb);
+    bin_range(b, begin, end, bins);
+    return find_split(bins, nb, cext);
   }
 
   void make_leaf(uint32_t node, uint32_t begin, uint32_t end, const Box3f& box, int depth) {
@@ -165,36 +239,19 @@ class Builder {
     }
   }
 
-  void build(uint32_t node, uint32_t begin, uint32_t end, const Box3f& box,
-             const CentroidBounds& cb, int depth) {
+  void build(uint32_t node, uint32_t begin, uint32_t end, const Range& range, int depth) {
     const uint32_t n = end - begin;
+    const Box3f box = range.box.box3();
     if (n == 1) return make_leaf(node, begin, end, box, depth);
 
-    Vec3f cext = cb.hi - cb.lo;
+    const Box3f cbox = range.cb.box3();
+    const Vec3f cext = cbox.hi - cbox.lo;
     uint32_t mid = begin;
+    Range left, right;
     bool median = depth >= kSahDepth || !(reduce_max(cext) > 0.0f);
     if (!median) {
       Binner b;
-      b.nb = nb_;
-      b.lo = cb.lo;
-      for (int a = 0; a < 3; ++a)
-        b.scale[a] = cext[a] > 0.0f ? float(nb_) * 0.99999f / cext[a] : 0.0f;
-      Bins bins;
-      if (n >= kParallelBinThreshold) {
-        bins = tbb::parallel_reduce(
-            tbb::blocked_range<uint32_t>(begin, end, 16384), Bins{},
-            [&](const tbb::blocked_range<uint32_t>& r, Bins acc) {
-              bin_range(b, r.begin(), r.end(), acc);
-              return acc;
-            },
-            [&](Bins x, const Bins& y) {
-              x.merge(y, nb_);
-              return x;
-            });
-      } else {
-        bin_range(b, begin, end, bins);
-      }
-      Split s = find_split(b, bins, cext);
+      Split s = bin_and_split(begin, end, cbox, b);
       float leaf_cost = box.half_area() * blocks(n);
       float split_cost = cfg_.trav_cost * box.half_area() + s.cost;
       if (n <= cfg_.max_leaf_size && (s.axis < 0 || leaf_cost <= split_cost))
@@ -202,10 +259,7 @@ class Builder {
       if (s.axis < 0) {
         median = true;
       } else {
-        auto it = std::partition(refs_.begin() + begin, refs_.begin() + end, [&](const PrimRef& r) {
-          return b.bin(centroid2(r.box)[s.axis], s.axis) < s.pos;
-        });
-        mid = uint32_t(it - refs_.begin());
+        mid = partition(b, s, begin, end, left, right);
         if (mid == begin || mid == end) median = true;
       }
     } else if (n <= cfg_.max_leaf_size) {
@@ -218,27 +272,24 @@ class Builder {
         int a = max_dim(cext);
         std::nth_element(refs_.begin() + begin, refs_.begin() + mid, refs_.begin() + end,
                          [a](const PrimRef& x, const PrimRef& y) {
-                           return centroid2(x.box)[a] < centroid2(y.box)[a];
+                           return x.box.lo[a] + x.box.hi[a] < y.box.lo[a] + y.box.hi[a];
                          });
       }
+      left = range_of(begin, mid);
+      right = range_of(mid, end);
     }
 
-    uint32_t left = node_count_.fetch_add(2);
+    uint32_t first = node_count_.fetch_add(2);
     Bvh2Node& nd = out_.nodes[node];
     nd.box = box;
-    nd.first = left;
+    nd.first = first;
     nd.count = 0;
-
-    Box3f lbox, rbox;
-    CentroidBounds lcb, rcb;
-    bounds_of(begin, mid, lbox, lcb);
-    bounds_of(mid, end, rbox, rcb);
     if (n >= kParallelTaskThreshold) {
-      tbb::parallel_invoke([&] { build(left, begin, mid, lbox, lcb, depth + 1); },
-                           [&] { build(left + 1, mid, end, rbox, rcb, depth + 1); });
+      tbb::parallel_invoke([&] { build(first, begin, mid, left, depth + 1); },
+                           [&] { build(first + 1, mid, end, right, depth + 1); });
     } else {
-      build(left, begin, mid, lbox, lcb, depth + 1);
-      build(left + 1, mid, end, rbox, rcb, depth + 1);
+      build(first, begin, mid, left, depth + 1);
+      build(first + 1, mid, end, right, depth + 1);
     }
   }
 

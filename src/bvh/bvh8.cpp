@@ -211,11 +211,32 @@ class Collapser {
     collect_leaves(i, kids, k);
     Box3f boxes[8];
     for (int c = 0; c < k; ++c) boxes[c] = b2_.nodes[kids[c]].box;
-    uint64_t off = out_.leaves.append(sizeof(MultiLeaf8) + uint64_t(k) * enc_.block_bytes, 16);
+    uint64_t off;
+    if (enc_.encode_multileaf) {
+      const uint32_t* prims[8];
+      uint32_t counts[8];
+      for (int c = 0; c < k; ++c) {
+        const Bvh2Node& n = b2_.nodes[kids[c]];
+        prims[c] = &b2_.prim_ids[n.first];
+        counts[c] = n.count;
+        Bvh8Stats& s = out_.stats;
+        s.leaves++;
+        s.leaf_blocks++;
+        s.prims += n.count;
+        sah_ += double(n.box.half_area()) / root_area_;
+      }
+      std::vector<uint8_t> data = enc_.encode_multileaf(prims, counts, k);
+      off = out_.leaves.append(sizeof(MultiLeaf8) + data.size(), 16);
+      std::memcpy(out_.leaves.data() + off + sizeof(MultiLeaf8), data.data(), data.size());
+      out_.leaf_data_bytes += data.size();
+    } else {
+      off = out_.leaves.append(sizeof(MultiLeaf8) + uint64_t(k) * enc_.block_bytes, 16);
+      uint8_t* blocks = out_.leaves.data() + off + sizeof(MultiLeaf8);
+      for (int c = 0; c < k; ++c)
+        write_leaf_blocks(kids[c], blocks + uint64_t(c) * enc_.block_bytes);
+    }
     auto* ml = reinterpret_cast<MultiLeaf8*>(out_.leaves.data() + off);
     quantize_boxes(b2_.nodes[i].box, boxes, k, *ml);
-    uint8_t* blocks = out_.leaves.data() + off + sizeof(MultiLeaf8);
-    for (int c = 0; c < k; ++c) write_leaf_blocks(kids[c], blocks + uint64_t(c) * enc_.block_bytes);
     out_.multileaf_bytes += sizeof(MultiLeaf8);
     out_.stats.multileaf++;
     out_.stats.leaves_in_multileaf += k;
@@ -299,6 +320,7 @@ namespace {
 struct Validator {
   const Bvh8& bvh;
   const LeafValidator& leaf;
+  const MultiLeafValidator& multi;
   std::string* why;
 
   bool fail(const std::string& msg) {
@@ -336,13 +358,19 @@ struct Validator {
         uint64_t off = NodeRef::offset(ref);
         uint32_t k = NodeRef::blocks(ref);
         if (k == 0 || k > 8) return fail("multi-leaf with a bad child count");
-        if (off + sizeof(MultiLeaf8) + uint64_t(k) * bvh.block_bytes > bvh.leaves.size())
+        if (!multi && off + sizeof(MultiLeaf8) + uint64_t(k) * bvh.block_bytes > bvh.leaves.size())
           return fail("multi-leaf outside the leaf arena");
         const auto* ml = reinterpret_cast<const MultiLeaf8*>(bvh.leaves.data() + off);
         for (uint32_t c = 0; c < k; ++c) {
-          const uint8_t* blk = bvh.leaves.data() + off + sizeof(MultiLeaf8) + c * bvh.block_bytes;
+          const uint8_t* data = bvh.leaves.data() + off + sizeof(MultiLeaf8);
           Box3f g;
-          if (!check_leaf_block(blk, dequantize_box(*ml, c), g)) return false;
+          if (multi) {
+            Box3f cb = dequantize_box(*ml, c);
+            if (!multi(data, k, c, g, why)) return false;
+            if (!cb.contains(g)) return fail("primitive outside the box of its leaf");
+          } else if (!check_leaf_block(data + c * bvh.block_bytes, dequantize_box(*ml, c), g)) {
+            return false;
+          }
           if (!box.contains(g)) return fail("multi-leaf primitives outside the parent box");
           geom.extend(g);
         }
@@ -390,8 +418,9 @@ struct Validator {
 
 }  // namespace
 
-bool validate_bvh8(const Bvh8& bvh, const LeafValidator& leaf, std::string* why) {
-  Validator v{bvh, leaf, why};
+bool validate_bvh8(const Bvh8& bvh, const LeafValidator& leaf, std::string* why,
+                   const MultiLeafValidator& multi) {
+  Validator v{bvh, leaf, multi, why};
   Box3f geom;
   if (!v.visit(bvh.root, bvh.bounds, 0, geom)) return false;
   if (!geom.empty() && !bvh.bounds.contains(geom)) return v.fail("primitives outside the root box");

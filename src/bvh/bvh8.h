@@ -111,6 +111,11 @@ struct LeafEncoder {
   uint32_t block_bytes = 0;
   // Writes the block of primitives prims[0..n) (1 <= n <= block_prims) to out (zeroed).
   std::function<void(const uint32_t* prims, uint32_t n, uint8_t* out)> encode;
+  // Optional: the leaf data of a whole multi-leaf (written right behind its 72-byte header) from
+  // its k children's primitives (prims[i][0..counts[i])). Used by layouts that share data among
+  // the children (clbvh-compact). Without it, children are blocks written by `encode`.
+  std::function<std::vector<uint8_t>(const uint32_t* const* prims, const uint32_t* counts, int k)>
+      encode_multileaf;
 };
 
 struct Bvh8Stats {
@@ -142,11 +147,16 @@ Bvh8 collapse_bvh8(const Bvh2& bvh2, NodeKind kind, const LeafEncoder& enc);
 
 // Checks a leaf block and returns the bounds of its primitives in `bounds`.
 using LeafValidator = std::function<bool(const uint8_t* block, Box3f& bounds, std::string* why)>;
+// For layouts with LeafEncoder::encode_multileaf: checks child i of the k children of a
+// multi-leaf whose data starts at `data` (right behind the header).
+using MultiLeafValidator = std::function<bool(const uint8_t* data, uint32_t k, uint32_t i,
+                                              Box3f& bounds, std::string* why)>;
 
 // Checks the node invariants: every box the traversal tests (quantized boxes decoded exactly as
 // the traversal decodes them) contains all primitives below it, Node8 child boxes lie inside their
 // parent box, offsets stay inside the arenas, and every leaf block passes `leaf`. Returns false
 // and sets `why` on the first violation.
-bool validate_bvh8(const Bvh8& bvh, const LeafValidator& leaf, std::string* why);
+bool validate_bvh8(const Bvh8& bvh, const LeafValidator& leaf, std::string* why,
+                   const MultiLeafValidator& multi = nullptr);
 
 }  // namespace slim

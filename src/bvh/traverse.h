@@ -77,6 +77,15 @@ SLIM_INLINE bool intersect_leaf_blocks(const typename Leaf::Context& ctx, const 
   return found;
 }
 
+// A leaf format may store the children of a multi-leaf differently from isolated leaves
+// (clbvh-compact: 8-bit indices into a per-multi-leaf dictionary, compressed-leaf-bvh.txt section
+// 4.5). It then provides
+//   template <bool kAny, class Stats> static bool intersect_in_multileaf(const Context&,
+//       const uint8_t* data, uint32_t children, int i, TravRay&, HitRecord&, Stats&);
+// where data points right behind the 72-byte multi-leaf header.
+template <class L>
+concept HasMultiLeafLayout = requires { L::kMultiLeafLayout; };
+
 // Multi-leaf (compressed-leaf-bvh.txt section 4.4): test the 8 quantized boxes, then the blocks
 // of the children hit; no ordering (the paper found it does not pay off).
 template <class Leaf, bool kAny, class Stats>
@@ -91,7 +100,12 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
   const uint8_t* blocks = p + sizeof(MultiLeaf8);
   while (mask) {
     int i = simd::pop_lowest(mask);
-    if (Leaf::template intersect<kAny>(ctx, blocks + uint64_t(i) * block_bytes, ray, hit, st)) {
+    bool h;
+    if constexpr (HasMultiLeafLayout<Leaf>)
+      h = Leaf::template intersect_in_multileaf<kAny>(ctx, blocks, children, i, ray, hit, st);
+    else
+      h = Leaf::template intersect<kAny>(ctx, blocks + uint64_t(i) * block_bytes, ray, hit, st);
+    if (h) {
       found = true;
       if constexpr (kAny) return true;
     }

@@ -165,6 +165,24 @@ SLIM_INLINE vbool4 operator!=(vfloat4 a, vfloat4 b) { return _mm_cmpneq_ps(a.v, 
 SLIM_INLINE vfloat4 select(vbool4 m, vfloat4 a, vfloat4 b) { return _mm_blendv_ps(b.v, a.v, m.m); }
 SLIM_INLINE vfloat4 rcp_exact(vfloat4 a) { return _mm_div_ps(_mm_set1_ps(1.0f), a.v); }
 
+struct vint4 {
+  __m128i v;
+  SLIM_INLINE vint4() = default;
+  SLIM_INLINE vint4(__m128i x) : v(x) {}
+  SLIM_INLINE explicit vint4(int s) : v(_mm_set1_epi32(s)) {}
+  SLIM_INLINE void storeu(int32_t* p) const { _mm_storeu_si128((__m128i*)p, v); }
+  SLIM_INLINE int operator[](int i) const {
+    alignas(16) int32_t t[4];
+    _mm_store_si128((__m128i*)t, v);
+    return t[i];
+  }
+};
+// Truncating conversion (as a C cast) and clamping.
+SLIM_INLINE vint4 to_int_trunc(vfloat4 a) { return _mm_cvttps_epi32(a.v); }
+SLIM_INLINE vint4 clamp(vint4 a, vint4 lo, vint4 hi) {
+  return _mm_min_epi32(_mm_max_epi32(a.v, lo.v), hi.v);
+}
+
 #else
 
 // ------------------------------------------------------------------------------------------------
@@ -327,6 +345,29 @@ struct vint8 {
   }
   SLIM_INLINE int operator[](int i) const { return v[i]; }
 };
+struct vint4 {
+  int32_t v[4];
+  SLIM_INLINE vint4() = default;
+  SLIM_INLINE explicit vint4(int s) {
+    for (int i = 0; i < 4; ++i) v[i] = s;
+  }
+  SLIM_INLINE void storeu(int32_t* p) const { std::memcpy(p, v, sizeof(v)); }
+  SLIM_INLINE int operator[](int i) const { return v[i]; }
+};
+SLIM_INLINE vint4 to_int_trunc(vfloat4 a) {
+  vint4 r;
+  for (int i = 0; i < 4; ++i) {
+    float x = a.v[i];
+    r.v[i] = x != x || x <= -2147483648.0f || x >= 2147483648.0f ? int32_t(0x80000000u) : int32_t(x);
+  }
+  return r;
+}
+SLIM_INLINE vint4 clamp(vint4 a, vint4 lo, vint4 hi) {
+  vint4 r;
+  for (int i = 0; i < 4; ++i) r.v[i] = a.v[i] < lo.v[i] ? lo.v[i] : (a.v[i] > hi.v[i] ? hi.v[i] : a.v[i]);
+  return r;
+}
+
 SLIM_INLINE vfloat8 to_float(vint8 a) {
   vfloat8 r;
   for (int i = 0; i < 8; ++i) r.v[i] = float(a.v[i]);

@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <cstring>
+#include <vector>
 #include <string>
 #include <type_traits>
 
@@ -246,6 +247,104 @@ struct Tri4i : TriangleSourceOps {
       box.extend(c1);
       box.extend(c2);
       fn(box, triangle_key(a, c1, c2, b->geom[i], b->prim[i]));
+    }
+  }
+};
+
+struct Tri4iCompactBlock {
+  uint8_t v[3][4];   // 12 B: [corner][lane] indices into the multi-leaf's vertex dictionary
+  uint32_t geom[4];  // 16 B
+  uint32_t prim[4];  // 16 B
+};
+static_assert(sizeof(Tri4iCompactBlock) == 44, "compact Triangle4i block is 44 bytes");
+
+// clbvh-compact (compressed-leaf-bvh.txt section 4.5): inside a multi-leaf, every distinct 32-bit
+// vertex index is stored once in a dictionary behind the children's blocks, and the blocks hold
+// 8-bit indices into it. Multi-leaf data: k x Tri4iCompactBlock, then the dictionary (uint32 each).
+// Isolated leaves keep plain Tri4i blocks.
+struct Tri4iCompact : Tri4i {
+  static constexpr bool kMultiLeafLayout = true;
+
+  static std::vector<uint8_t> encode_multileaf(const TriangleSource& src,
+                                               const uint32_t* const* prims,
+                                               const uint32_t* counts, int k) {
+    std::vector<uint32_t> dict;
+    std::vector<uint8_t> out(size_t(k) * sizeof(Tri4iCompactBlock));
+    auto index_of = [&](uint32_t v) {
+      for (size_t i = 0; i < dict.size(); ++i)
+        if (dict[i] == v) return uint8_t(i);
+      dict.push_back(v);
+      return uint8_t(dict.size() - 1);
+    };
+    for (int c = 0; c < k; ++c) {
+      auto* b = reinterpret_cast<Tri4iCompactBlock*>(out.data() + c * sizeof(Tri4iCompactBlock));
+      uint32_t n = counts[c];  // <= 4: the collapse makes multi-leaves of one-block leaves only
+      for (uint32_t l = 0; l < 4; ++l) {
+        uint32_t t = prims[c][l < n ? l : n - 1];
+        for (int j = 0; j < 3; ++j) b->v[j][l] = index_of(src.tris[3 * t + j]);
+        b->geom[l] = src.geom_ids[t];
+        b->prim[l] = src.prim_ids[t];
+      }
+    }
+    size_t base = out.size();
+    out.resize(base + dict.size() * sizeof(uint32_t));
+    std::memcpy(out.data() + base, dict.data(), dict.size() * sizeof(uint32_t));
+    return out;
+  }
+
+  static SLIM_INLINE void gather_compact(const Context& ctx, const Tri4iCompactBlock* b,
+                                         const uint8_t* dict, float (*out)[3][4]) {
+    for (int k = 0; k < 3; ++k)
+      for (int l = 0; l < 4; ++l) {
+        uint32_t vi;
+        std::memcpy(&vi, dict + 4 * b->v[k][l], 4);
+        const Vec3f& p = ctx.vertices[vi];
+        out[k][0][l] = p.x;
+        out[k][1][l] = p.y;
+        out[k][2][l] = p.z;
+      }
+  }
+
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect_in_multileaf(const Context& ctx, const uint8_t* data,
+                                                 uint32_t children, int i, TravRay& ray,
+                                                 HitRecord& hit, Stats& st) {
+    using namespace simd;
+    const auto* b = reinterpret_cast<const Tri4iCompactBlock*>(data) + i;
+    const uint8_t* dict = data + children * sizeof(Tri4iCompactBlock);
+    alignas(16) float vv[3][3][4];
+    gather_compact(ctx, b, dict, vv);
+    if constexpr (!std::is_same_v<Stats, NoStats>) st.prims(detail::distinct_lanes(b->geom, b->prim, vv));
+    RayVertex<vfloat4> A = detail::to_ray_space4(ray.wt, vv[0]);
+    RayVertex<vfloat4> B = detail::to_ray_space4(ray.wt, vv[1]);
+    RayVertex<vfloat4> C = detail::to_ray_space4(ray.wt, vv[2]);
+    vfloat4 t(0.0f), u(0.0f), v(0.0f);
+    uint32_t m = intersect_triangles(A, B, C, 0xF, ray.tnear, ray.tfar, t, u, v);
+    if (!m) return false;
+    if constexpr (kAny) return true;
+    int l = detail::closest_lane(m, t);
+    auto vert = [&](int k) { return Vec3f(vv[k][0][l], vv[k][1][l], vv[k][2][l]); };
+    detail::record_hit(t[l], u[l], v[l], vert(0), vert(1), vert(2), b->geom[l], b->prim[l], ray,
+                       hit);
+    return true;
+  }
+
+  template <class F>
+  static void visit_in_multileaf(const Context& ctx, const uint8_t* data, uint32_t children, int i,
+                                 F&& fn) {
+    const auto* b = reinterpret_cast<const Tri4iCompactBlock*>(data) + i;
+    const uint8_t* dict = data + children * sizeof(Tri4iCompactBlock);
+    alignas(16) float vv[3][3][4];
+    gather_compact(ctx, b, dict, vv);
+    int n = detail::distinct_lanes(b->geom, b->prim, vv);
+    for (int l = 0; l < n; ++l) {
+      Vec3f c[3];
+      Box3f box;
+      for (int k = 0; k < 3; ++k) {
+        c[k] = Vec3f(vv[k][0][l], vv[k][1][l], vv[k][2][l]);
+        box.extend(c[k]);
+      }
+      fn(box, triangle_key(c[0], c[1], c[2], b->geom[l], b->prim[l]));
     }
   }
 };

@@ -39,6 +39,7 @@ Scene Scene::build(const std::vector<const PolyMesh*>& meshes, const BuildOption
       break;
   }
   impl->opt = opt;
+  impl->ray_setup = RaySetupBounds(impl->bounds);
   impl->stats.build_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   Scene s;
@@ -59,14 +60,14 @@ Scene Scene::build(const PolyMesh& mesh, const BuildOptions& opt) {
 Hit Scene::intersect(const Ray& ray) const {
   Hit hit;
   TravRay tr;
-  if (!impl_ || !make_trav_ray(ray, impl_->bounds, tr)) return hit;
+  if (!impl_ || !make_trav_ray(ray, impl_->ray_setup, tr)) return hit;
   impl_->intersect(tr, hit);
   return hit;
 }
 
 bool Scene::occluded(const Ray& ray) const {
   TravRay tr;
-  if (!impl_ || !make_trav_ray(ray, impl_->bounds, tr)) return false;
+  if (!impl_ || !make_trav_ray(ray, impl_->ray_setup, tr)) return false;
   return impl_->occluded(tr);
 }
 
@@ -74,7 +75,7 @@ Hit Scene::intersect(const Ray& ray, TraversalCounters& counters) const {
   Hit hit;
   counters.rays++;
   TravRay tr;
-  if (!impl_ || !make_trav_ray(ray, impl_->bounds, tr)) return hit;
+  if (!impl_ || !make_trav_ray(ray, impl_->ray_setup, tr)) return hit;
   impl_->intersect_counted(tr, hit, counters);
   return hit;
 }

@@ -16,6 +16,7 @@ struct Scene::Impl {
   SceneStats stats;
   MemoryStats mem;
   Box3f bounds;
+  RaySetupBounds ray_setup;  // from bounds, set by Scene::build
 
   virtual ~Impl() = default;
   virtual void intersect(TravRay& ray, HitRecord& hit) const = 0;

@@ -42,26 +42,35 @@ struct Box4 {
     return Box3f({lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]});
   }
   SLIM_INLINE float half_area() const {
-    vfloat4 d = hi - lo;
-    float x = d[0], y = d[1], z = d[2];
-    return x >= 0.0f ? x * y + y * z + z * x : 0.0f;
+    alignas(16) float d[4];
+    (hi - lo).storeu(d);
+    return d[0] >= 0.0f ? d[0] * d[1] + d[1] * d[2] + d[2] * d[0] : 0.0f;
+  }
+};
+
+// Bin boxes are left uninitialised on construction: clear() sets the ones in use.
+struct BinBox {
+  vfloat4 lo, hi;
+  SLIM_INLINE void extend(vfloat4 l, vfloat4 h) {
+    lo = simd::min(lo, l);
+    hi = simd::max(hi, h);
   }
 };
 
 struct Bins {
-  Box4 box[3][kMaxBins];
+  BinBox box[3][kMaxBins];
   uint32_t count[3][kMaxBins];
   void clear(int nb) {
     for (int a = 0; a < 3; ++a)
       for (int i = 0; i < nb; ++i) {
-        box[a][i] = Box4();
+        box[a][i] = {vfloat4(kInf), vfloat4(-kInf)};
         count[a][i] = 0;
       }
   }
   void merge(const Bins& o, int nb) {
     for (int a = 0; a < 3; ++a)
       for (int i = 0; i < nb; ++i) {
-        box[a][i].extend(o.box[a][i]);
+        box[a][i].extend(o.box[a][i].lo, o.box[a][i].hi);
         count[a][i] += o.count[a][i];
       }
   }
@@ -95,7 +104,11 @@ struct Range {
 class Builder {
  public:
   Builder(std::vector<PrimRef>& refs, const Bvh2BuildConfig& cfg, Bvh2& out)
-      : refs_(refs), cfg_(cfg), out_(out), nb_(std::clamp(cfg.bins, 2, kMaxBins)) {}
+      : refs_(refs),
+        cfg_(cfg),
+        out_(out),
+        nb_(std::clamp(cfg.bins, 2, kMaxBins)),
+        inv_block_(1.0f / float(std::max<uint32_t>(cfg.block_prims, 1))) {}
 
   void run() {
     const uint32_t n = uint32_t(refs_.size());
@@ -112,7 +125,8 @@ class Builder {
   }
 
  private:
-  float blocks(uint32_t n) const { return float((n + cfg_.block_prims - 1) / cfg_.block_prims); }
+  // Leaf blocks for n primitives (the SAH's intersection cost unit).
+  SLIM_INLINE float blocks(uint32_t n) const { return std::ceil(float(n) * inv_block_); }
 
   Range range_of(uint32_t begin, uint32_t end) const {
     auto body = [&](const tbb::blocked_range<uint32_t>& r, Range a) {
@@ -156,7 +170,7 @@ class Builder {
       Box4 rb;
       uint32_t rc = 0;
       for (int i = nb - 1; i > 0; --i) {
-        rb.extend(bins.box[a][i]);
+        rb.extend(bins.box[a][i].lo, bins.box[a][i].hi);
         rc += bins.count[a][i];
         rcost[i] = rb.half_area() * blocks(rc);
         rcnt[i] = rc;
@@ -164,7 +178,7 @@ class Builder {
       Box4 lb;
       uint32_t lc = 0;
       for (int i = 1; i < nb; ++i) {
-        lb.extend(bins.box[a][i - 1]);
+        lb.extend(bins.box[a][i - 1].lo, bins.box[a][i - 1].hi);
         lc += bins.count[a][i - 1];
         if (lc == 0 || rcnt[i] == 0) continue;
         float cost = lb.half_area() * blocks(lc) + rcost[i];
@@ -242,7 +256,10 @@ class Builder {
   void build(uint32_t node, uint32_t begin, uint32_t end, const Range& range, int depth) {
     const uint32_t n = end - begin;
     const Box3f box = range.box.box3();
-    if (n == 1) return make_leaf(node, begin, end, box, depth);
+    // A split never beats a leaf of at most one block: both halves would cost a block each on
+    // top of the node (SAH), so such nodes become leaves without binning.
+    if (n == 1 || (n <= cfg_.block_prims && n <= cfg_.max_leaf_size))
+      return make_leaf(node, begin, end, box, depth);
 
     const Box3f cbox = range.cb.box3();
     const Vec3f cext = cbox.hi - cbox.lo;
@@ -297,6 +314,7 @@ class Builder {
   const Bvh2BuildConfig& cfg_;
   Bvh2& out_;
   int nb_;
+  float inv_block_;
   std::atomic<uint32_t> node_count_{0};
   std::atomic<int> max_depth_{0};
 };

@@ -27,22 +27,29 @@ struct TravRay {
   WatertightRay wt;
 };
 
+// Per-scene constants of the ray setup: the largest |coordinate| of the scene box per axis.
+struct RaySetupBounds {
+  float absmax[3] = {0, 0, 0};
+  RaySetupBounds() = default;
+  explicit RaySetupBounds(const Box3f& b) {
+    for (int a = 0; a < 3; ++a) {
+      absmax[a] = std::max(std::fabs(b.lo[a]), std::fabs(b.hi[a]));
+      if (!std::isfinite(absmax[a])) absmax[a] = 0.0f;
+    }
+  }
+};
+
 // Prepares a ray. Returns false for rays that cannot hit anything: NaN/Inf origin, NaN or zero
 // direction, NaN bounds or tnear > tfar (documented behaviour: a miss).
-inline bool make_trav_ray(const Ray& r, const Box3f& scene_box, TravRay& tr) {
+SLIM_INLINE bool make_trav_ray(const Ray& r, const RaySetupBounds& sb, TravRay& tr) {
   if (!is_finite(r.org) || !is_finite(r.dir)) return false;
-  if (!(r.tnear <= r.tfar) || std::isnan(r.tnear) || std::isnan(r.tfar)) return false;
+  if (!(r.tnear <= r.tfar)) return false;  // also false for NaN bounds
   if (r.dir.x == 0.0f && r.dir.y == 0.0f && r.dir.z == 0.0f) return false;
   tr.org = r.org;
   tr.dir = r.dir;
-  tr.tnear = std::max(r.tnear, 0.0f);
+  tr.tnear = r.tnear > 0.0f ? r.tnear : 0.0f;
   tr.tfar = r.tfar;
   if (!(tr.tnear <= tr.tfar)) return false;
-  float absmax[3];
-  for (int a = 0; a < 3; ++a) {
-    absmax[a] = std::max(std::fabs(scene_box.lo[a]), std::fabs(scene_box.hi[a]));
-    if (!std::isfinite(absmax[a])) absmax[a] = 0.0f;
-  }
   for (int a = 0; a < 3; ++a) {
     float d = r.dir[a];
     // Zero components become tiny ones so that 1/d stays finite (the planes parallel to the ray
@@ -53,12 +60,12 @@ inline bool make_trav_ray(const Ray& r, const Box3f& scene_box, TravRay& tr) {
     float c = tr.org[a] * rd;
     // |error of fmsub(bound, rd, c)| <= 2^-23 * |rd| * (|bound| + |org|) for bounds in the scene
     // box: rounding of rd, of c and of the result. Use 2^-20 for margin.
-    float err = std::fabs(rd) * (absmax[a] + std::fabs(tr.org[a])) * (1.0f / 1048576.0f);
+    float err = std::fabs(rd) * (sb.absmax[a] + std::fabs(tr.org[a])) * (1.0f / 1048576.0f);
     tr.c_near[a] = c + err;
     tr.c_far[a] = c - err;
     tr.near_plane[a] = 2 * a + (rd < 0.0f ? 1 : 0);
   }
-  tr.wt = WatertightRay(r.org, r.dir);
+  tr.wt = WatertightRay(r.org, r.dir, tr.rdir);
   return true;
 }
 

@@ -45,6 +45,21 @@ struct WatertightRay {
     Sy = d[ky] / d[kz];
     Sz = 1.0f / d[kz];
   }
+  // The same with the reciprocal direction already at hand: one division fewer per axis. Any
+  // per-ray constants work as long as every triangle of the ray uses the same ones.
+  WatertightRay(const Vec3f& o, const Vec3f& d, const Vec3f& rd) : org(o) {
+    kz = max_dim(abs(d));
+    kx = kz == 2 ? 0 : kz + 1;
+    ky = kx == 2 ? 0 : kx + 1;
+    if (d[kz] < 0.0f) {
+      int t = kx;
+      kx = ky;
+      ky = t;
+    }
+    Sz = rd[kz];
+    Sx = d[kx] * Sz;
+    Sy = d[ky] * Sz;
+  }
 };
 
 // A vertex in ray space (before the z scaling, which is applied only where needed).

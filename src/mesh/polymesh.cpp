@@ -1,30 +1,147 @@
-// PolyMesh helpers: placeholder until implemented.
+// PolyMesh helpers: offsets, bounds, validation (check_mesh) and statistics (summarize).
+#include <algorithm>
+
 #include "slimrt/mesh.h"
 
 namespace slim {
+
 uint64_t PolyMesh::fan_triangle_count() const {
   uint64_t n = 0;
   for (uint32_t s : face_sizes) n += s >= 3 ? s - 2 : 0;
   return n;
 }
+
 std::vector<uint64_t> PolyMesh::face_offsets() const {
   std::vector<uint64_t> off(face_sizes.size() + 1, 0);
   for (size_t i = 0; i < face_sizes.size(); ++i) off[i + 1] = off[i] + face_sizes[i];
   return off;
 }
+
 Box3f PolyMesh::bounds() const {
   Box3f b;
   for (const Vec3f& p : positions)
     if (is_finite(p)) b.extend(p);
   return b;
 }
-void check_mesh(const PolyMesh&) {}
+
+namespace {
+
+std::string label(const PolyMesh& m) { return m.name.empty() ? std::string("mesh") : m.name; }
+
+[[noreturn]] void bad_face(const PolyMesh& m, uint64_t f, const std::string& what) {
+  throw Error(label(m) + ": face " + std::to_string(f) + ": " + what);
+}
+
+// Checks a per-corner attribute: either index array parallel to face_indices, or per vertex.
+void check_attribute(const PolyMesh& m, const char* attr, size_t attr_count,
+                     const std::vector<uint32_t>& index, const std::vector<uint64_t>& off) {
+  const std::string name = attr;
+  if (index.empty()) {
+    if (attr_count != 0 && attr_count != m.positions.size())
+      throw Error(label(m) + ": " + name + " has " + std::to_string(attr_count) +
+                  " entries and no " + name + " indices; expected one per vertex (" +
+                  std::to_string(m.positions.size()) + ")");
+    return;
+  }
+  if (index.size() != m.face_indices.size())
+    throw Error(label(m) + ": " + name + " index array has " + std::to_string(index.size()) +
+                " entries; expected one per corner (" + std::to_string(m.face_indices.size()) +
+                ")");
+  for (size_t f = 0; f + 1 < off.size(); ++f)
+    for (uint64_t c = off[f]; c < off[f + 1]; ++c)
+      if (index[c] >= attr_count)
+        bad_face(m, f,
+                 name + " index " + std::to_string(index[c]) + " out of range (" +
+                     std::to_string(attr_count) + " " + name + ")");
+}
+
+}  // namespace
+
+void check_mesh(const PolyMesh& m) {
+  uint64_t corners = 0;
+  for (size_t f = 0; f < m.face_sizes.size(); ++f) {
+    if (m.face_sizes[f] < 3)
+      bad_face(m, f, "has " + std::to_string(m.face_sizes[f]) + " vertices; expected at least 3");
+    corners += m.face_sizes[f];
+  }
+  if (corners != m.face_indices.size())
+    throw Error(label(m) + ": face sizes add up to " + std::to_string(corners) +
+                " corners but face_indices has " + std::to_string(m.face_indices.size()));
+  const std::vector<uint64_t> off = m.face_offsets();
+  const size_t nv = m.positions.size();
+  for (size_t f = 0; f < m.face_sizes.size(); ++f)
+    for (uint64_t c = off[f]; c < off[f + 1]; ++c)
+      if (m.face_indices[c] >= nv)
+        bad_face(m, f,
+                 "vertex index " + std::to_string(m.face_indices[c]) + " out of range (" +
+                     std::to_string(nv) + " vertices)");
+  check_attribute(m, "normals", m.normals.size(), m.normal_indices, off);
+  check_attribute(m, "uvs", m.uvs.size(), m.uv_indices, off);
+  if (!m.face_object.empty()) {
+    if (m.face_object.size() != m.face_sizes.size())
+      throw Error(label(m) + ": face_object has " + std::to_string(m.face_object.size()) +
+                  " entries; expected one per face (" + std::to_string(m.face_sizes.size()) + ")");
+    if (!m.object_names.empty())
+      for (size_t f = 0; f < m.face_object.size(); ++f)
+        if (m.face_object[f] >= m.object_names.size())
+          bad_face(m, f,
+                   "object id " + std::to_string(m.face_object[f]) + " out of range (" +
+                       std::to_string(m.object_names.size()) + " object names)");
+  }
+}
+
+namespace {
+
+// A face is degenerate if it repeats a vertex index or all its fan triangles have zero area
+// (cross products in double, so float positions give an exact zero test).
+bool is_degenerate(const Vec3f* p, const uint32_t* idx, uint32_t k) {
+  if (k <= 16) {
+    for (uint32_t i = 0; i < k; ++i)
+      for (uint32_t j = i + 1; j < k; ++j)
+        if (idx[i] == idx[j]) return true;
+  } else {
+    std::vector<uint32_t> s(idx, idx + k);
+    std::sort(s.begin(), s.end());
+    if (std::adjacent_find(s.begin(), s.end()) != s.end()) return true;
+  }
+  const Vec3f a = p[idx[0]];
+  double area = 0;
+  for (uint32_t i = 1; i + 1 < k; ++i) {
+    const Vec3f b = p[idx[i]], c = p[idx[i + 1]];
+    const double ux = double(b.x) - a.x, uy = double(b.y) - a.y, uz = double(b.z) - a.z;
+    const double vx = double(c.x) - a.x, vy = double(c.y) - a.y, vz = double(c.z) - a.z;
+    const double cx = uy * vz - uz * vy, cy = uz * vx - ux * vz, cz = ux * vy - uy * vx;
+    area += std::sqrt(cx * cx + cy * cy + cz * cz);
+  }
+  return area == 0;  // NaN (non-finite corner) is not counted as zero area
+}
+
+}  // namespace
+
 MeshSummary summarize(const PolyMesh& m) {
   MeshSummary s;
   s.vertices = m.positions.size();
   s.faces = m.face_sizes.size();
   s.fan_triangles = m.fan_triangle_count();
+  for (const Vec3f& p : m.positions) s.nonfinite_vertices += is_finite(p) ? 0 : 1;
+  uint64_t c = 0;
+  for (uint32_t k : m.face_sizes) {
+    if (k == 3)
+      ++s.triangles;
+    else if (k == 4)
+      ++s.quads;
+    else if (k > 4)
+      ++s.ngons;
+    // Tolerates malformed meshes (summaries are printed for diagnosis): skip what check_mesh
+    // rejects.
+    bool valid = k >= 3 && c + k <= m.face_indices.size();
+    for (uint32_t i = 0; valid && i < k; ++i) valid = m.face_indices[c + i] < m.positions.size();
+    if (valid && is_degenerate(m.positions.data(), m.face_indices.data() + c, k))
+      ++s.degenerate_faces;
+    c += k;
+  }
   s.bounds = m.bounds();
   return s;
 }
+
 }  // namespace slim

@@ -1,0 +1,261 @@
+// Wavefront OBJ reader on top of tinyobjloader (Debian libtinyobjloader-dev, header only here).
+//
+// tinyobjloader parses the numbers; this file adds what it leaves out for untrusted input:
+// - a pre-scan with the same line splitting as tinyobjloader's safeGetline (\n, \r\n or \r) that
+//   counts the corners of every 'f' line: faces with fewer than 3 corners are an error here
+//   (tinyobjloader drops them with a warning), and the counts replace tinyobjloader's per-face
+//   sizes, which are stored as unsigned char and wrap for polygons of 256+ corners;
+// - control bytes (NUL etc.) are rejected, so binary garbage is not read as an empty mesh, and
+//   'v' lines must have 3 numeric coordinates (tinyobjloader reads missing or bad ones as 0);
+// - every position, normal and uv index is checked (tinyobjloader only warns), and the error
+//   names the line of the offending face.
+#define TINYOBJLOADER_IMPLEMENTATION
+#include <tiny_obj_loader.h>
+
+#include "io/obj.h"
+
+#include <streambuf>
+#include <unordered_map>
+
+#include "slimrt/error.h"
+
+namespace slim::detail {
+namespace {
+
+// Read-only std::streambuf over a memory buffer, so tinyobjloader parses without a copy.
+struct MemoryBuf : std::streambuf {
+  MemoryBuf(const char* data, size_t size) {
+    char* p = const_cast<char*>(data);  // get area only: never written through
+    setg(p, p, p + size);
+  }
+};
+
+// Calls fn(line_number, text) for every line, split exactly like tinyobjloader's safeGetline so
+// that line numbers agree with its messages. fn returns false to stop.
+template <class Fn>
+void for_each_line(std::string_view d, Fn&& fn) {
+  size_t i = 0;
+  uint64_t line = 0;
+  while (i < d.size()) {
+    size_t j = i;
+    while (j < d.size() && d[j] != '\n' && d[j] != '\r') ++j;
+    if (!fn(++line, d.substr(i, j - i))) return;
+    i = (j + 1 < d.size() && d[j] == '\r' && d[j + 1] == '\n') ? j + 2 : j + 1;
+  }
+}
+
+// True if `s` is statement `kw` ("f", "v"): the keyword after optional blanks, then a blank or
+// the end of the line (tinyobjloader's rule, except that a bare keyword counts too, so that "f"
+// alone is reported instead of skipped). `rest` gets what follows the keyword.
+bool statement(std::string_view s, char kw, std::string_view& rest) {
+  size_t i = 0;
+  while (i < s.size() && (s[i] == ' ' || s[i] == '\t')) ++i;
+  if (i >= s.size() || s[i] != kw) return false;
+  ++i;
+  if (i < s.size() && s[i] != ' ' && s[i] != '\t') return false;
+  rest = s.substr(i);
+  return true;
+}
+
+// Splits at blanks (spaces and tabs), as tinyobjloader does within a line.
+template <class Fn>
+int64_t for_each_token(std::string_view s, Fn&& fn) {
+  int64_t n = 0;
+  size_t i = 0;
+  while (i < s.size()) {
+    while (i < s.size() && (s[i] == ' ' || s[i] == '\t')) ++i;
+    if (i == s.size()) break;
+    size_t j = i;
+    while (j < s.size() && s[j] != ' ' && s[j] != '\t') ++j;
+    fn(n++, s.substr(i, j - i));
+    i = j;
+  }
+  return n;
+}
+
+// Number of corners if `s` is a face line, else -1.
+int64_t face_corners(std::string_view s) {
+  std::string_view rest;
+  if (!statement(s, 'f', rest)) return -1;
+  return for_each_token(rest, [](int64_t, std::string_view) {});
+}
+
+std::string excerpt(std::string_view s) {
+  constexpr size_t kMax = 60;
+  std::string out = "'";
+  for (char c : s.substr(0, kMax)) out += (c >= 32 && c < 127) ? c : '?';
+  if (s.size() > kMax) out += "...";
+  return out + "'";
+}
+
+// Line number and text of face number `face` (0-based, in file order).
+std::pair<uint64_t, std::string_view> face_line(std::string_view data, uint64_t face) {
+  std::pair<uint64_t, std::string_view> found{0, {}};
+  uint64_t f = 0;
+  for_each_line(data, [&](uint64_t line, std::string_view text) {
+    if (face_corners(text) < 0) return true;
+    if (f++ != face) return true;
+    found = {line, text};
+    return false;
+  });
+  return found;
+}
+
+// Last "line N" in a tinyobjloader message, 0 if none.
+uint64_t line_in_message(const std::string& msg) {
+  size_t p = msg.rfind("line ");
+  if (p == std::string::npos) return 0;
+  uint64_t n = 0;
+  for (size_t i = p + 5; i < msg.size() && msg[i] >= '0' && msg[i] <= '9'; ++i)
+    n = n * 10 + uint64_t(msg[i] - '0');
+  return n;
+}
+
+std::string trim(const std::string& s) {
+  size_t b = s.find_first_not_of(" \t");
+  if (b == std::string::npos) return {};
+  return s.substr(b, s.find_last_not_of(" \t") + 1 - b);
+}
+
+}  // namespace
+
+PolyMesh read_obj(const std::string& src, std::string_view data) {
+  PolyMesh mesh;
+
+  // Pre-scan: corners per face, control bytes.
+  for_each_line(data, [&](uint64_t line, std::string_view text) {
+    for (char c : text) {
+      unsigned char u = static_cast<unsigned char>(c);
+      if (u < 32 && c != '\t' && c != '\v' && c != '\f' && u != 0x1a)
+        throw_at_line(src, line,
+                      "control byte " + std::to_string(u) + " in an OBJ file; expected text");
+    }
+    std::string_view rest;
+    if (statement(text, 'v', rest)) {
+      // tinyobjloader reads a missing or non-numeric coordinate as 0: refuse it here.
+      int64_t bad = -1;
+      int64_t coords = for_each_token(rest, [&](int64_t k, std::string_view t) {
+        if (k < 3 && bad < 0 && std::string_view("+-.0123456789").find(t[0]) == t.npos) bad = k;
+      });
+      if (coords < 3)
+        throw_at_line(src, line,
+                      "vertex has " + std::to_string(coords) + " coordinates; expected x y z");
+      if (bad >= 0) throw_at_line(src, line, "vertex coordinate is not a number; expected x y z");
+      return true;
+    }
+    int64_t n = face_corners(text);
+    if (n < 0) return true;
+    if (n < 3)
+      throw_at_line(src, line, "face has " + std::to_string(n) + " vertices; expected at least 3");
+    if (n > int64_t(UINT32_MAX)) throw_at_line(src, line, "face has too many vertices");
+    mesh.face_sizes.push_back(uint32_t(n));
+    return true;
+  });
+
+  tinyobj::attrib_t attrib;
+  std::vector<tinyobj::shape_t> shapes;
+  std::vector<tinyobj::material_t> materials;
+  std::string warn, err;
+  MemoryBuf buf(data.data(), data.size());
+  std::istream in(&buf);
+  if (!tinyobj::LoadObj(&attrib, &shapes, &materials, &warn, &err, &in, nullptr,
+                        /*triangulate=*/false, /*default_vcols_fallback=*/false)) {
+    uint64_t line = line_in_message(err);
+    std::string what = "cannot parse OBJ (tinyobjloader: " + trim(err.substr(0, err.find('\n'))) +
+                       "); expected vertex references v, v/t, v//n or v/t/n with nonzero integers";
+    if (line > 0) throw_at_line(src, line, what);
+    throw Error(src + ": " + what);
+  }
+
+  const size_t nv = attrib.vertices.size() / 3;
+  const size_t nn = attrib.normals.size() / 3;
+  const size_t nt = attrib.texcoords.size() / 2;
+  if (nv > UINT32_MAX) throw Error(src + ": more than 2^32-1 vertices are not supported");
+  mesh.positions.resize(nv);
+  for (size_t i = 0; i < nv; ++i)
+    mesh.positions[i] = {attrib.vertices[3 * i], attrib.vertices[3 * i + 1],
+                         attrib.vertices[3 * i + 2]};
+
+  auto fail_face = [&](uint64_t face, const std::string& what) {
+    auto [line, text] = face_line(data, face);
+    if (line == 0) throw Error(src + ": face " + std::to_string(face) + ": " + what);
+    throw_at_line(src, line, what + " in face " + excerpt(text));
+  };
+
+  // Flatten tinyobjloader's shapes (file order) and check every index.
+  const uint64_t face_count = mesh.face_sizes.size();
+  mesh.face_indices.reserve(size_t(mesh.fan_triangle_count() + 2 * face_count));
+  std::vector<tinyobj::index_t> corners;
+  corners.reserve(mesh.face_indices.capacity());
+  std::vector<uint32_t> shape_object;
+  std::unordered_map<std::string, uint32_t> object_id;
+  uint64_t f = 0;
+  for (const tinyobj::shape_t& shape : shapes) {
+    if (shape.mesh.num_face_vertices.empty()) continue;  // lines or points only
+    std::string name = trim(shape.name);
+    if (name.empty()) name = "default";
+    auto [it, added] = object_id.try_emplace(name, uint32_t(mesh.object_names.size()));
+    if (added) mesh.object_names.push_back(name);
+    size_t k = 0;
+    const auto& idx = shape.mesh.indices;
+    for (unsigned char tiny_size : shape.mesh.num_face_vertices) {
+      if (f >= face_count || (mesh.face_sizes[f] & 0xff) != tiny_size ||
+          mesh.face_sizes[f] > idx.size() - k)
+        fail_face(f, "internal: tinyobjloader disagrees with the face pre-scan");
+      for (uint32_t c = 0; c < mesh.face_sizes[f]; ++c) corners.push_back(idx[k++]);
+      shape_object.push_back(it->second);
+      ++f;
+    }
+  }
+  if (f != face_count)
+    fail_face(f, "internal: tinyobjloader returned " + std::to_string(f) + " faces, expected " +
+                     std::to_string(face_count));
+
+  bool any_normal = false, any_uv = false;
+  {
+    uint64_t face = 0, end = face_count ? mesh.face_sizes[0] : 0;
+    const std::string range = " (" + std::to_string(nv) + " defined)";
+    for (size_t c = 0; c < corners.size(); ++c) {
+      while (c >= end) end += mesh.face_sizes[++face];
+      const tinyobj::index_t& x = corners[c];
+      if (x.vertex_index < 0 || size_t(x.vertex_index) >= nv)
+        fail_face(face, "vertex index out of range" + range +
+                            "; expected 1..N or -N..-1 relative to the vertices read so far");
+      if (x.normal_index < -1 || (x.normal_index >= 0 && size_t(x.normal_index) >= nn))
+        fail_face(face, "normal index out of range (" + std::to_string(nn) + " vn defined)");
+      if (x.texcoord_index < -1 || (x.texcoord_index >= 0 && size_t(x.texcoord_index) >= nt))
+        fail_face(face, "texture index out of range (" + std::to_string(nt) + " vt defined)");
+      mesh.face_indices.push_back(uint32_t(x.vertex_index));
+      any_normal |= x.normal_index >= 0;
+      any_uv |= x.texcoord_index >= 0;
+    }
+  }
+
+  if (any_normal) {
+    mesh.normals.resize(nn);
+    for (size_t i = 0; i < nn; ++i)
+      mesh.normals[i] = {attrib.normals[3 * i], attrib.normals[3 * i + 1],
+                         attrib.normals[3 * i + 2]};
+    mesh.normal_indices.reserve(corners.size());
+    for (const tinyobj::index_t& x : corners) {
+      if (x.normal_index < 0 && mesh.normals.size() == nn) mesh.normals.push_back({0, 0, 0});
+      mesh.normal_indices.push_back(x.normal_index >= 0 ? uint32_t(x.normal_index) : uint32_t(nn));
+    }
+  }
+  if (any_uv) {
+    mesh.uvs.resize(nt);
+    for (size_t i = 0; i < nt; ++i)
+      mesh.uvs[i] = {attrib.texcoords[2 * i], attrib.texcoords[2 * i + 1]};
+    mesh.uv_indices.reserve(corners.size());
+    for (const tinyobj::index_t& x : corners) {
+      if (x.texcoord_index < 0 && mesh.uvs.size() == nt) mesh.uvs.push_back({0, 0});
+      mesh.uv_indices.push_back(x.texcoord_index >= 0 ? uint32_t(x.texcoord_index) : uint32_t(nt));
+    }
+  }
+
+  if (mesh.object_names.size() > 1) mesh.face_object = std::move(shape_object);
+  if (face_count == 0) mesh.object_names.clear();
+  return mesh;
+}
+
+}  // namespace slim::detail

@@ -1,6 +1,70 @@
+// `slimrt bench SCENE... [--config NAME...] [--threads N] [--repeat K] [--json FILE] [--plot FILE]
+//                [--strict]`
+// Every configuration beside Embree 3 on the same rays in this process (../shared/BENCHMARK.md);
+// the work is done by bench/bench_runner. Prints the markdown table on stdout, progress and ERROR
+// lines on stderr. Exit code 0, or 1 with --strict when an ERROR was reported (a lossless
+// configuration under 99.9% hit agreement, a build failure, a non-deterministic run).
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "bench_runner.h"
 #include "commands.h"
 #include "slimrt/slimrt.h"
 
 namespace slim::cli {
-int cmd_bench(int, char**) { throw Error("bench: not implemented yet"); }
+
+int cmd_bench(int argc, char** argv) {
+  CLI::App app{"Benchmark every configuration beside Embree on the same rays (BENCHMARK.md).",
+               "slimrt bench"};
+  bench::BenchOptions opt;
+  std::string json_path, plot_path;
+  bool strict = false;
+  app.add_option(
+         "scenes", opt.scenes,
+         "mesh files (.obj .ply .gltf .glb, optionally .xz) or terrain:N, torus:N, canyon:N")
+      ->required();
+  app.add_option("--config", opt.configs,
+                 "configurations (BENCHMARK.md names, repeatable or comma-separated); default: "
+                 "every Embree anchor and every slimrt configuration; embree-tri always runs")
+      ->delimiter(',');
+  app.add_option("--threads", opt.threads, "threads for builds and rays, 0 = all cores")
+      ->check(CLI::Range(0, 4096))
+      ->capture_default_str();
+  app.add_option("--repeat", opt.repeat, "timed runs and builds per configuration (medians)")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  app.add_option("--json", json_path, "write the figures as JSON (BENCHMARK.md schema)");
+  app.add_option("--plot", plot_path,
+                 "draw bytes/triangle vs diffuse MRays/s into a PNG with gnuplot");
+  app.add_flag("--strict", strict, "exit with 1 if any ERROR was reported");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  for (const std::string& c : opt.configs) bench::check_config_name(c);  // before any work
+
+  const bench::BenchReport report = bench::run_bench(opt);
+  std::fputs(bench::report_markdown(report).c_str(), stdout);
+  std::fflush(stdout);
+
+  if (!json_path.empty()) {
+    std::ofstream out(json_path);
+    out << bench::report_json(report).dump(1) << "\n";
+    if (!out) throw Error(json_path + ": cannot write the JSON output");
+  }
+  if (!plot_path.empty()) {
+    std::string why;
+    if (!bench::write_plot(report, plot_path, &why))
+      std::fprintf(stderr, "slimrt bench: warning: no plot written to %s: %s\n", plot_path.c_str(),
+                   why.c_str());
+  }
+  if (!report.errors.empty())
+    std::fprintf(stderr, "slimrt bench: %zu ERROR(s), see above\n", report.errors.size());
+  return strict && !report.errors.empty() ? 1 : 0;
+}
+
 }  // namespace slim::cli

@@ -1,0 +1,398 @@
+// The benchmark instrument (issue 3): the Embree adapter against slimrt, and `slimrt bench --json`
+// against the BENCHMARK.md schema. No test asserts a timing.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "bench_runner.h"
+#include "embree_scene.h"
+#include "test_util.h"
+
+using namespace slim;
+using namespace slim::test;
+using slim::bench::EmbreeScene;
+
+namespace {
+
+struct Comparison {
+  uint64_t rays = 0, agree = 0, both_hit = 0, same_face = 0, same_geom = 0;
+};
+
+template <class A, class B>
+void compare_ray(const A& a, const B& b, const Ray& r, Comparison& c) {
+  const Hit ha = a.intersect(r), hb = b.intersect(r);
+  c.rays++;
+  c.agree += bench::hits_agree(ha, hb);
+  if (ha.valid() && hb.valid()) {
+    c.both_hit++;
+    c.same_face += ha.geomID == hb.geomID && ha.primID == hb.primID;
+    c.same_geom += ha.geomID == hb.geomID;
+  }
+  EXPECT_EQ(a.occluded(r), ha.valid());
+}
+
+// Random rays around the box plus the benchmark camera's rays at res x res.
+template <class A, class B>
+Comparison compare(const A& a, const B& b, const Box3f& box, int random_rays, int res) {
+  Comparison c;
+  Rng rng(11);
+  for (int i = 0; i < random_rays; ++i) compare_ray(a, b, random_ray(rng, box), c);
+  const Camera cam = frame_box(box, res, res);
+  for (int y = 0; y < res; ++y)
+    for (int x = 0; x < res; ++x)
+      compare_ray(a, b, camera_ray(cam, float(x) + 0.5f, float(y) + 0.5f), c);
+  return c;
+}
+
+std::vector<const PolyMesh*> ptrs(const PolyMesh& m) { return {&m}; }
+
+}  // namespace
+
+TEST(BenchEmbree, TriangleHitsMatchSlimrtOnRandomSoup) {
+  PolyMesh m = random_soup(4000, 5);
+  EmbreeScene e(ptrs(m), "embree-tri");
+  Scene s = Scene::build(m, BuildOptions::from_config("bvh8-tri4v"));
+  Comparison c = compare(e, s, m.bounds(), 20000, 128);
+  EXPECT_GT(c.both_hit, 5000u);
+  // A soup has no shared edges: every hit names the same face at the same t.
+  EXPECT_EQ(c.agree, c.rays);
+  EXPECT_EQ(c.same_face, c.both_hit);
+}
+
+TEST(BenchEmbree, TriangleHitsMatchSlimrtOnTerrain) {
+  PolyMesh m = make_terrain(64);
+  for (const char* config : {"embree-tri", "embree-tri-compact"}) {
+    EmbreeScene e(ptrs(m), config);
+    Scene s = Scene::build(m, BuildOptions::from_config("bvh8-tri4v"));
+    Comparison c = compare(e, s, m.bounds(), 20000, 256);
+    EXPECT_GT(c.both_hit, 30000u) << config;
+    // Embree's default triangle test is not watertight: a ray through a shared edge may slip
+    // between two triangles (about one camera ray in a million on terrain:64 at 1024 x 1024).
+    EXPECT_LE(c.rays - c.agree, c.rays / 10000) << config;
+    // Same face except on shared edges and vertices (ties).
+    EXPECT_GE(c.same_face, c.both_hit - c.both_hit / 1000) << config;
+  }
+}
+
+TEST(BenchEmbree, MixedPolygonsSeveralMeshesAndNonFiniteFaces) {
+  // Two meshes, faces of 3..6 corners, and faces using a NaN vertex (skipped, as slimrt does):
+  // primID must name the input face, geomID the mesh.
+  PolyMesh a = random_soup(300, 3);
+  PolyMesh b;
+  Rng rng(4);
+  for (int f = 0; f < 400; ++f) {
+    const int n = 3 + f % 4;
+    const Vec3f c(rng.uniform(), rng.uniform(), rng.uniform());
+    const uint32_t base = uint32_t(b.positions.size());
+    for (int k = 0; k < n; ++k) {
+      const float ang = 6.2831853f * float(k) / float(n);
+      b.positions.push_back(c + Vec3f(std::cos(ang), std::sin(ang), 0.2f * rng.uniform()) * 0.04f);
+      b.face_indices.push_back(base + uint32_t(k));
+    }
+    b.face_sizes.push_back(uint32_t(n));
+  }
+  b.positions[7 * 5 + 1].x = NAN;  // hits a face of b; its face (and only it) is skipped
+  std::vector<const PolyMesh*> meshes = {&a, &b};
+  EmbreeScene e(meshes, "embree-tri");
+  Scene s = Scene::build(meshes);
+  Comparison c = compare(e, s, merge(a.bounds(), b.bounds()), 20000, 128);
+  EXPECT_GT(c.both_hit, 3000u);
+  EXPECT_EQ(c.agree, c.rays);
+  EXPECT_EQ(c.same_geom, c.both_hit);
+  EXPECT_GE(c.same_face, c.both_hit - c.both_hit / 200);
+  // The face table is Embree's side data.
+  EXPECT_GT(e.memory().other_bytes, 0u);
+  EXPECT_EQ(e.memory().triangles, a.fan_triangle_count() + b.fan_triangle_count());
+
+  try {
+    EmbreeScene q(meshes, "embree-quad");
+    ADD_FAILURE() << "embree-quad built on non-quad faces";
+  } catch (const Error& err) {
+    EXPECT_NE(std::string(err.what()).find("does not apply"), std::string::npos) << err.what();
+    EXPECT_NE(std::string(err.what()).find("non-quad faces"), std::string::npos) << err.what();
+  }
+  try {
+    EmbreeScene g(meshes, "embree-grid");
+    ADD_FAILURE() << "embree-grid built on a soup";
+  } catch (const Error& err) {
+    EXPECT_NE(std::string(err.what()).find("does not apply"), std::string::npos) << err.what();
+  }
+}
+
+TEST(BenchEmbree, LatticeDetection) {
+  for (int n : {1, 2, 7, 64}) {
+    bench::QuadLattice t = bench::detect_quad_lattice(make_terrain(n));
+    EXPECT_EQ(t.nx, uint32_t(n));
+    EXPECT_EQ(t.ny, uint32_t(n));
+    EXPECT_FALSE(t.periodic);
+  }
+  bench::QuadLattice c = bench::detect_quad_lattice(make_canyon(33));
+  EXPECT_EQ(c.nx, 33u);
+  EXPECT_FALSE(c.periodic);
+  bench::QuadLattice t = bench::detect_quad_lattice(make_torus(64));
+  EXPECT_EQ(t.nx, 64u);
+  EXPECT_EQ(t.ny, 32u);
+  EXPECT_TRUE(t.periodic);
+  EXPECT_FALSE(bench::detect_quad_lattice(random_soup(100, 1)).valid());
+  PolyMesh broken = make_terrain(16);
+  std::swap(broken.face_indices[4 * 37 + 1], broken.face_indices[4 * 37 + 2]);
+  EXPECT_FALSE(bench::detect_quad_lattice(broken).valid());
+}
+
+// embree-quad and embree-grid split each quad on the fan's diagonal and map hits back to the
+// input face: on noisy (non-planar) quads the wrong diagonal would change t by far more than 1e-5.
+TEST(BenchEmbree, QuadAndGridMatchTrianglesOnGridScenes) {
+  for (const char* scene : {"terrain:64", "torus:64", "canyon:48"}) {
+    PolyMesh m = load(scene);
+    EmbreeScene tri(ptrs(m), "embree-tri");
+    Scene s = Scene::build(m, BuildOptions::from_config("bvh8-tri4v"));
+    for (const char* config : {"embree-quad", "embree-grid"}) {
+      EmbreeScene e(ptrs(m), config);
+      Comparison c = compare(e, s, m.bounds(), 20000, 256);
+      EXPECT_GT(c.both_hit, 20000u) << scene << " " << config;
+      EXPECT_LE(c.rays - c.agree, c.rays / 10000) << scene << " " << config;
+      EXPECT_GE(c.same_face, c.both_hit - c.both_hit / 1000) << scene << " " << config;
+    }
+    // Memory: grid vertices with the torus seam duplicated, plus 12 B RTCGrid records.
+    EmbreeScene grid(ptrs(m), "embree-grid");
+    bench::QuadLattice lat = bench::detect_quad_lattice(m);
+    const uint64_t verts = uint64_t(lat.nx + 1) * (lat.ny + 1);
+    EXPECT_EQ(grid.memory().geometry_bytes, verts * 12 + 16 + 12) << scene;
+    EXPECT_EQ(grid.memory().other_bytes, 0u);
+    EXPECT_GT(grid.memory().bvh_bytes, 0u);
+    // Triangles: the input vertices (+16 B padding) and 12 B per triangle; no face table needed
+    // for quads, but needed for the triangles.
+    const MemoryStats mt = tri.memory();
+    EXPECT_EQ(mt.geometry_bytes, m.positions.size() * 12 + 16 + m.fan_triangle_count() * 12);
+    EXPECT_EQ(mt.other_bytes, m.fan_triangle_count() * 4);
+    EmbreeScene quad(ptrs(m), "embree-quad");
+    EXPECT_EQ(quad.memory().geometry_bytes, m.positions.size() * 12 + 16 + m.face_count() * 16);
+    EXPECT_EQ(quad.memory().other_bytes, 0u);
+  }
+}
+
+// A lattice wider than an RTCGrid record (32767 vertices a side) is cut into records that share
+// their border column; hits still map to the input face.
+TEST(BenchEmbree, GridRecordsSplitLongLattices) {
+  const uint32_t nx = 70000, ny = 3;
+  PolyMesh m;
+  m.name = "strip";
+  Rng rng(8);
+  for (uint32_t j = 0; j <= ny; ++j)
+    for (uint32_t i = 0; i <= nx; ++i)
+      m.positions.push_back(Vec3f(float(i), float(j), 0.3f * rng.uniform()));
+  for (uint32_t j = 0; j < ny; ++j)
+    for (uint32_t i = 0; i < nx; ++i) {
+      const uint32_t v = j * (nx + 1) + i;
+      m.face_indices.insert(m.face_indices.end(), {v, v + 1, v + nx + 2, v + nx + 1});
+      m.face_sizes.push_back(4);
+    }
+  bench::QuadLattice lat = bench::detect_quad_lattice(m);
+  ASSERT_EQ(lat.nx, nx);
+  ASSERT_EQ(lat.ny, ny);
+  EmbreeScene grid(ptrs(m), "embree-grid");
+  // The reference is slimrt's watertight BVH: at |x| ~ 5e4, embree-tri's triangle test lets a
+  // few rays slip through shared edges.
+  Scene tri = Scene::build(m, BuildOptions::from_config("bvh8-tri4v"));
+  // 3 records of 12 bytes; one vertex buffer.
+  EXPECT_EQ(grid.memory().geometry_bytes, uint64_t(nx + 1) * (ny + 1) * 12 + 16 + 3 * 12);
+  Comparison c;
+  auto shoot = [&](float x, float y) {
+    Ray r;
+    r.org = Vec3f(x, y, 2.0f);
+    r.dir = normalize(Vec3f(0.01f, 0.02f, -1.0f));
+    compare_ray(grid, tri, r, c);
+  };
+  for (int k = 0; k < 20000; ++k) shoot(rng.uniform() * float(nx), rng.uniform() * float(ny));
+  for (float x0 : {32766.0f, 65532.0f, 0.0f, float(nx - 1)})  // around the record borders
+    for (int k = 0; k < 2000; ++k) shoot(x0 + 2.0f * rng.uniform() - 1.0f, rng.uniform() * ny);
+  EXPECT_GT(c.both_hit, 25000u);
+  EXPECT_LE(c.rays - c.agree, c.rays / 10000);
+  EXPECT_GE(c.same_face, c.both_hit - c.both_hit / 1000);
+}
+
+TEST(BenchEmbree, HitAttributesMatchSlimrt) {
+  // u, v are the fan triangle's barycentrics and Ng its orientation, whatever the Embree geometry.
+  PolyMesh m = make_terrain(32);
+  Scene s = Scene::build(m, BuildOptions::from_config("bvh8-tri4v"));
+  for (const char* config : {"embree-tri", "embree-quad", "embree-grid"}) {
+    EmbreeScene e(ptrs(m), config);
+    Rng rng(3);
+    int checked = 0;
+    for (int i = 0; i < 5000; ++i) {
+      Ray r = random_ray(rng, m.bounds());
+      Hit a = e.intersect(r), b = s.intersect(r);
+      if (!a.valid() || !b.valid() || a.primID != b.primID) continue;
+      // Near the quad's diagonal either fan triangle may be reported.
+      if (std::min(std::min(a.u, a.v), std::min(b.u, b.v)) < 0.01f) continue;
+      ++checked;
+      EXPECT_GT(dot(a.Ng, b.Ng), 0.0f) << config;
+      EXPECT_NEAR(a.u, b.u, 1e-3f) << config;
+      EXPECT_NEAR(a.v, b.v, 1e-3f) << config;
+    }
+    EXPECT_GT(checked, 1000) << config;
+  }
+}
+
+TEST(BenchEmbree, UnknownConfigAndInvalidRays) {
+  PolyMesh m = make_terrain(4);
+  EXPECT_THROW(EmbreeScene(ptrs(m), "embree-foo"), Error);
+  EXPECT_THROW(bench::check_config_name("bvh9-tri4v"), Error);
+  EXPECT_NO_THROW(bench::check_config_name("embree-grid"));
+  EXPECT_NO_THROW(bench::check_config_name("costa-TPFV"));
+  EmbreeScene e(ptrs(m), "embree-tri");
+  Ray r;
+  r.org = Vec3f(0.5f, 0.5f, 2.0f);
+  r.dir = Vec3f(0.0f, 0.0f, -1.0f);
+  EXPECT_TRUE(e.intersect(r).valid());
+  Ray bad = r;
+  bad.dir = Vec3f(0.0f);
+  EXPECT_FALSE(e.intersect(bad).valid());
+  bad = r;
+  bad.org.x = NAN;
+  EXPECT_FALSE(e.occluded(bad));
+  bad = r;
+  bad.tnear = 5.0f;
+  bad.tfar = 1.0f;
+  EXPECT_FALSE(e.intersect(bad).valid());
+}
+
+TEST(BenchRunner, LossyNamesAndAgreement) {
+  EXPECT_TRUE(bench::is_lossy_config("lossy-grid"));
+  EXPECT_TRUE(bench::is_lossy_config("lossy-grid-e2"));
+  EXPECT_TRUE(bench::is_lossy_config("costa-PFV"));
+  EXPECT_TRUE(bench::is_lossy_config("costa-V"));
+  EXPECT_FALSE(bench::is_lossy_config("costa-TPF"));
+  EXPECT_FALSE(bench::is_lossy_config("costa"));
+  EXPECT_FALSE(bench::is_lossy_config("bvh8-tri4v"));
+  EXPECT_FALSE(bench::is_lossy_config("embree-grid"));
+  Hit a, b;
+  EXPECT_TRUE(bench::hits_agree(a, b));
+  a.geomID = b.geomID = 0;
+  a.t = 2.0f;
+  b.t = 2.0f * (1.0f + 0.9e-5f);
+  EXPECT_TRUE(bench::hits_agree(a, b));
+  b.t = 2.0f * (1.0f + 2e-5f);
+  EXPECT_FALSE(bench::hits_agree(a, b));
+  b.geomID = kInvalidID;
+  EXPECT_FALSE(bench::hits_agree(a, b));
+}
+
+// `slimrt bench terrain:64 --repeat 1 --json` against the BENCHMARK.md schema.
+TEST(BenchCli, JsonSchemaOnTerrain64) {
+  const std::string json_path = (std::filesystem::temp_directory_path() /
+                                 ("slimrt_bench_" + std::to_string(getpid()) + ".json"))
+                                    .string();
+  const std::string configs =
+      "embree-tri,embree-tri-compact,embree-quad,embree-grid,bvh8-tri4v,bvh8-tri4i,qbvh8-tri4v,"
+      "clbvh-tri4v,grid,lossy-grid,costa-PFV";
+  const std::string cmd = std::string(SLIM_CLI_PATH) + " bench terrain:64 --repeat 1 --threads 2" +
+                          " --config " + configs + " --json " + json_path + " > /dev/null";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  std::ifstream in(json_path);
+  ASSERT_TRUE(in.good());
+  nlohmann::json j = nlohmann::json::parse(in);
+  std::filesystem::remove(json_path);
+
+  ASSERT_TRUE(j.is_object());
+  ASSERT_TRUE(j.contains("machine") && j["machine"].is_object());
+  EXPECT_TRUE(j["machine"]["cpu"].is_string());
+  EXPECT_TRUE(j["machine"]["threads"].is_number_integer());
+  EXPECT_EQ(j["machine"]["threads"].get<int>(), 2);
+  EXPECT_TRUE(j["machine"]["isa"].is_string());
+  ASSERT_TRUE(j.contains("results") && j["results"].is_array());
+  ASSERT_EQ(j["results"].size(), 11u);
+
+  const char* integer_fields[] = {"bytes_geometry", "bytes_bvh", "bytes_other", "bytes_total"};
+  const char* number_fields[] = {"build_s",           "bytes_per_triangle", "mrays_primary",
+                                 "mrays_diffuse",     "ratio_primary",      "ratio_diffuse",
+                                 "box_tests_per_ray", "prim_tests_per_ray", "hit_agreement"};
+  const char* error_fields[] = {"rms", "diag_avg_pct", "diag_max_pct", "psnr_db"};
+  std::map<std::string, nlohmann::json> by_config;
+  for (const nlohmann::json& r : j["results"]) {
+    ASSERT_TRUE(r["config"].is_string());
+    const std::string config = r["config"];
+    by_config[config] = r;
+    EXPECT_EQ(r["scene"], "terrain:64");
+    EXPECT_TRUE(r["triangles"].is_number_unsigned()) << config;
+    EXPECT_EQ(r["triangles"].get<uint64_t>(), 2u * 64 * 64);
+    for (const char* f : integer_fields) {
+      ASSERT_TRUE(r.contains(f)) << config << " " << f;
+      EXPECT_TRUE(r[f].is_null() || r[f].is_number_unsigned()) << config << " " << f;
+    }
+    for (const char* f : number_fields) {
+      ASSERT_TRUE(r.contains(f)) << config << " " << f;
+      EXPECT_TRUE(r[f].is_null() || r[f].is_number()) << config << " " << f;
+    }
+    ASSERT_TRUE(r.contains("error") && r["error"].is_object()) << config;
+    for (const char* f : error_fields) {
+      ASSERT_TRUE(r["error"].contains(f)) << config << " " << f;
+      EXPECT_TRUE(r["error"][f].is_null() || r["error"][f].is_number()) << config << " " << f;
+    }
+    if (r.contains("reason")) {  // not measured: every figure is null
+      EXPECT_TRUE(r["reason"].is_string());
+      for (const char* f : number_fields) EXPECT_TRUE(r[f].is_null()) << config << " " << f;
+      for (const char* f : integer_fields) EXPECT_TRUE(r[f].is_null()) << config << " " << f;
+      const std::string reason = r["reason"];
+      EXPECT_TRUE(reason.find("does not apply") != std::string::npos ||
+                  reason.find("not implemented") != std::string::npos)
+          << config << ": " << reason;
+      continue;
+    }
+    for (const char* f : integer_fields) EXPECT_FALSE(r[f].is_null()) << config << " " << f;
+    EXPECT_EQ(r["bytes_total"].get<uint64_t>(), r["bytes_geometry"].get<uint64_t>() +
+                                                    r["bytes_bvh"].get<uint64_t>() +
+                                                    r["bytes_other"].get<uint64_t>())
+        << config;
+    EXPECT_NEAR(r["bytes_per_triangle"].get<double>(),
+                double(r["bytes_total"].get<uint64_t>()) / double(2 * 64 * 64), 1e-9)
+        << config;
+    for (const char* f : {"build_s", "mrays_primary", "mrays_diffuse", "ratio_primary",
+                          "ratio_diffuse", "hit_agreement"}) {
+      ASSERT_TRUE(r[f].is_number()) << config << " " << f;
+      EXPECT_GT(r[f].get<double>(), 0.0) << config << " " << f;
+    }
+    const bool embree = config.rfind("embree-", 0) == 0;
+    EXPECT_EQ(r["box_tests_per_ray"].is_null(), embree) << config;
+    EXPECT_EQ(r["prim_tests_per_ray"].is_null(), embree) << config;
+    if (!bench::is_lossy_config(config)) {
+      // 1.0 up to the rays that slip through Embree's non-watertight triangle test (about one
+      // in a million here; BENCHMARK.md: a lossless format under 99.9% is an error).
+      EXPECT_GE(r["hit_agreement"].get<double>(), 0.9999) << config;
+      for (const char* f : error_fields) EXPECT_TRUE(r["error"][f].is_null()) << config << " " << f;
+    }
+  }
+  // The Embree anchors that apply to a terrain, and the uncompressed slimrt formats, must build.
+  for (const char* c : {"embree-tri", "embree-tri-compact", "embree-quad", "embree-grid",
+                        "bvh8-tri4v", "bvh8-tri4i"}) {
+    ASSERT_TRUE(by_config.count(c)) << c;
+    EXPECT_FALSE(by_config[c].contains("reason")) << c;
+  }
+  const double ref_primary = by_config["embree-tri"]["mrays_primary"];
+  const double ref_diffuse = by_config["embree-tri"]["mrays_diffuse"];
+  EXPECT_EQ(by_config["embree-tri"]["hit_agreement"].get<double>(), 1.0);
+  for (const auto& [config, r] : by_config) {
+    if (r.contains("reason")) continue;
+    const double rp = r["ratio_primary"], rd = r["ratio_diffuse"];
+    const double mp = r["mrays_primary"], md = r["mrays_diffuse"];
+    EXPECT_NEAR(rp, mp / ref_primary, 1e-6 * rp) << config;
+    EXPECT_NEAR(rd, md / ref_diffuse, 1e-6 * rd) << config;
+    if (bench::is_lossy_config(config)) {
+      EXPECT_TRUE(r["error"]["psnr_db"].is_number()) << config;
+    }
+  }
+}
+
+TEST(BenchCli, UnknownConfigFails) {
+  const std::string cmd =
+      std::string(SLIM_CLI_PATH) + " bench terrain:4 --config bvh9 > /dev/null 2>&1";
+  EXPECT_NE(std::system(cmd.c_str()), 0);
+}

@@ -433,7 +433,7 @@ BenchReport run_bench(const BenchOptions& opt) {
   report.machine.cpu = cpu_model_name();
   report.machine.threads = opt.threads > 0 ? opt.threads : tbb::this_task_arena::max_concurrency();
   // The compiled SIMD path of the library. Nothing public reports it yet (see the README).
-  report.machine.isa = "avx2";
+  report.machine.isa = slim::simd_isa();
   report.repeat = std::max(opt.repeat, 1);
   report.width = opt.width;
   report.height = opt.height;

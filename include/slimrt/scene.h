@@ -85,6 +85,9 @@ struct BuildOptions {
 // Every slimrt configuration name, in the order of BENCHMARK.md.
 std::vector<std::string> all_config_names();
 
+// The SIMD path slimrt was compiled for: "avx512", "avx2" or "scalar" (CMake option SLIM_ISA).
+const char* simd_isa();
+
 // Bytes kept by a scene: geometry (vertices, leaf primitive data), BVH nodes, side tables.
 struct MemoryStats {
   uint64_t geometry_bytes = 0;

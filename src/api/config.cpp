@@ -2,6 +2,7 @@
 #include <string>
 #include <vector>
 
+#include "core/simd.h"
 #include "slimrt/scene.h"
 
 namespace slim {
@@ -74,6 +75,8 @@ std::string BuildOptions::config_name() const {
   static const char* b[] = {"bvh8", "qbvh8", "clbvh", "clbvh-compact"};
   return std::string(b[int(bvh)]) + "-" + g[int(geometry)];
 }
+
+const char* simd_isa() { return simd::isa_name(); }
 
 std::vector<std::string> all_config_names() {
   std::vector<std::string> v;

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <cctype>
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
@@ -49,7 +50,16 @@ int cmd_render(int argc, char** argv) {
                  "mesh file (.obj .ply .gltf .glb, optionally .xz) or terrain:N, torus:N, canyon:N")
       ->required();
   app.add_option("-o,--output", output, "output image, .png (8-bit sRGB) or .exr (float)")
-      ->required();
+      ->required()
+      ->check(  // checked before the (possibly long) load, build and render
+          [](const std::string& path) {
+            std::string ext = path.size() >= 4 ? path.substr(path.size() - 4) : "";
+            for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+            return ext == ".png" || ext == ".exr"
+                       ? std::string()
+                       : path + ": unknown image extension, expected .png or .exr";
+          },
+          "PATH.png|PATH.exr");
   app.add_option("--shade", shade, "diffuse (path tracing), normals or kind (primitive kind)")
       ->check(CLI::IsMember({"diffuse", "normals", "kind"}))
       ->capture_default_str();
@@ -114,10 +124,9 @@ int cmd_render(int argc, char** argv) {
   std::printf(
       "%s: %llu faces, %llu triangles | load %.3f s | build %.3f s (%s) | render %.3f s "
       "(%dx%d, %d spp, %s) | %.2f MRays/s%s | %s\n",
-      scene_name.c_str(), (unsigned long long)faces, (unsigned long long)triangles, load_s,
-      build_s, config.c_str(), render_s, ropt.width, ropt.height, ropt.spp,
-      shade.c_str(), mrays, ropt.shade == Shade::Diffuse ? " (camera rays only)" : "",
-      output.c_str());
+      scene_name.c_str(), (unsigned long long)faces, (unsigned long long)triangles, load_s, build_s,
+      config.c_str(), render_s, ropt.width, ropt.height, ropt.spp, shade.c_str(), mrays,
+      ropt.shade == Shade::Diffuse ? " (camera rays only)" : "", output.c_str());
   return 0;
 }
 

@@ -3,7 +3,7 @@
 //   Tri4i   80 B  4 triangles as 3 vertex indices into one shared vertex array + geomID/primID
 // Both are tested 4 at a time with the watertight test (core/watertight.h). Blocks with fewer
 // than 4 triangles repeat their last triangle (the duplicate gives the same hit, so no lane mask
-// is needed on the hot path).
+// is needed on the hot path) with primID = kInvalidID.
 #pragma once
 
 #include <cstdint>
@@ -57,16 +57,12 @@ SLIM_INLINE RayVertex<simd::vfloat4> to_ray_space4(const WatertightRay& r, const
   return {fnmadd(vfloat4(r.Sx), az, ax), fnmadd(vfloat4(r.Sy), az, ay), vfloat4(r.Sz) * az};
 }
 
-// Number of lanes that are real triangles, not repeats of the previous lane (statistics and
-// validation only). v[corner][axis][lane].
-SLIM_INLINE int distinct_lanes(const uint32_t* geom, const uint32_t* prim, const float (*v)[3][4]) {
-  int n = 1;
-  for (int i = 1; i < 4; ++i) {
-    bool same = geom[i] == geom[i - 1] && prim[i] == prim[i - 1];
-    for (int k = 0; k < 3 && same; ++k)
-      for (int a = 0; a < 3; ++a) same = same && v[k][a][i] == v[k][a][i - 1];
-    n += !same;
-  }
+// Number of lanes that hold real triangles (statistics and validation only): padding lanes repeat
+// the last triangle with primID = kInvalidID. Their hits tie with the real lane's, and the closest
+// lane search keeps the lowest lane on ties, so a padding lane is never reported.
+SLIM_INLINE int distinct_lanes(const uint32_t* prim) {
+  int n = 0;
+  for (int i = 0; i < 4; ++i) n += prim[i] != kInvalidID;
   return n;
 }
 
@@ -135,7 +131,7 @@ struct Tri4v : TriangleSourceOps {
         b->v[k][2][l] = p.z;
       }
       b->geom[l] = src.geom_ids[t];
-      b->prim[l] = src.prim_ids[t];
+      b->prim[l] = l < n ? src.prim_ids[t] : kInvalidID;
     }
   }
 
@@ -144,7 +140,7 @@ struct Tri4v : TriangleSourceOps {
                                     Stats& st) {
     using namespace simd;
     const auto* b = reinterpret_cast<const Tri4vBlock*>(p);
-    if constexpr (!std::is_same_v<Stats, NoStats>) st.prims(detail::distinct_lanes(b->geom, b->prim, b->v));
+    if constexpr (!std::is_same_v<Stats, NoStats>) st.prims(detail::distinct_lanes(b->prim));
     RayVertex<vfloat4> A = detail::to_ray_space4(ray.wt, b->v[0]);
     RayVertex<vfloat4> B = detail::to_ray_space4(ray.wt, b->v[1]);
     RayVertex<vfloat4> C = detail::to_ray_space4(ray.wt, b->v[2]);
@@ -163,7 +159,7 @@ struct Tri4v : TriangleSourceOps {
   template <class F>
   static void visit(const Context&, const uint8_t* p, F&& fn) {
     const auto* b = reinterpret_cast<const Tri4vBlock*>(p);
-    int n = detail::distinct_lanes(b->geom, b->prim, b->v);
+    int n = detail::distinct_lanes(b->prim);
     for (int i = 0; i < n; ++i) {
       Vec3f c[3];
       Box3f box;
@@ -197,7 +193,7 @@ struct Tri4i : TriangleSourceOps {
       uint32_t t = prims[l < n ? l : n - 1];
       for (int k = 0; k < 3; ++k) b->v[k][l] = src.tris[3 * t + k];
       b->geom[l] = src.geom_ids[t];
-      b->prim[l] = src.prim_ids[t];
+      b->prim[l] = l < n ? src.prim_ids[t] : kInvalidID;
     }
   }
 
@@ -218,7 +214,7 @@ struct Tri4i : TriangleSourceOps {
     const auto* b = reinterpret_cast<const Tri4iBlock*>(p);
     alignas(16) float vv[3][3][4];
     gather(ctx, b, vv);
-    if constexpr (!std::is_same_v<Stats, NoStats>) st.prims(detail::distinct_lanes(b->geom, b->prim, vv));
+    if constexpr (!std::is_same_v<Stats, NoStats>) st.prims(detail::distinct_lanes(b->prim));
     RayVertex<vfloat4> A = detail::to_ray_space4(ray.wt, vv[0]);
     RayVertex<vfloat4> B = detail::to_ray_space4(ray.wt, vv[1]);
     RayVertex<vfloat4> C = detail::to_ray_space4(ray.wt, vv[2]);
@@ -237,7 +233,7 @@ struct Tri4i : TriangleSourceOps {
     const auto* b = reinterpret_cast<const Tri4iBlock*>(p);
     alignas(16) float vv[3][3][4];
     gather(ctx, b, vv);
-    int n = detail::distinct_lanes(b->geom, b->prim, vv);
+    int n = detail::distinct_lanes(b->prim);
     for (int i = 0; i < n; ++i) {
       const Vec3f& a = ctx.vertices[b->v[0][i]];
       const Vec3f& c1 = ctx.vertices[b->v[1][i]];
@@ -283,7 +279,7 @@ struct Tri4iCompact : Tri4i {
         uint32_t t = prims[c][l < n ? l : n - 1];
         for (int j = 0; j < 3; ++j) b->v[j][l] = index_of(src.tris[3 * t + j]);
         b->geom[l] = src.geom_ids[t];
-        b->prim[l] = src.prim_ids[t];
+        b->prim[l] = l < n ? src.prim_ids[t] : kInvalidID;
       }
     }
     size_t base = out.size();
@@ -314,7 +310,7 @@ struct Tri4iCompact : Tri4i {
     const uint8_t* dict = data + children * sizeof(Tri4iCompactBlock);
     alignas(16) float vv[3][3][4];
     gather_compact(ctx, b, dict, vv);
-    if constexpr (!std::is_same_v<Stats, NoStats>) st.prims(detail::distinct_lanes(b->geom, b->prim, vv));
+    if constexpr (!std::is_same_v<Stats, NoStats>) st.prims(detail::distinct_lanes(b->prim));
     RayVertex<vfloat4> A = detail::to_ray_space4(ray.wt, vv[0]);
     RayVertex<vfloat4> B = detail::to_ray_space4(ray.wt, vv[1]);
     RayVertex<vfloat4> C = detail::to_ray_space4(ray.wt, vv[2]);
@@ -336,7 +332,7 @@ struct Tri4iCompact : Tri4i {
     const uint8_t* dict = data + children * sizeof(Tri4iCompactBlock);
     alignas(16) float vv[3][3][4];
     gather_compact(ctx, b, dict, vv);
-    int n = detail::distinct_lanes(b->geom, b->prim, vv);
+    int n = detail::distinct_lanes(b->prim);
     for (int l = 0; l < n; ++l) {
       Vec3f c[3];
       Box3f box;

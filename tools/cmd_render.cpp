@@ -113,20 +113,18 @@ int cmd_render(int argc, char** argv) {
 
   Camera cam = frame_box(scene.bounds(), ropt.width, ropt.height);
   t0 = std::chrono::steady_clock::now();
-  Image img = render(scene, cam, ropt);
+  RenderStats rstats;
+  Image img = render(scene, cam, ropt, &rstats);
   double render_s = seconds_since(t0);
   write_image(img, output);
 
-  // render() does not report the rays it traced, so the rate counts camera rays (one per sample);
-  // for diffuse shading the bounces are not included.
-  double primary_rays = double(ropt.width) * double(ropt.height) * double(ropt.spp);
-  double mrays = render_s > 0 ? primary_rays / render_s * 1e-6 : 0.0;
+  double mrays = render_s > 0 ? double(rstats.rays) / render_s * 1e-6 : 0.0;
   std::printf(
       "%s: %llu faces, %llu triangles | load %.3f s | build %.3f s (%s) | render %.3f s "
       "(%dx%d, %d spp, %s) | %.2f MRays/s%s | %s\n",
       scene_name.c_str(), (unsigned long long)faces, (unsigned long long)triangles, load_s, build_s,
       config.c_str(), render_s, ropt.width, ropt.height, ropt.spp, shade.c_str(), mrays,
-      ropt.shade == Shade::Diffuse ? " (camera rays only)" : "", output.c_str());
+      "", output.c_str());
   return 0;
 }
 

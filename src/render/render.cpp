@@ -89,7 +89,8 @@ class ProgressBar {
 
 }  // namespace
 
-Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt) {
+Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
+             RenderStats* stats) {
   // The camera defines the view, the options the resolution: rescale the pixel steps when they
   // differ so that the whole camera view lands in the image.
   Camera cam = cam_in;
@@ -115,7 +116,8 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt)
   img.height = height;
   img.rgb.assign(size_t(width) * size_t(height) * 3, 0.0f);
 
-  auto shade_sample = [&](int x, int y, int s) -> Vec3f {
+  std::atomic<uint64_t> rays_traced{0};
+  auto shade_sample = [&](int x, int y, int s, uint64_t& rays) -> Vec3f {
     Rng rng(pixel_seed(x, y, s));
     float jx = 0.5f, jy = 0.5f;
     if (spp > 1) {
@@ -124,14 +126,19 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt)
     }
     Ray ray = camera_ray(cam, float(x) + jx, float(y) + jy);
     switch (opt.shade) {
-      case Shade::Diffuse:
-        return trace_path(scene, ray, rng, max_bounces, offset).radiance;
+      case Shade::Diffuse: {
+        PathResult p = trace_path(scene, ray, rng, max_bounces, offset);
+        rays += p.rays;
+        return p.radiance;
+      }
       case Shade::Normals: {
+        rays++;
         Hit h = scene.intersect(ray);
         if (!h.valid()) return Vec3f(0.03f);  // dark grey background
         return Vec3f(0.5f) + unit_normal(h) * 0.5f;
       }
       case Shade::Kind: {
+        rays++;
         Hit h = scene.intersect(ray);
         if (!h.valid()) return Vec3f(0.0f);
         float c = std::fabs(dot(unit_normal(h), ray.dir));
@@ -149,13 +156,14 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt)
   auto render_tiles = [&] {
     tbb::parallel_for(
         tbb::blocked_range<int>(0, tile_count, 1), [&](const tbb::blocked_range<int>& r) {
+          uint64_t rays = 0;
           for (int tile = r.begin(); tile != r.end(); ++tile) {
             int x0 = (tile % tiles_x) * kTileSize, y0 = (tile / tiles_x) * kTileSize;
             int x1 = std::min(x0 + kTileSize, width), y1 = std::min(y0 + kTileSize, height);
             for (int y = y0; y < y1; ++y) {
               for (int x = x0; x < x1; ++x) {
                 Vec3f sum(0.0f);
-                for (int s = 0; s < spp; ++s) sum += shade_sample(x, y, s);
+                for (int s = 0; s < spp; ++s) sum += shade_sample(x, y, s, rays);
                 sum *= inv_spp;
                 float* px = &img.rgb[(size_t(y) * size_t(width) + size_t(x)) * 3];
                 px[0] = sum.x;
@@ -165,6 +173,7 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt)
             }
             progress.tile_done();
           }
+          rays_traced += rays;
         });
   };
   if (opt.threads > 0) {
@@ -174,6 +183,7 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt)
     render_tiles();
   }
   progress.finish();
+  if (stats) stats->rays = rays_traced.load();
   return img;
 }
 

@@ -1,9 +1,13 @@
 // A scene that is one BVH8 over the blocks of one leaf format: the common case for every format.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <string>
 #include <vector>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
 
 #include "api/scene_impl.h"
 #include "bvh/build.h"
@@ -21,6 +25,12 @@ struct Fingerprint {
     sum += k;
     sum_sq += k * k;
     xor_all ^= k * 0x9E3779B97F4A7C15ULL;
+  }
+  void merge(const Fingerprint& o) {
+    count += o.count;
+    sum += o.sum;
+    sum_sq += o.sum_sq;
+    xor_all ^= o.xor_all;
   }
   bool operator==(const Fingerprint& o) const {
     return count == o.count && sum == o.sum && sum_sq == o.sum_sq && xor_all == o.xor_all;
@@ -89,17 +99,35 @@ class BvhScene : public Scene::Impl {
   // Leaf::source_bounds read it), fills bvh, expected, bounds and the BVH part of stats/mem.
   template <class Source>
   void build(const Source& src, uint32_t prim_count, const BuildOptions& opt) {
+    using clock = std::chrono::steady_clock;
+    auto secs = [](clock::time_point a) {
+      return std::chrono::duration<double>(clock::now() - a).count();
+    };
+    auto t0 = clock::now();
     std::vector<PrimRef> refs(prim_count);
-    for (uint32_t i = 0; i < prim_count; ++i) {
-      refs[i] = {Leaf::source_bounds(src, i), i};
-      expected.add(Leaf::source_key(src, i));
-    }
+    expected = tbb::parallel_reduce(
+        tbb::blocked_range<uint32_t>(0, prim_count, 4096), Fingerprint{},
+        [&](const tbb::blocked_range<uint32_t>& r, Fingerprint f) {
+          for (uint32_t i = r.begin(); i < r.end(); ++i) {
+            refs[i] = {Leaf::source_bounds(src, i), i};
+            f.add(Leaf::source_key(src, i));
+          }
+          return f;
+        },
+        [](Fingerprint a, const Fingerprint& b) {
+          a.merge(b);
+          return a;
+        });
     Bvh2BuildConfig cfg;
     cfg.bins = opt.sah_bins;
     cfg.max_leaf_size = std::max<uint32_t>(1, std::min<uint32_t>(opt.max_leaf_size, Leaf::kBlockPrims * kMaxLeafBlocks));
     cfg.block_prims = Leaf::kBlockPrims;
     cfg.threads = opt.threads;
+    double refs_s = secs(t0);
+    t0 = clock::now();
     Bvh2 b2 = build_bvh2(std::move(refs), cfg);
+    double bvh2_s = secs(t0);
+    t0 = clock::now();
     LeafEncoder enc;
     enc.block_prims = Leaf::kBlockPrims;
     enc.block_bytes = Leaf::kBlockBytes;
@@ -111,12 +139,16 @@ class BvhScene : public Scene::Impl {
         return Leaf::encode_multileaf(src, prims, counts, k);
       };
     bvh = collapse_bvh8(b2, node_kind(opt.bvh), enc);
+    double collapse_s = secs(t0);
     bounds = bvh.bounds;
     mem.bvh_bytes = bvh.node_bytes + bvh.multileaf_bytes;
     mem.geometry_bytes += bvh.leaf_data_bytes;
     stats.primitives = prim_count;
     const Bvh8Stats& s = bvh.stats;
     auto& d = stats.details;
+    d.emplace_back("prim_refs_s", refs_s);
+    d.emplace_back("bvh2_build_s", bvh2_s);
+    d.emplace_back("collapse_s", collapse_s);
     d.emplace_back("bvh2_depth", double(b2.depth));
     d.emplace_back("bvh8_depth", double(s.depth));
     d.emplace_back("node8_count", double(s.node8));

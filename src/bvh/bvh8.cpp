@@ -6,6 +6,9 @@
 #include <cmath>
 #include <new>
 #include <stdexcept>
+#include <unordered_map>
+
+#include <tbb/task_group.h>
 
 #include "core/assert.h"
 
@@ -97,6 +100,10 @@ Box3f dequantize_box(const QuantBoxes8& q, int i) {
 
 namespace {
 
+// Two passes: measure() walks the BVH8 that the collapse will produce (serially, cheap: no leaf
+// data is written) and records every subtree's byte sizes and the statistics; emit() then writes
+// nodes and leaves at their precomputed offsets, large subtrees as parallel tasks. The layout is
+// depth-first in both arenas (a node's children follow it), identical to a serial collapse.
 class Collapser {
  public:
   Collapser(const Bvh2& b2, NodeKind kind, const LeafEncoder& enc, Bvh8& out)
@@ -108,48 +115,46 @@ class Collapser {
       out_.root = NodeRef::make(kRefEmpty, 0);
       return;
     }
-    // Subtree sizes bottom-up (children always have larger indices than their parent).
+    // Subtree figures bottom-up (children always have larger indices than their parent).
     const size_t nn = b2_.nodes.size();
     prims_.assign(nn, 0);
     leaves_.assign(nn, 0);
+    max_leaf_.assign(nn, 0);
     for (size_t i = nn; i-- > 0;) {
       const Bvh2Node& n = b2_.nodes[i];
       if (n.is_leaf()) {
         prims_[i] = n.count;
         leaves_[i] = 1;
+        max_leaf_[i] = n.count;
       } else {
         prims_[i] = prims_[n.first] + prims_[n.first + 1];
         leaves_[i] = leaves_[n.first] + leaves_[n.first + 1];
+        max_leaf_[i] = std::max(max_leaf_[n.first], max_leaf_[n.first + 1]);
       }
     }
     out_.bounds = b2_.nodes[0].box;
     root_area_ = std::max(out_.bounds.half_area(), 1e-30f);
-    // Reserve roughly: one inner node per ~4 leaves, one block per leaf.
-    size_t nleaves = leaves_[0];
-    out_.nodes.reserve((nleaves / 4 + 1) * (kind_ == NodeKind::QBvh8 ? 136 : 256));
-    out_.leaves.reserve(uint64_t(nleaves) * enc_.block_bytes * 5 / 4 + 1024);
-    out_.root = emit(0, 1);
-    out_.nodes.shrink_to_fit();
-    out_.leaves.shrink_to_fit();
+    node_size_.assign(nn, 0);
+    leaf_size_.assign(nn, 0);
+    measure(0, 1);
+    out_.nodes.append(node_size_[0], 64);
+    out_.leaves.append(leaf_size_[0], 64);
+    out_.root = emit(0, 0, 0);
     Bvh8Stats& s = out_.stats;
     s.sah_cost = sah_;
     s.leaf_fill = s.leaf_blocks ? double(s.prims) / double(s.leaf_blocks * enc_.block_prims) : 0;
   }
 
  private:
+  static uint64_t round16(uint64_t x) { return (x + 15) & ~uint64_t(15); }
+  uint32_t node_bytes() const { return kind_ == NodeKind::QBvh8 ? sizeof(QNode8) : sizeof(Node8); }
+
   bool multileaf_candidate(uint32_t i) const {
     if (kind_ != NodeKind::CompressedLeaf) return false;
-    const Bvh2Node& n = b2_.nodes[i];
-    if (n.is_leaf()) return false;
+    if (b2_.nodes[i].is_leaf()) return false;
     // compressed-leaf-bvh.txt section 4.3: subtrees of fewer than N x M primitives; each of
     // their (at most 8) leaves must fit one block so that child blocks are addressed implicitly.
-    return prims_[i] < 8 * enc_.block_prims && leaves_[i] <= 8 && max_leaf(i) <= enc_.block_prims;
-  }
-
-  uint32_t max_leaf(uint32_t i) const {
-    const Bvh2Node& n = b2_.nodes[i];
-    if (n.is_leaf()) return n.count;
-    return std::max(max_leaf(n.first), max_leaf(n.first + 1));
+    return prims_[i] < 8 * enc_.block_prims && leaves_[i] <= 8 && max_leaf_[i] <= enc_.block_prims;
   }
 
   // Up to 8 BVH2 nodes below node i, opening the largest-area inner child first.
@@ -178,73 +183,6 @@ class Collapser {
     return k;
   }
 
-  uint64_t write_leaf_blocks(uint32_t i, uint8_t* dst) {
-    const Bvh2Node& n = b2_.nodes[i];
-    uint32_t blocks = (n.count + enc_.block_prims - 1) / enc_.block_prims;
-    for (uint32_t b = 0; b < blocks; ++b) {
-      uint32_t first = n.first + b * enc_.block_prims;
-      uint32_t cnt = std::min(enc_.block_prims, n.first + n.count - first);
-      enc_.encode(&b2_.prim_ids[first], cnt, dst + uint64_t(b) * enc_.block_bytes);
-    }
-    Bvh8Stats& s = out_.stats;
-    s.leaves++;
-    s.leaf_blocks += blocks;
-    s.prims += n.count;
-    out_.leaf_data_bytes += uint64_t(blocks) * enc_.block_bytes;
-    sah_ += double(n.box.half_area()) / root_area_ * blocks;
-    return blocks;
-  }
-
-  uint64_t emit_leaf(uint32_t i) {
-    const Bvh2Node& n = b2_.nodes[i];
-    uint32_t blocks = (n.count + enc_.block_prims - 1) / enc_.block_prims;
-    if (blocks > kMaxLeafBlocks) throw std::logic_error("BVH leaf too large");
-    uint64_t off = out_.leaves.append(uint64_t(blocks) * enc_.block_bytes, 16);
-    write_leaf_blocks(i, out_.leaves.data() + off);
-    return NodeRef::make(kRefLeaf, off, blocks);
-  }
-
-  // One MultiLeaf8 with the blocks of the subtree's (<= 8) leaves right behind it.
-  uint64_t emit_multileaf(uint32_t i) {
-    uint32_t kids[8];
-    int k = 0;
-    collect_leaves(i, kids, k);
-    Box3f boxes[8];
-    for (int c = 0; c < k; ++c) boxes[c] = b2_.nodes[kids[c]].box;
-    uint64_t off;
-    if (enc_.encode_multileaf) {
-      const uint32_t* prims[8];
-      uint32_t counts[8];
-      for (int c = 0; c < k; ++c) {
-        const Bvh2Node& n = b2_.nodes[kids[c]];
-        prims[c] = &b2_.prim_ids[n.first];
-        counts[c] = n.count;
-        Bvh8Stats& s = out_.stats;
-        s.leaves++;
-        s.leaf_blocks++;
-        s.prims += n.count;
-        sah_ += double(n.box.half_area()) / root_area_;
-      }
-      std::vector<uint8_t> data = enc_.encode_multileaf(prims, counts, k);
-      off = out_.leaves.append(sizeof(MultiLeaf8) + data.size(), 16);
-      std::memcpy(out_.leaves.data() + off + sizeof(MultiLeaf8), data.data(), data.size());
-      out_.leaf_data_bytes += data.size();
-    } else {
-      off = out_.leaves.append(sizeof(MultiLeaf8) + uint64_t(k) * enc_.block_bytes, 16);
-      uint8_t* blocks = out_.leaves.data() + off + sizeof(MultiLeaf8);
-      for (int c = 0; c < k; ++c)
-        write_leaf_blocks(kids[c], blocks + uint64_t(c) * enc_.block_bytes);
-    }
-    auto* ml = reinterpret_cast<MultiLeaf8*>(out_.leaves.data() + off);
-    quantize_boxes(b2_.nodes[i].box, boxes, k, *ml);
-    out_.multileaf_bytes += sizeof(MultiLeaf8);
-    out_.stats.multileaf++;
-    out_.stats.leaves_in_multileaf += k;
-    sah_ += double(b2_.nodes[i].box.half_area()) / root_area_;
-    // The block count field of a multi-leaf ref holds its number of children.
-    return NodeRef::make(kRefMulti, off, uint32_t(k));
-  }
-
   void collect_leaves(uint32_t i, uint32_t* kids, int& k) const {
     const Bvh2Node& n = b2_.nodes[i];
     if (n.is_leaf()) {
@@ -255,36 +193,155 @@ class Collapser {
     collect_leaves(n.first + 1, kids, k);
   }
 
-  uint64_t emit(uint32_t i, int depth) {
-    out_.stats.depth = std::max(out_.stats.depth, depth);
-    const Bvh2Node& n = b2_.nodes[i];
-    if (n.is_leaf()) return emit_leaf(i);
-    if (multileaf_candidate(i)) return emit_multileaf(i);
+  uint32_t leaf_blocks(uint32_t i) const {
+    return (b2_.nodes[i].count + enc_.block_prims - 1) / enc_.block_prims;
+  }
 
+  void count_leaf(uint32_t i) {
+    uint32_t blocks = leaf_blocks(i);
+    Bvh8Stats& s = out_.stats;
+    s.leaves++;
+    s.leaf_blocks += blocks;
+    s.prims += b2_.nodes[i].count;
+    sah_ += double(b2_.nodes[i].box.half_area()) / root_area_ * blocks;
+  }
+
+  // Multi-leaf data written by LeafEncoder::encode_multileaf (clbvh-compact), encoded during
+  // measure() because its size depends on the content.
+  std::vector<uint8_t> encode_multi(uint32_t i) const {
+    uint32_t kids[8];
+    int k = 0;
+    collect_leaves(i, kids, k);
+    const uint32_t* prims[8];
+    uint32_t counts[8];
+    for (int c = 0; c < k; ++c) {
+      prims[c] = &b2_.prim_ids[b2_.nodes[kids[c]].first];
+      counts[c] = b2_.nodes[kids[c]].count;
+    }
+    return enc_.encode_multileaf(prims, counts, k);
+  }
+
+  // Pass 1: sizes of the subtree rooted at BVH2 node i, and the statistics.
+  void measure(uint32_t i, int depth) {
+    Bvh8Stats& s = out_.stats;
+    s.depth = std::max(s.depth, depth);
+    const Bvh2Node& n = b2_.nodes[i];
+    if (n.is_leaf()) {
+      uint32_t blocks = leaf_blocks(i);
+      if (blocks > kMaxLeafBlocks) throw std::logic_error("BVH leaf too large");
+      leaf_size_[i] = round16(uint64_t(blocks) * enc_.block_bytes);
+      out_.leaf_data_bytes += uint64_t(blocks) * enc_.block_bytes;
+      count_leaf(i);
+      return;
+    }
+    if (multileaf_candidate(i)) {
+      uint32_t kids[8];
+      int k = 0;
+      collect_leaves(i, kids, k);
+      uint64_t data;
+      if (enc_.encode_multileaf) {
+        std::vector<uint8_t> d = encode_multi(i);
+        data = d.size();
+        multi_cache_.emplace(i, std::move(d));
+      } else {
+        data = uint64_t(k) * enc_.block_bytes;
+      }
+      leaf_size_[i] = round16(sizeof(MultiLeaf8) + data);
+      out_.leaf_data_bytes += data;
+      out_.multileaf_bytes += sizeof(MultiLeaf8);
+      s.multileaf++;
+      s.leaves_in_multileaf += k;
+      sah_ += double(n.box.half_area()) / root_area_;
+      for (int c = 0; c < k; ++c) {
+        s.leaves++;
+        s.leaf_blocks++;
+        s.prims += b2_.nodes[kids[c]].count;
+        sah_ += double(b2_.nodes[kids[c]].box.half_area()) / root_area_;
+      }
+      return;
+    }
     uint32_t kids[8];
     int k = gather(i, kids);
     sah_ += double(n.box.half_area()) / root_area_;
-    if (kind_ == NodeKind::QBvh8) {
-      uint64_t off = out_.nodes.append(sizeof(QNode8), 8);
-      out_.node_bytes += sizeof(QNode8);
-      out_.stats.qnode8++;
-      Box3f boxes[8];
-      uint64_t refs[8] = {};
-      for (int c = 0; c < k; ++c) {
-        boxes[c] = b2_.nodes[kids[c]].box;
-        refs[c] = emit(kids[c], depth + 1);
+    if (kind_ == NodeKind::QBvh8)
+      s.qnode8++;
+    else
+      s.node8++;
+    out_.node_bytes += node_bytes();
+    uint64_t nb = node_bytes(), lb = 0;
+    for (int c = 0; c < k; ++c) {
+      measure(kids[c], depth + 1);
+      nb += node_size_[kids[c]];
+      lb += leaf_size_[kids[c]];
+    }
+    node_size_[i] = nb;
+    leaf_size_[i] = lb;
+  }
+
+  void write_leaf_blocks(uint32_t i, uint8_t* dst) const {
+    const Bvh2Node& n = b2_.nodes[i];
+    uint32_t blocks = leaf_blocks(i);
+    for (uint32_t b = 0; b < blocks; ++b) {
+      uint32_t first = n.first + b * enc_.block_prims;
+      uint32_t cnt = std::min(enc_.block_prims, n.first + n.count - first);
+      enc_.encode(&b2_.prim_ids[first], cnt, dst + uint64_t(b) * enc_.block_bytes);
+    }
+  }
+
+  // Pass 2: writes the subtree of BVH2 node i with its node at node_off and its first leaf at
+  // leaf_off; returns its reference.
+  uint64_t emit(uint32_t i, uint64_t node_off, uint64_t leaf_off) const {
+    const Bvh2Node& n = b2_.nodes[i];
+    if (n.is_leaf()) {
+      write_leaf_blocks(i, out_.leaves.data() + leaf_off);
+      return NodeRef::make(kRefLeaf, leaf_off, leaf_blocks(i));
+    }
+    if (multileaf_candidate(i)) {
+      uint32_t kids[8];
+      int k = 0;
+      collect_leaves(i, kids, k);
+      uint8_t* base = out_.leaves.data() + leaf_off;
+      uint8_t* data = base + sizeof(MultiLeaf8);
+      if (enc_.encode_multileaf) {
+        const std::vector<uint8_t>& d = multi_cache_.at(i);
+        std::memcpy(data, d.data(), d.size());
+      } else {
+        for (int c = 0; c < k; ++c) write_leaf_blocks(kids[c], data + uint64_t(c) * enc_.block_bytes);
       }
-      auto* q = reinterpret_cast<QNode8*>(out_.nodes.data() + off);
+      Box3f boxes[8];
+      for (int c = 0; c < k; ++c) boxes[c] = b2_.nodes[kids[c]].box;
+      quantize_boxes(n.box, boxes, k, *reinterpret_cast<MultiLeaf8*>(base));
+      // The block count field of a multi-leaf ref holds its number of children.
+      return NodeRef::make(kRefMulti, leaf_off, uint32_t(k));
+    }
+    uint32_t kids[8];
+    int k = gather(i, kids);
+    uint64_t refs[8] = {};
+    uint64_t noff[8], loff[8];
+    uint64_t no = node_off + node_bytes(), lo = leaf_off;
+    for (int c = 0; c < k; ++c) {
+      noff[c] = no;
+      loff[c] = lo;
+      no += node_size_[kids[c]];
+      lo += leaf_size_[kids[c]];
+    }
+    if (prims_[i] >= kParallelEmit) {
+      tbb::task_group tg;
+      for (int c = 0; c < k; ++c)
+        tg.run([&, c] { refs[c] = emit(kids[c], noff[c], loff[c]); });
+      tg.wait();
+    } else {
+      for (int c = 0; c < k; ++c) refs[c] = emit(kids[c], noff[c], loff[c]);
+    }
+    if (kind_ == NodeKind::QBvh8) {
+      auto* q = reinterpret_cast<QNode8*>(out_.nodes.data() + node_off);
+      Box3f boxes[8];
+      for (int c = 0; c < k; ++c) boxes[c] = b2_.nodes[kids[c]].box;
       quantize_boxes(n.box, boxes, k, q->boxes);
       std::memcpy(q->child, refs, sizeof(refs));
-      return NodeRef::make(kRefQNode8, off);
+      return NodeRef::make(kRefQNode8, node_off);
     }
-    uint64_t off = out_.nodes.append(sizeof(Node8), 64);
-    out_.node_bytes += sizeof(Node8);
-    out_.stats.node8++;
-    uint64_t refs[8] = {};
-    for (int c = 0; c < k; ++c) refs[c] = emit(kids[c], depth + 1);
-    auto* nd = reinterpret_cast<Node8*>(out_.nodes.data() + off);
+    auto* nd = reinterpret_cast<Node8*>(out_.nodes.data() + node_off);
     for (int c = 0; c < 8; ++c) {
       Box3f b = c < k ? b2_.nodes[kids[c]].box : Box3f();
       for (int a = 0; a < 3; ++a) {
@@ -293,14 +350,18 @@ class Collapser {
       }
       nd->child[c] = refs[c];
     }
-    return NodeRef::make(kRefNode8, off);
+    return NodeRef::make(kRefNode8, node_off);
   }
+
+  static constexpr uint32_t kParallelEmit = 1u << 14;  // primitives per subtree to emit as tasks
 
   const Bvh2& b2_;
   NodeKind kind_;
   const LeafEncoder& enc_;
   Bvh8& out_;
-  std::vector<uint32_t> prims_, leaves_;
+  std::vector<uint32_t> prims_, leaves_, max_leaf_;
+  std::vector<uint64_t> node_size_, leaf_size_;
+  std::unordered_map<uint32_t, std::vector<uint8_t>> multi_cache_;
   double sah_ = 0;
   double root_area_ = 1;
 };

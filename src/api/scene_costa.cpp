@@ -1,8 +1,356 @@
-// placeholder until the costa formats land
-#include "api/scene_impl.h"
+// Costa quantized n-gon mesh scenes (fast-mesh-compression-gpu-rt.txt): configs costa, costa-P,
+// ..., costa-TPFV. Loading (section 3.1) -> optional T -> BVH2 over the primitives -> primitives
+// reordered in leaf order -> the store (section 3.2) -> BVH8 whose leaves are primitive ranges
+// (prim/costa_leaf.h). Also costa_sizes() (Tables 1 and 3) for the CLI and the benchmark.
+#include <zlib.h>
+
+#include <algorithm>
+#include <cstring>
+#include <memory>
+#include <stdexcept>
+
+#include "api/bvh_scene.h"
+#include "mesh/tessellate.h"
+#include "prim/costa_leaf.h"
+#include "prim/quantized_mesh.h"
+#include "slimrt/costa.h"
 
 namespace slim {
-std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*>&, const BuildOptions& opt) {
-  throw Error(opt.config_name() + ": not implemented yet");
+
+namespace {
+
+// Everything a Costa scene keeps besides the BVH: the store and the primitive -> input face map.
+struct CostaData {
+  QuantizedMesh store;
+  BitArray face_map;                // global input face id per primitive (in store order)
+  std::vector<uint32_t> face_base;  // first global face id per mesh, + total
+};
+
+template <bool P, bool F, bool V>
+class CostaScene : public BvhScene<CostaLeaf<P, F, V>> {
+ public:
+  std::shared_ptr<const CostaData> data;
+
+  bool validate(std::string* why) const override {
+    // The store first, so that the leaf walk below only decodes well-formed primitives.
+    if (!data->store.validate(why)) return false;
+    if (data->face_map.size() != data->store.prim_count()) {
+      if (why) *why = "costa: the face map does not have one entry per primitive";
+      return false;
+    }
+    for (uint64_t i = 0; i < data->face_map.size(); ++i)
+      if (data->face_map.get(i) >= data->face_base.back()) {
+        if (why) *why = "costa: primitive " + std::to_string(i) + " maps to no input face";
+        return false;
+      }
+    return BvhScene<CostaLeaf<P, F, V>>::validate(why);
+  }
+};
+
+// The primitives of `m` in the order `order` (the BVH's leaf order).
+NgonMesh reorder(const NgonMesh& m, const std::vector<uint32_t>& order) {
+  NgonMesh r;
+  r.vertices = m.vertices;
+  r.face_base = m.face_base;
+  r.faces.reserve(m.faces.size());
+  r.prim_offsets.reserve(m.prim_offsets.size());
+  r.prim_face.reserve(m.prim_face.size());
+  r.prim_offsets.push_back(0);
+  for (uint32_t i : order) {
+    r.faces.insert(r.faces.end(), m.faces.begin() + m.prim_offsets[i],
+                   m.faces.begin() + m.prim_offsets[i + 1]);
+    r.prim_offsets.push_back(uint32_t(r.faces.size()));
+    r.prim_face.push_back(m.prim_face[i]);
+  }
+  return r;
 }
+
+// Mesh of a global face id (for the validation keys of the source primitives).
+uint32_t mesh_of(const std::vector<uint32_t>& face_base, uint32_t g) {
+  return uint32_t(std::upper_bound(face_base.begin(), face_base.end(), g) - face_base.begin()) - 1;
+}
+
+template <bool P, bool F, bool V>
+std::unique_ptr<Scene::Impl> make_scene(std::shared_ptr<CostaData> data, Bvh8&& bvh,
+                                        const Fingerprint& expected) {
+  auto s = std::make_unique<CostaScene<P, F, V>>();
+  s->bvh = std::move(bvh);
+  s->expected = expected;
+  auto& ctx = s->ctx;
+  ctx.view.r = data->store.raw();
+  ctx.faces.bits = data->face_map.data();
+  ctx.faces.width = data->face_map.width();
+  ctx.faces.face_base = data->face_base.data();
+  ctx.faces.mesh_count = uint32_t(data->face_base.size() - 1);
+  ctx.prim_count = data->store.prim_count();
+  s->data = data;
+  s->keepalive = data;
+  return s;
+}
+
+std::unique_ptr<Scene::Impl> make_scene(const CostaFlags& f, std::shared_ptr<CostaData> data,
+                                        Bvh8&& b, const Fingerprint& e) {
+  switch ((f.P ? 4 : 0) | (f.F ? 2 : 0) | (f.V ? 1 : 0)) {
+    case 0:
+      return make_scene<false, false, false>(std::move(data), std::move(b), e);
+    case 1:
+      return make_scene<false, false, true>(std::move(data), std::move(b), e);
+    case 2:
+      return make_scene<false, true, false>(std::move(data), std::move(b), e);
+    case 3:
+      return make_scene<false, true, true>(std::move(data), std::move(b), e);
+    case 4:
+      return make_scene<true, false, false>(std::move(data), std::move(b), e);
+    case 5:
+      return make_scene<true, false, true>(std::move(data), std::move(b), e);
+    case 6:
+      return make_scene<true, true, false>(std::move(data), std::move(b), e);
+    default:
+      return make_scene<true, true, true>(std::move(data), std::move(b), e);
+  }
+}
+
+// gzip -9 size of the regular arrays (primitive offsets, face entries, float vertices), streamed.
+uint64_t gzip9_bytes(const NgonMesh& m) {
+  z_stream z{};
+  if (deflateInit2(&z, 9, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK)
+    throw Error("zlib: deflateInit2 failed");
+  std::vector<unsigned char> out(1 << 20);
+  uint64_t total = 0;
+  auto feed = [&](const void* p, uint64_t bytes, bool last) {
+    const unsigned char* c = static_cast<const unsigned char*>(p);
+    do {
+      uInt chunk = uInt(std::min<uint64_t>(bytes, 1u << 30));
+      z.next_in = const_cast<unsigned char*>(c);
+      z.avail_in = chunk;
+      c += chunk;
+      bytes -= chunk;
+      int flush = last && bytes == 0 ? Z_FINISH : Z_NO_FLUSH;
+      int rc;
+      do {
+        z.next_out = out.data();
+        z.avail_out = uInt(out.size());
+        rc = deflate(&z, flush);
+        total += out.size() - z.avail_out;
+      } while (z.avail_out == 0 || (flush == Z_FINISH && rc != Z_STREAM_END));
+    } while (bytes > 0);
+  };
+  feed(m.prim_offsets.data(), m.prim_offsets.size() * 4, false);
+  feed(m.faces.data(), m.faces.size() * 4, false);
+  feed(m.vertices.data(), m.vertices.size() * 12, true);
+  deflateEnd(&z);
+  return total;
+}
+
+}  // namespace
+
+std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*>& meshes,
+                                               const BuildOptions& opt) {
+  const CostaFlags flags = CostaFlags::parse(opt.costa);
+  NgonMesh loaded = load_ngon_mesh(meshes);  // section 3.1
+  if (flags.T) loaded = triangulate_ngon_mesh(loaded);
+  const uint32_t prim_count = uint32_t(loaded.prim_count());
+
+  // The BVH, the leaves and the validation keys all see the vertices as the store decodes them.
+  std::vector<Vec3f> decoded = loaded.vertices;
+  if (flags.V) {
+    VertexQuantizer q = make_vertex_quantizer(loaded.vertices);
+    for (Vec3f& p : decoded) {
+      uint16_t c[3] = {q.encode(p.x, 0), q.encode(p.y, 1), q.encode(p.z, 2)};
+      p = q.decode(c);
+    }
+  }
+
+  // BVH2 over the primitive boxes, and the source keys for validate().
+  std::vector<PrimRef> refs(prim_count);
+  Fingerprint expected;
+  for (uint32_t i = 0; i < prim_count; ++i) {
+    const uint32_t o0 = loaded.prim_offsets[i], o1 = loaded.prim_offsets[i + 1];
+    Box3f box;
+    CostaKey key;
+    uint32_t flag = 0;
+    for (uint32_t j = o0; j < o1; ++j) {
+      uint32_t v = loaded.faces[j];
+      if (j == o0 && o1 - o0 >= kFanStripFlagMin) flag = v & 1, v >>= 1;
+      box.extend(decoded[v]);
+      key.add(decoded[v]);
+    }
+    const uint32_t g = loaded.prim_face[i], mesh = mesh_of(loaded.face_base, g);
+    expected.add(key.finish(o1 - o0, flag, mesh, g - loaded.face_base[mesh]));
+    refs[i] = {box, i};
+  }
+  decoded = {};
+  using Leaf = CostaLeaf<false, false, false>;  // block layout is the same for every letter
+  Bvh2BuildConfig cfg;
+  cfg.bins = opt.sah_bins;
+  cfg.max_leaf_size = std::max<uint32_t>(
+      1, std::min<uint32_t>(opt.max_leaf_size, Leaf::kBlockPrims * kMaxLeafBlocks));
+  cfg.block_prims = Leaf::kBlockPrims;
+  cfg.threads = opt.threads;
+  Bvh2 b2 = build_bvh2(std::move(refs), cfg);
+
+  // Reorder the primitives in leaf order: a leaf block is then a range of the store.
+  std::vector<uint32_t> pos(prim_count);
+  for (uint32_t k = 0; k < prim_count; ++k) pos[b2.prim_ids[k]] = k;
+  auto data = std::make_shared<CostaData>();
+  NgonMesh stats_src;  // keeps the loading statistics after `loaded` is released
+  {
+    NgonMesh ordered = reorder(loaded, b2.prim_ids);
+    stats_src.input_faces = loaded.input_faces;
+    stats_src.skipped_faces = loaded.skipped_faces;
+    stats_src.input_triangles = loaded.input_triangles;
+    stats_src.triangles = loaded.triangles, stats_src.quads = loaded.quads;
+    stats_src.fans = loaded.fans, stats_src.strips = loaded.strips;
+    stats_src.tess = loaded.tess;
+    loaded = {};
+    data->store = QuantizedMesh(ordered, flags.P, flags.F, flags.V);  // section 3.2
+    uint32_t max_face = 0;
+    for (uint32_t g : ordered.prim_face) max_face = std::max(max_face, g);
+    data->face_map = BitArray(prim_count, bits_for(max_face));
+    for (uint32_t i = 0; i < prim_count; ++i) data->face_map.set(i, ordered.prim_face[i]);
+    data->face_base = ordered.face_base;
+    if (data->face_base.empty()) data->face_base.push_back(0);
+  }
+
+  LeafEncoder enc;
+  enc.block_prims = Leaf::kBlockPrims;
+  enc.block_bytes = Leaf::kBlockBytes;
+  enc.encode = [&](const uint32_t* prims, uint32_t n, uint8_t* out) {
+    CostaBlock b{pos[prims[0]], n};
+    for (uint32_t k = 1; k < n; ++k)
+      if (pos[prims[k]] != b.first + k)
+        throw std::logic_error("costa: a leaf block is not a range of the leaf order");
+    std::memcpy(out, &b, sizeof(b));
+  };
+  Bvh8 bvh = collapse_bvh8(b2, node_kind(opt.bvh), enc);
+
+  const uint64_t node_bytes = bvh.node_bytes, multileaf_bytes = bvh.multileaf_bytes;
+  const uint64_t leaf_data_bytes = bvh.leaf_data_bytes;
+  const Bvh8Stats b8 = bvh.stats;
+  const Box3f bounds = bvh.bounds;
+  std::unique_ptr<Scene::Impl> s = make_scene(flags, data, std::move(bvh), expected);
+  s->bounds = bounds;
+  const QuantizedMesh& q = data->store;
+  MemoryStats& mem = s->mem;  // everything the scene keeps
+  mem.bvh_bytes = node_bytes + multileaf_bytes;
+  mem.geometry_bytes = q.bytes() + leaf_data_bytes;
+  mem.other_bytes = data->face_map.bytes() + data->face_base.size() * sizeof(uint32_t);
+  mem.triangles = stats_src.input_triangles;
+  SceneStats& st = s->stats;
+  st.input_faces = stats_src.input_faces;
+  st.triangles = stats_src.input_triangles;
+  st.skipped_faces = stats_src.skipped_faces;
+  st.primitives = prim_count;
+  auto& d = st.details;
+  d.emplace_back("bvh2_depth", double(b2.depth));
+  d.emplace_back("bvh8_depth", double(b8.depth));
+  d.emplace_back("node8_count", double(b8.node8));
+  d.emplace_back("qnode8_count", double(b8.qnode8));
+  d.emplace_back("multileaf_count", double(b8.multileaf));
+  d.emplace_back("leaf_count", double(b8.leaves));
+  d.emplace_back("leaves_in_multileaf", double(b8.leaves_in_multileaf));
+  d.emplace_back("leaf_blocks", double(b8.leaf_blocks));
+  d.emplace_back("leaf_fill", b8.leaf_fill);
+  d.emplace_back("sah_cost", b8.sah_cost);
+  d.emplace_back("node_bytes", double(node_bytes));
+  d.emplace_back("multileaf_bytes", double(multileaf_bytes));
+  d.emplace_back("leaf_data_bytes", double(leaf_data_bytes));
+  d.emplace_back("costa_triangles", double(stats_src.triangles));
+  d.emplace_back("costa_quads", double(stats_src.quads));
+  d.emplace_back("costa_fans", double(stats_src.fans));
+  d.emplace_back("costa_strips", double(stats_src.strips));
+  d.emplace_back("costa_tess_polygons", double(stats_src.tess.polygons));
+  d.emplace_back("costa_tess_fallbacks", double(stats_src.tess.fallbacks()));
+  d.emplace_back("store_prim_bytes", double(q.prim_bytes()));
+  d.emplace_back("store_face_bytes", double(q.face_bytes()));
+  d.emplace_back("store_vertex_bytes", double(q.vertex_bytes()));
+  d.emplace_back("store_bytes", double(q.bytes()));
+  d.emplace_back("prim_residual_bits", double(q.prim_residual_bits()));
+  d.emplace_back("face_bits", double(q.face_bits()));
+  d.emplace_back("face_map_bytes", double(data->face_map.bytes()));
+  return s;
+}
+
+// ---- sizes (Tables 1 and 3) ---------------------------------------------------------------------
+
+std::vector<std::string> costa_combinations() {
+  std::vector<std::string> v;
+  for (const char* t : {"", "T"})
+    for (const char* c : {"", "V", "F", "FV", "P", "PV", "PF", "PFV"})
+      v.push_back(std::string(t) + c);
+  return v;
+}
+
+CostaSizes costa_sizes(const std::vector<const PolyMesh*>& meshes) {
+  for (const PolyMesh* m : meshes) {
+    if (!m) throw Error("costa_sizes: null mesh");
+    check_mesh(*m);
+  }
+  CostaSizes s;
+  NgonMesh m = load_ngon_mesh(meshes);
+  NgonMesh t = triangulate_ngon_mesh(m);
+  s.vertices = m.vertices.size();
+  s.input_faces = m.input_faces;
+  s.skipped_faces = m.skipped_faces;
+  s.primitives = m.prim_count();
+  s.triangles = m.triangles, s.quads = m.quads, s.fans = m.fans, s.strips = m.strips;
+  s.triangulated_primitives = t.prim_count();
+  s.tess_polygons = m.tess.polygons;
+  s.tess_glu = m.tess.glu;
+  s.tess_fallbacks = m.tess.fallbacks();
+  s.gzip_bytes = gzip9_bytes(m);
+  s.gzip_triangulated_bytes = gzip9_bytes(t);
+  for (const std::string& c : costa_combinations()) {
+    CostaFlags f = CostaFlags::parse(c);
+    QuantizedMesh q(f.T ? t : m, f.P, f.F, f.V);
+    s.combos[c] = q.bytes();
+    if (c == "PF") s.prim_residual_bits = q.prim_residual_bits(), s.face_bits = q.face_bits();
+    if (c == "TPF")
+      s.prim_residual_bits_triangulated = q.prim_residual_bits(),
+      s.face_bits_triangulated = q.face_bits();
+  }
+  s.regular_bytes = s.combos[""];
+  s.triangulated_bytes = s.combos["T"];
+  return s;
+}
+
+CostaTriangles costa_triangles(const std::vector<const PolyMesh*>& meshes,
+                               const BuildOptions& opt) {
+  if (opt.geometry != Geometry::Quantized)
+    throw Error("costa_triangles: " + opt.config_name() + " is not a costa configuration");
+  for (const PolyMesh* m : meshes) {
+    if (!m) throw Error("costa_triangles: null mesh");
+    check_mesh(*m);
+  }
+  const CostaFlags f = CostaFlags::parse(opt.costa);
+  NgonMesh m = load_ngon_mesh(meshes);
+  if (f.T) m = triangulate_ngon_mesh(m);
+  const QuantizedMesh q(m, f.P, f.F, f.V);
+  // Decode the store back into an NgonMesh, then triangulate with the leaves' rules.
+  NgonMesh d;
+  d.prim_offsets.reserve(q.prim_count() + 1);
+  d.faces.reserve(q.face_count());
+  for (uint32_t i = 0; i <= q.prim_count(); ++i) d.prim_offsets.push_back(q.offset(i));
+  for (uint64_t j = 0; j < q.face_count(); ++j) d.faces.push_back(q.face(j));
+  CostaTriangles out;
+  std::vector<uint32_t> tris;
+  for (size_t i = 0; i < d.prim_count(); ++i) {
+    tris.clear();
+    primitive_triangles(d, i, tris);
+    const uint32_t g = m.prim_face[i], mesh = mesh_of(m.face_base, g);
+    for (size_t k = 0; k < tris.size(); ++k) {
+      out.vertices.push_back(q.vertex(tris[k]));
+      if (k % 3 == 2) {
+        out.geom.push_back(mesh);
+        out.face.push_back(g - m.face_base[mesh]);
+      }
+    }
+  }
+  return out;
+}
+
+CostaSizes costa_sizes(const PolyMesh& mesh) {
+  return costa_sizes(std::vector<const PolyMesh*>{&mesh});
+}
+
 }  // namespace slim

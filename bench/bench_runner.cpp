@@ -16,6 +16,8 @@
 #include <sstream>
 
 #include "embree_scene.h"
+#include "slimrt/costa.h"
+#include "slimrt/grids.h"
 #include "slimrt/render.h"
 
 namespace slim::bench {
@@ -189,6 +191,38 @@ std::string fmt(const char* f, double v) {
   return buf;
 }
 
+// Formats that intersect other triangles than the input's fan triangulation: lossy grids, costa
+// with V (quantized), costa's GLU tessellation of n-gons, the grid cells' diagonals. They are
+// validated against Embree run on their own decoded geometry (DESIGN.md "Baseline and oracle"),
+// with hits mapped back to the input faces.
+struct OwnGeometry {
+  PolyMesh mesh;  // one triangle per face
+  std::vector<uint32_t> geom, face;
+};
+
+template <class Tris>
+OwnGeometry own_geometry_from(const Tris& t) {
+  OwnGeometry g;
+  g.mesh.name = "decoded";
+  g.mesh.positions = t.vertices;
+  g.mesh.face_sizes.assign(t.size(), 3);
+  g.mesh.face_indices.resize(3 * t.size());
+  for (size_t i = 0; i < g.mesh.face_indices.size(); ++i) g.mesh.face_indices[i] = uint32_t(i);
+  g.geom = t.geom;
+  g.face = t.face;
+  return g;
+}
+
+std::optional<OwnGeometry> own_geometry(const std::vector<const PolyMesh*>& meshes,
+                                        const std::string& config) {
+  BuildOptions bo = BuildOptions::from_config(config);
+  if (bo.geometry == Geometry::Quantized) return own_geometry_from(costa_triangles(meshes, bo));
+  if (bo.geometry == Geometry::Grids || bo.geometry == Geometry::LossyGrids ||
+      bo.geometry == Geometry::LossyGridsE2)
+    return own_geometry_from(grid_triangles(meshes, bo));
+  return std::nullopt;
+}
+
 // Everything of one scene that outlives a single configuration.
 struct SceneRun {
   const BenchOptions& opt;
@@ -227,19 +261,40 @@ struct SceneRun {
       row.hit_agreement = 1.0;
       row.same_face = 1.0;
     } else if (!reference.empty()) {
-      uint64_t agree = 0, both = 0, same = 0;
-      for (size_t i = 0; i < hits.size(); ++i) {
-        agree += hits_agree(hits[i], reference[i]);
-        if (hits[i].valid() && reference[i].valid()) {
-          ++both;
-          same += hits[i].geomID == reference[i].geomID && hits[i].primID == reference[i].primID;
+      auto agreement = [&](const std::vector<Hit>& ref, double& frac, double& same_frac) {
+        uint64_t agree = 0, both = 0, same = 0;
+        for (size_t i = 0; i < hits.size(); ++i) {
+          agree += hits_agree(hits[i], ref[i]);
+          if (hits[i].valid() && ref[i].valid()) {
+            ++both;
+            same += hits[i].geomID == ref[i].geomID && hits[i].primID == ref[i].primID;
+          }
         }
+        frac = double(agree) / double(hits.size());
+        same_frac = both ? double(same) / double(both) : 1.0;
+      };
+      double frac, same_frac;
+      agreement(reference, frac, same_frac);
+      row.agreement_embree_tri = frac;
+      std::string against = "embree-tri";
+      if (std::optional<OwnGeometry> own = own_geometry(meshes, row.config)) {
+        // Embree on the format's own decoded triangles, hits mapped back to the input faces.
+        EmbreeScene es({&own->mesh}, "embree-tri");
+        std::vector<Hit> ref = primary_hits(es, arena, w);
+        for (Hit& h : ref)
+          if (h.valid()) {
+            uint32_t t = h.primID;
+            h.geomID = own->geom[t];
+            h.primID = own->face[t];
+          }
+        agreement(ref, frac, same_frac);
+        against = "embree-tri on its own decoded geometry";
       }
-      row.hit_agreement = double(agree) / double(hits.size());
-      row.same_face = both ? double(same) / double(both) : 1.0;
-      if (!row.lossy && *row.hit_agreement < kLosslessAgreement)
-        error(row, "hit agreement with embree-tri " + fmt("%.4f%%", 100.0 * *row.hit_agreement) +
-                       " is under 99.9% for a lossless configuration");
+      row.hit_agreement = frac;
+      row.same_face = same_frac;
+      if (*row.hit_agreement < kLosslessAgreement)
+        error(row, "hit agreement with " + against + " " +
+                       fmt("%.4f%%", 100.0 * *row.hit_agreement) + " is under 99.9%");
     }
     hits = {};
 
@@ -519,6 +574,7 @@ nlohmann::json report_json(const BenchReport& report) {
     j["box_tests_per_ray"] = opt_json(r.box_tests_per_ray);
     j["prim_tests_per_ray"] = opt_json(r.prim_tests_per_ray);
     j["hit_agreement"] = opt_json(r.hit_agreement);
+    j["hit_agreement_embree_tri"] = opt_json(r.agreement_embree_tri);
     j["error"] = {{"rms", opt_json(r.error.rms)},
                   {"diag_avg_pct", opt_json(r.error.diag_avg_pct)},
                   {"diag_max_pct", opt_json(r.error.diag_max_pct)},
@@ -555,17 +611,19 @@ std::string report_markdown(const BenchReport& report) {
     << "W1 = one primary ray per pixel, W2 = diffuse path tracing (up to " << report.max_bounces
     << " bounces, every ray counted). ratio = MRays/s over embree-tri's. box/prim = tests per ray "
        "(slimrt only, untimed counting pass): W1 over all workload-1 rays, W2s over the paths of "
-       "every 16th pixel. agree = workload-1 hits agreeing with embree-tri (BENCHMARK.md). MB = "
-       "geometry + BVH + side tables.\n\n";
+       "every 16th pixel. agree = workload-1 hits agreeing with Embree on the same geometry "
+       "(BENCHMARK.md): embree-tri, or for grid, lossy-grid* and costa-* embree-tri run on the "
+       "format's own decoded triangles; vs tri = agreement with embree-tri on the input's fan "
+       "triangles. MB = geometry + BVH + side tables.\n\n";
   o << "| scene | config | build s | Mtri/s | MB | B/tri | W1 MRays/s | W2 MRays/s | W1 ratio | "
-       "W2 ratio | box/ray W1 | prim/ray W1 | box/ray W2s | prim/ray W2s | agree % | PSNR dB | "
-       "note |\n";
+       "W2 ratio | box/ray W1 | prim/ray W1 | box/ray W2s | prim/ray W2s | agree % | vs tri % | "
+       "PSNR dB | note |\n";
   o << "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | "
-       "---: | ---: | ---: | --- |\n";
+       "---: | ---: | ---: | ---: | --- |\n";
   for (const BenchRow& r : report.rows) {
     o << "| " << markdown_escape(r.scene) << " | " << r.config << " | ";
     if (!r.measured()) {
-      for (int i = 0; i < 14; ++i) o << "— | ";
+      for (int i = 0; i < 15; ++i) o << "— | ";
       o << markdown_escape(r.reason) << " |\n";
       continue;
     }
@@ -573,8 +631,11 @@ std::string report_markdown(const BenchReport& report) {
     if (r.bytes_total) mb = double(*r.bytes_total) / 1e6;
     std::optional<double> agree;
     if (r.hit_agreement) agree = 100.0 * *r.hit_agreement;
+    std::optional<double> vs_tri;
+    if (r.agreement_embree_tri) vs_tri = 100.0 * *r.agreement_embree_tri;
+    if (r.config == "embree-tri") vs_tri = agree;
     std::string note;
-    if (!r.lossy && r.hit_agreement && *r.hit_agreement < kLosslessAgreement)
+    if (r.hit_agreement && *r.hit_agreement < kLosslessAgreement)
       note = "ERROR: agreement < 99.9%";
     std::string psnr_cell = r.error.psnr_identical ? "inf" : cell(r.error.psnr_db, "%.2f");
     o << cell(r.build_s, "%.3f") << " | " << cell(r.build_mprims_s, "%.2f") << " | "
@@ -583,7 +644,8 @@ std::string report_markdown(const BenchReport& report) {
       << cell(r.ratio_primary, "%.3f") << " | " << cell(r.ratio_diffuse, "%.3f") << " | "
       << cell(r.box_tests_per_ray, "%.1f") << " | " << cell(r.prim_tests_per_ray, "%.1f") << " | "
       << cell(r.box_tests_per_ray_w2, "%.1f") << " | " << cell(r.prim_tests_per_ray_w2, "%.1f")
-      << " | " << cell(agree, "%.3f") << " | " << psnr_cell << " | " << note << " |\n";
+      << " | " << cell(agree, "%.3f") << " | " << cell(vs_tri, "%.3f") << " | " << psnr_cell
+      << " | " << note << " |\n";
   }
   return o.str();
 }

@@ -58,6 +58,9 @@ struct BenchRow {
   std::optional<double> box_tests_per_ray_w2, prim_tests_per_ray_w2;  // workload 2 sample
   std::optional<double> hit_agreement;                                // BENCHMARK.md definition
   std::optional<double> same_face;  // of the rays both hit: fraction naming the same face
+  // Agreement with embree-tri on the input's fan triangles (equals hit_agreement except for the
+  // formats validated on their own decoded geometry: grids, lossy grids, costa).
+  std::optional<double> agreement_embree_tri;
   ErrorFigures error;
   uint64_t rays_primary = 0, rays_diffuse = 0;  // per timed run
   double checksum_primary = 0, checksum_diffuse = 0;

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Installs what is missing (Debian 12, as root), builds Release, renders the default scene and
-# prints the memory/speed table against Embree.
+# Installs what is missing (Debian 12, as root), builds Release, renders the default scene
+# (terrain:1024) to out/default.png, prints its statistics and the memory/speed table against
+# Embree (the main configuration of each technique; `slimrt bench terrain:1024` runs them all).
 set -euo pipefail
 cd "$(dirname "$0")"
 ./scripts/setup.sh
@@ -8,4 +9,6 @@ cd "$(dirname "$0")"
 mkdir -p out
 ./build/slimrt render terrain:1024 -o out/default.png
 ./build/slimrt info terrain:1024
-./build/slimrt bench terrain:1024 --repeat 3
+./build/slimrt bench terrain:1024 --repeat 3 --json out/default-bench.json --plot out/default-bench.png \
+  --config embree-tri,embree-tri-compact,embree-quad,embree-grid,bvh8-tri4v,bvh8-tri4i,qbvh8-tri4v \
+  --config clbvh-tri4v,clbvh-compact,bvh8-pairs,clbvh-pairs,grid,lossy-grid,lossy-grid-e2,costa-PFV

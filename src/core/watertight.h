@@ -29,6 +29,7 @@ struct WatertightRay {
   Vec3f org;
   int kx = 0, ky = 1, kz = 2;
   float Sx = 0, Sy = 0, Sz = 1;
+  float ox = 0, oy = 0, oz = 0;  // org[kx], org[ky], org[kz]
 
   WatertightRay() = default;
   WatertightRay(const Vec3f& o, const Vec3f& d) : org(o) {
@@ -44,6 +45,9 @@ struct WatertightRay {
     Sx = d[kx] / d[kz];
     Sy = d[ky] / d[kz];
     Sz = 1.0f / d[kz];
+    ox = o[kx];
+    oy = o[ky];
+    oz = o[kz];
   }
   // The same with the reciprocal direction already at hand: one division fewer per axis. Any
   // per-ray constants work as long as every triangle of the ray uses the same ones.
@@ -59,6 +63,9 @@ struct WatertightRay {
     Sz = rd[kz];
     Sx = d[kx] * Sz;
     Sy = d[ky] * Sz;
+    ox = o[kx];
+    oy = o[ky];
+    oz = o[kz];
   }
 };
 
@@ -73,9 +80,9 @@ template <class VF>
 SLIM_INLINE RayVertex<VF> to_ray_space(const WatertightRay& r, const VF& px, const VF& py,
                                        const VF& pz) {
   const VF* p[3] = {&px, &py, &pz};
-  VF ax = *p[r.kx] - VF(r.org[r.kx]);
-  VF ay = *p[r.ky] - VF(r.org[r.ky]);
-  VF az = *p[r.kz] - VF(r.org[r.kz]);
+  VF ax = *p[r.kx] - VF(r.ox);
+  VF ay = *p[r.ky] - VF(r.oy);
+  VF az = *p[r.kz] - VF(r.oz);
   using simd::fnmadd;
   using slim::fnmadd;
   return {fnmadd(VF(r.Sx), az, ax), fnmadd(VF(r.Sy), az, ay), VF(r.Sz) * az};

@@ -51,9 +51,9 @@ namespace detail {
 // Ray-space transform of 4 vertices stored SoA as p[axis][lane].
 SLIM_INLINE RayVertex<simd::vfloat4> to_ray_space4(const WatertightRay& r, const float (*p)[4]) {
   using namespace simd;
-  vfloat4 ax = vfloat4::loadu(p[r.kx]) - vfloat4(r.org[r.kx]);
-  vfloat4 ay = vfloat4::loadu(p[r.ky]) - vfloat4(r.org[r.ky]);
-  vfloat4 az = vfloat4::loadu(p[r.kz]) - vfloat4(r.org[r.kz]);
+  vfloat4 ax = vfloat4::loadu(p[r.kx]) - vfloat4(r.ox);
+  vfloat4 ay = vfloat4::loadu(p[r.ky]) - vfloat4(r.oy);
+  vfloat4 az = vfloat4::loadu(p[r.kz]) - vfloat4(r.oz);
   return {fnmadd(vfloat4(r.Sx), az, ax), fnmadd(vfloat4(r.Sy), az, ay), vfloat4(r.Sz) * az};
 }
 

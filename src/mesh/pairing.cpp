@@ -1,0 +1,952 @@
+// Triangle pairing: A. Aman, S. Fenney, "Fast Triangle Pairing for Ray Tracing", Imagination
+// Technologies (../shared/papers/fast-triangle-pairing.txt). See pairing.h.
+//
+// Stages (paper, "Edge bbox surface area heuristic"):
+//   1. half-edge table: (BBSA, smaller vertex, larger vertex, triangle) per non-degenerate
+//      half-edge;
+//   2. (optional) edge key compression: midpoint + BBSA as 24-bit fields (coordinate keys);
+//   3. sort descending by (BBSA, smaller vertex, larger vertex) with an LSD radix sort;
+//   4. greedy scan: runs of equal keys are twins; pair two of them when both triangles are free.
+//
+// Three implementations of stages 1-4 give the same pairs (EdgeOrder; tests/test_pairing.cpp
+// checks them against a std::stable_sort of the explicit table):
+//   - FullTable (coordinate keys always; index keys on request): 16 B records with the packed key
+//     (BBSA float bits : smaller vertex : larger vertex, or BBSA24 : midpoint 3 x 24), LSD radix
+//     sort over all key bits (7 passes of 11 bits for 1M vertices), linear scan;
+//   - TwinSort (default for index keys): a counting sort of the half-edges by their smaller
+//     vertex brings twins together (buckets hold ~3 edges); each run of >= 2 twins becomes one
+//     12 B edge record, emitted in descending (smaller, larger) vertex order, so a stable radix
+//     sort by the 31 BBSA bits alone (sort_edges: one MSD pass, two LSD passes in cache) gives
+//     exactly the paper's descending (BBSA, smaller, larger) order; boundary edges never enter
+//     the sort;
+//   - Local: the twins as in TwinSort, then the greedy scan's result is computed from each
+//     triangle's neighbours without any global sort (see local_scan): fewer cache misses, more
+//     instructions.
+// One thread, thread CPU time on the shared 2-core build VM (best of 3), pairing alone:
+//   fg_terrain_hawaii (2M triangles, TIN):      TwinSort 7.3 M triangles/s, Local 6.5,
+//   FullTable 2.4 jittered grid, 2M / 8M triangles (coherent): TwinSort 5.7 / 6.2, Local 6.8 / 8.6
+// so TwinSort (the paper's sort) is the default and Local is kept for very large meshes.
+#include "mesh/pairing.h"
+
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
+#include <algorithm>
+#include <chrono>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <new>
+#include <string>
+
+#include "mesh/triangulate.h"
+#include "slimrt/error.h"
+
+namespace slim {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+constexpr uint32_t kNone = 0xffffffffu;
+
+// Uninitialized array for the big temporaries (tens of MB for millions of triangles), backed by
+// transparent huge pages where the system offers them (Linux, THP "madvise" mode): measured on
+// the 2-core build VM, a fresh 100 MB buffer costs 55 ms of page faults with 4 KB pages and 18 ms
+// with 2 MB pages, and the random accesses of the twin table miss the TLB far less.
+template <class T>
+class LargeArray {
+ public:
+  LargeArray() = default;
+  explicit LargeArray(size_t n) : n_(n) {
+    if (n == 0) return;
+    constexpr size_t kHuge = size_t(2) << 20;
+    size_t bytes = n * sizeof(T);
+    if (bytes >= kHuge) {
+      bytes = (bytes + kHuge - 1) / kHuge * kHuge;
+      p_ = static_cast<T*>(std::aligned_alloc(kHuge, bytes));
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+      if (p_) madvise(p_, bytes, MADV_HUGEPAGE);
+#endif
+    } else {
+      p_ = static_cast<T*>(std::malloc(bytes));
+    }
+    if (!p_) throw std::bad_alloc();
+  }
+  LargeArray(size_t n, const T& value) : LargeArray(n) { std::fill(p_, p_ + n_, value); }
+  ~LargeArray() { std::free(p_); }
+  LargeArray(LargeArray&& o) noexcept : p_(o.p_), n_(o.n_) { o.p_ = nullptr, o.n_ = 0; }
+  LargeArray& operator=(LargeArray&& o) noexcept {
+    std::swap(p_, o.p_);
+    std::swap(n_, o.n_);
+    return *this;
+  }
+  LargeArray(const LargeArray&) = delete;
+  LargeArray& operator=(const LargeArray&) = delete;
+  T* data() { return p_; }
+  const T* data() const { return p_; }
+  size_t size() const { return n_; }
+  bool empty() const { return n_ == 0; }
+  T& operator[](size_t i) { return p_[i]; }
+  const T& operator[](size_t i) const { return p_[i]; }
+
+ private:
+  T* p_ = nullptr;
+  size_t n_ = 0;
+};
+
+SLIM_INLINE uint32_t float_bits(float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, 4);
+  return u;
+}
+
+SLIM_INLINE bool same_bits(const Vec3f& a, const Vec3f& b) {
+  return std::memcmp(&a, &b, sizeof(Vec3f)) == 0;
+}
+
+// Surface area of the edge's bounding box, halved (the factor 2 changes no order). Symmetric in
+// (p, q) bit for bit, so twin half-edges get the same value. Axis-aligned edges give 0 and sort
+// last (paper, "Halfedge table sorting"). An overflow to NaN counts as +inf.
+SLIM_INLINE float edge_box_area(const Vec3f& p, const Vec3f& q) {
+  Vec3f d = abs(q - p);
+  float a = d.x * d.y + d.y * d.z + d.z * d.x;
+  return a >= 0.0f ? a : kInf;
+}
+
+int bit_width(uint64_t x) { return x ? 64 - __builtin_clzll(x) : 0; }
+
+// Digits of <= 11 bits (2048 buckets: the histograms of all passes stay in L1/L2) covering key
+// bits [from, to) evenly.
+struct Digit {
+  int shift, bits;
+};
+int cut_digits(int from, int to, Digit* out) {
+  constexpr int kMaxDigit = 11;
+  int w = to - from;
+  if (w <= 0) return 0;
+  int k = (w + kMaxDigit - 1) / kMaxDigit;
+  int s = from;
+  for (int i = 0; i < k; ++i) {
+    int bits = w / k + (i < w % k ? 1 : 0);
+    out[i] = {s, bits};
+    s += bits;
+  }
+  return k;
+}
+
+// Stable LSD radix sort of `a` (n records) by the digits key_of(record, digit) ascending. One
+// histogram pass for all digits; digits equal in every key are skipped. Returns the buffer that
+// holds the result (a or tmp).
+template <class Rec, class KeyOf>
+Rec* radix_sort(Rec* a, Rec* tmp, size_t n, const Digit* digits, int nd, KeyOf key_of) {
+  if (n < 2 || nd == 0) return a;
+  std::vector<uint32_t> hist(size_t(nd) << 11, 0);
+  for (size_t i = 0; i < n; ++i)
+    for (int d = 0; d < nd; ++d) hist[(size_t(d) << 11) + key_of(a[i], digits[d])]++;
+  Rec* src = a;
+  Rec* dst = tmp;
+  for (int d = 0; d < nd; ++d) {
+    uint32_t* h = &hist[size_t(d) << 11];
+    const uint32_t buckets = 1u << digits[d].bits;
+    bool constant = false;
+    uint32_t sum = 0;
+    for (uint32_t b = 0; b < buckets; ++b) {
+      if (h[b] == n) constant = true;
+      uint32_t c = h[b];
+      h[b] = sum;
+      sum += c;
+    }
+    if (constant) continue;
+    const Digit dg = digits[d];
+    for (size_t i = 0; i < n; ++i) dst[h[key_of(src[i], dg)]++] = src[i];
+    std::swap(src, dst);
+  }
+  return src;
+}
+
+// Quantizer of edge midpoints to 24 bits per axis over the mesh box (coordinate keys).
+struct MidpointQuantizer {
+  Vec3f lo;
+  float scale[3];
+  explicit MidpointQuantizer(const Box3f& box) : lo(box.lo) {
+    for (int a = 0; a < 3; ++a) {
+      float ext = box.hi[a] - box.lo[a];
+      scale[a] = ext > 0.0f && std::isfinite(ext) ? 16777215.0f / ext : 0.0f;
+    }
+  }
+  SLIM_INLINE uint64_t q(float m, int a) const {
+    float t = (m - lo[a]) * scale[a];
+    if (!(t > 0.0f)) return 0;
+    if (t >= 16777215.0f) return 16777215;
+    return uint64_t(t);
+  }
+};
+
+SLIM_INLINE const Vec3f& corner(const PairingInput& in, uint32_t tri, int k) {
+  return in.vertices[in.tris[3 * size_t(tri) + k]];
+}
+SLIM_INLINE int next3(int k) { return k == 2 ? 0 : k + 1; }
+
+// Greedy scan state (paper, "Greedy pairing"). The scan reads one bit per triangle ("paired"; a
+// bit set of T/8 bytes stays in cache where a 4 B-per-triangle array would not) and appends the
+// accepted twins; mate() turns them into mate[t] = the half-edge of t's partner on the shared edge
+// (3 * partner + corner), kNone for unpaired triangles. twin[h] (only if asked for, for the
+// augmenting pass) is the other half-edge of a manifold edge, kNone otherwise.
+struct Greedy {
+  const PairingInput& in;
+  bool verify_positions;
+  std::vector<uint64_t> used;
+  std::vector<uint32_t> accepted;  // half-edge pairs (ha, hb)
+  LargeArray<uint32_t> twin;
+  uint64_t nonmanifold = 0;
+
+  Greedy(const PairingInput& i, bool verify, bool want_twins)
+      : in(i), verify_positions(verify), used((i.tri_count + 63) / 64, 0) {
+    accepted.reserve(i.tri_count);
+    if (want_twins) twin = LargeArray<uint32_t>(3 * i.tri_count, kNone);
+  }
+
+  SLIM_INLINE bool is_used(uint32_t t) const { return (used[t >> 6] >> (t & 63)) & 1; }
+  SLIM_INLINE void set_used(uint32_t t) { used[t >> 6] |= uint64_t(1) << (t & 63); }
+
+  bool compatible(uint32_t ha, uint32_t hb) const {
+    uint32_t ta = ha / 3, tb = hb / 3;
+    if (ta == tb) return false;
+    if (in.groups && in.groups[ta] != in.groups[tb]) return false;
+    if (!verify_positions) return true;
+    // Different edges may share a compressed key: accept real shared edges only.
+    TrianglePair p{std::min(ta, tb), std::max(ta, tb), uint8_t((ta < tb ? ha : hb) % 3),
+                   uint8_t((ta < tb ? hb : ha) % 3)};
+    return pair_shares_edge(in, p, true);
+  }
+
+  SLIM_INLINE void set_twins(uint32_t ha, uint32_t hb) {
+    if (!twin.empty()) {
+      twin[ha] = hb;
+      twin[hb] = ha;
+    }
+  }
+
+  // Twins already known to be compatible.
+  SLIM_INLINE void accept_if_free(uint32_t ha, uint32_t hb) {
+    uint32_t ta = ha / 3, tb = hb / 3;
+    if (is_used(ta) || is_used(tb)) return;
+    set_used(ta);
+    set_used(tb);
+    accepted.push_back(ha);
+    accepted.push_back(hb);
+  }
+
+  void two(uint32_t ha, uint32_t hb) {
+    if (!compatible(ha, hb)) return;
+    set_twins(ha, hb);
+    accept_if_free(ha, hb);
+  }
+
+  // A run of k >= 3 equal keys (an edge of 3+ triangles, or a key collision): pair the first two
+  // eligible, then the next two, ...
+  void run(const uint32_t* he, size_t k) {
+    nonmanifold++;
+    for (size_t x = 0; x + 1 < k; ++x) {
+      if (is_used(he[x] / 3)) continue;
+      for (size_t y = x + 1; y < k; ++y) {
+        if (is_used(he[y] / 3) || !compatible(he[x], he[y])) continue;
+        accept_if_free(he[x], he[y]);
+        break;
+      }
+    }
+  }
+
+  LargeArray<uint32_t> mate() const {
+    LargeArray<uint32_t> m(in.tri_count, kNone);
+    for (size_t i = 0; i < accepted.size(); i += 2) {
+      m[accepted[i] / 3] = accepted[i + 1];
+      m[accepted[i + 1] / 3] = accepted[i];
+    }
+    return m;
+  }
+};
+
+// Pairs of `mate`, ascending by a; the unpaired triangles; the figures.
+void collect(const PairingInput& in, const uint32_t* mate, PairingResult& r) {
+  r.pairs.clear();
+  r.unpaired.clear();
+  r.pairs.reserve(in.tri_count / 2);
+  for (uint64_t t = 0; t < in.tri_count; ++t) {
+    uint32_t m = mate[t];
+    if (m == kNone) {
+      r.unpaired.push_back(uint32_t(t));
+    } else if (m / 3 > t) {
+      uint32_t b = m / 3;
+      r.pairs.push_back({uint32_t(t), b, uint8_t(mate[b] % 3), uint8_t(m % 3)});
+    }
+  }
+  PairingStats& s = r.stats;
+  s.triangles = in.tri_count;
+  s.pairs = r.pairs.size();
+  s.unpaired = r.unpaired.size();
+  s.paired_fraction = in.tri_count ? double(2 * s.pairs) / double(in.tri_count) : 0.0;
+}
+
+// Full-table form: 16 B records with the packed key, sorted over all key bits.
+struct HalfEdgeRec {
+  uint64_t lo;  // key bits 0..63
+  uint32_t hi;  // key bits 64..95
+  uint32_t he;  // 3 * triangle + corner (the edge from that corner to the next)
+};
+static_assert(sizeof(HalfEdgeRec) == 16, "half-edge record is 16 bytes (paper: 16 B per entry)");
+
+void full_table(const PairingInput& in, bool coordinate_keys, Greedy& g, PairingStats& st) {
+  const uint64_t T = in.tri_count;
+  auto t0 = Clock::now();
+  LargeArray<HalfEdgeRec> table(3 * T);
+  size_t n = 0;
+  int key_bits;
+  if (!coordinate_keys) {
+    // Key = BBSA float bits (31 bits: areas >= 0, so the bits order like the values) : smaller
+    // vertex : larger vertex, each vertex in just enough bits for the vertex count; complemented
+    // so that an ascending sort gives the paper's descending order.
+    const int vb = std::max(1, bit_width(in.vertex_count ? in.vertex_count - 1 : 0));
+    key_bits = 31 + 2 * vb;
+    using u128 = unsigned __int128;
+    const u128 all = (u128(1) << key_bits) - 1;
+    for (uint64_t t = 0; t < T; ++t) {
+      const uint32_t* v = &in.tris[3 * t];
+      for (int k = 0; k < 3; ++k) {
+        uint32_t i0 = v[k], i1 = v[next3(k)];
+        if (i0 == i1) continue;  // degenerate edge: never paired on
+        uint32_t v0 = std::min(i0, i1), v1 = std::max(i0, i1);
+        float area = edge_box_area(in.vertices[v0], in.vertices[v1]);
+        u128 key = all - ((u128(float_bits(area)) << (2 * vb)) | (u128(v0) << vb) | v1);
+        table[n++] = {uint64_t(key), uint32_t(key >> 64), uint32_t(3 * t + k)};
+      }
+    }
+  } else {
+    // Paper, "Edge key representation & compression": BBSA (its float bits 30..7, order kept)
+    // and the edge midpoint quantized to 24 bits per axis: 96 key bits + the half-edge id = 16 B.
+    Box3f box;
+    for (uint64_t t = 0; t < T; ++t)
+      for (int k = 0; k < 3; ++k) box.extend(corner(in, uint32_t(t), k));
+    MidpointQuantizer mq(box);
+    key_bits = 96;
+    for (uint64_t t = 0; t < T; ++t) {
+      for (int k = 0; k < 3; ++k) {
+        const Vec3f& p = corner(in, uint32_t(t), k);
+        const Vec3f& q = corner(in, uint32_t(t), next3(k));
+        if (same_bits(p, q)) continue;
+        uint64_t area24 = float_bits(edge_box_area(p, q)) >> 7;
+        Vec3f m = (p + q) * 0.5f;  // + is commutative bit for bit: twins agree
+        uint64_t mx = mq.q(m.x, 0), my = mq.q(m.y, 1), mz = mq.q(m.z, 2);
+        // 96-bit key area24 : mx : my : mz, complemented.
+        uint32_t hi = ~uint32_t((area24 << 8) | (mx >> 16));
+        uint64_t lo = ~(((mx & 0xffff) << 48) | (my << 24) | mz);
+        table[n++] = {lo, hi, uint32_t(3 * t + k)};
+      }
+    }
+  }
+  st.half_edges = n;
+  st.table_s = seconds_since(t0);
+
+  t0 = Clock::now();
+  LargeArray<HalfEdgeRec> tmp(n);
+  Digit digits[12];
+  int nd = cut_digits(0, std::min(key_bits, 64), digits);
+  nd += cut_digits(64, key_bits, digits + nd);
+  const HalfEdgeRec* s =
+      radix_sort(table.data(), tmp.data(), n, digits, nd, [](const HalfEdgeRec& r, Digit d) {
+        uint64_t v = d.shift >= 64 ? uint64_t(r.hi) >> (d.shift - 64) : r.lo >> d.shift;
+        return uint32_t(v) & ((1u << d.bits) - 1);
+      });
+  st.sort_s = seconds_since(t0);
+
+  t0 = Clock::now();
+  std::vector<uint32_t> run;
+  for (size_t i = 0; i < n;) {
+    size_t j = i + 1;
+    while (j < n && s[j].lo == s[i].lo && s[j].hi == s[i].hi) ++j;
+    if (j - i == 2) {
+      g.two(s[i].he, s[i + 1].he);
+    } else if (j - i > 2) {
+      run.clear();
+      for (size_t x = i; x < j; ++x) run.push_back(s[x].he);
+      g.run(run.data(), run.size());
+    }
+    i = j;
+  }
+  st.scan_s = seconds_since(t0);
+}
+
+// Index keys without the full table: twins found by a counting sort on the smaller vertex.
+struct EdgeRec {
+  uint32_t key;  // complemented BBSA bits (31 bits)
+  uint32_t a;    // first half-edge of the run (smallest id); kNone for a run of 3+
+  uint32_t b;    // second half-edge; for a run of 3+, its offset in Twins::runs
+};
+
+// Twins of the mesh: twin[h] for manifold edges (two compatible half-edges), runs of 3+ equal
+// keys (edges of 3+ triangles) as [count, half-edges ascending...] in `runs`, and for each
+// half-edge of a run its run offset (run_of, sorted by half-edge) for the local scan.
+struct Twins {
+  // Per half-edge: BBSA float bits << 32 | twin half-edge (kNone: no manifold twin). One array,
+  // so that the random writes of a twin pair and the reads of the local scan share cache lines.
+  LargeArray<uint64_t> link;
+  std::vector<uint32_t> runs;
+  std::vector<std::pair<uint32_t, uint32_t>> run_of;
+  std::vector<uint64_t> in_run;  // bit per triangle: has a half-edge in a run
+};
+
+// Builds the twins (and, if `edges` is given, one record per run of >= 2 twins, in descending
+// (smaller, larger) vertex order: the input of the area-only radix sort).
+void find_twins(const PairingInput& in, Greedy& g, Twins& tw, LargeArray<EdgeRec>* edges,
+                size_t* edge_count, uint32_t* top_hist, PairingStats& st) {
+  const uint64_t T = in.tri_count, V = in.vertex_count;
+  const uint32_t* tris = in.tris;
+  // Counting sort of the half-edges by smaller vertex: start[v] .. start[v+1].
+  LargeArray<uint32_t> start(V + 1, 0u);
+  for (uint64_t i = 0; i < 3 * T; i += 3) {
+    uint32_t a = tris[i], b = tris[i + 1], c = tris[i + 2];
+    start[std::min(a, b)] += a != b;
+    start[std::min(b, c)] += b != c;
+    start[std::min(c, a)] += c != a;
+  }
+  uint32_t sum = 0;
+  for (uint64_t v = 0; v <= V; ++v) {
+    uint32_t c = start[v];
+    start[v] = sum;
+    sum += c;
+  }
+  const size_t n = sum;
+  st.half_edges = n;
+  // Entry: larger vertex << 32 | half-edge id; filled through start[] as cursors (shifted back
+  // by one bucket afterwards). Filled in half-edge order, so each bucket is sorted by id.
+  LargeArray<uint64_t> slot_buf(n);       // no fill: every entry is written
+  tw.link = LargeArray<uint64_t>(3 * T);  // no fill: every half-edge is written once below
+  uint64_t* slots = slot_buf.data();
+  for (uint64_t i = 0; i < 3 * T; i += 3)
+    for (int k = 0; k < 3; ++k) {
+      uint32_t i0 = tris[i + k], i1 = tris[i + next3(k)];
+      if (i0 == i1) {
+        tw.link[i + k] = kNone;  // degenerate: in no bucket
+        continue;
+      }
+      uint32_t v0 = std::min(i0, i1);
+      slots[start[v0]++] = uint64_t(std::max(i0, i1)) << 32 | uint32_t(i + k);
+    }
+  for (uint64_t v = V; v > 0; --v) start[v] = start[v - 1];
+  start[0] = 0;
+
+  tw.in_run.assign((T + 63) / 64, 0);
+  size_t ne = 0;  // at most one record per 2 half-edges
+  if (edges) *edges = LargeArray<EdgeRec>(n / 2 + 1);
+  for (uint64_t v0 = V; v0-- > 0;) {
+    uint64_t* e = slots + start[v0];
+    const size_t k = start[v0 + 1] - start[v0];
+    if (k < 2) {
+      if (k == 1) tw.link[uint32_t(e[0])] = kNone;  // boundary edge
+      continue;
+    }
+    // Insertion sort by (larger vertex, half-edge id): buckets are tiny (vertex valence / 2).
+    for (size_t i = 1; i < k; ++i) {
+      uint64_t x = e[i];
+      size_t j = i;
+      for (; j > 0 && e[j - 1] > x; --j) e[j] = e[j - 1];
+      e[j] = x;
+    }
+    for (size_t hi = k; hi > 0;) {
+      size_t lo = hi - 1;
+      const uint32_t v1 = uint32_t(e[lo] >> 32);
+      while (lo > 0 && uint32_t(e[lo - 1] >> 32) == v1) --lo;
+      const size_t cnt = hi - lo;
+      const uint32_t ha = uint32_t(e[lo]), hb = uint32_t(e[lo + (cnt > 1)]);
+      for (size_t x = lo; x < hi; ++x) tw.link[uint32_t(e[x])] = kNone;
+      if (cnt == 2 && g.compatible(ha, hb)) {
+        // Checked here, in vertex order (cache friendly): the later scans only touch the
+        // "paired" bits.
+        const uint32_t area = float_bits(edge_box_area(in.vertices[v0], in.vertices[v1]));
+        tw.link[ha] = uint64_t(area) << 32 | hb;
+        tw.link[hb] = uint64_t(area) << 32 | ha;
+        if (edges) {
+          const uint32_t key = ~area & 0x7fffffffu;
+          (*edges)[ne++] = {key, ha, hb};
+          top_hist[key >> 20]++;
+        }
+      } else if (cnt > 2) {
+        const uint32_t off = uint32_t(tw.runs.size());
+        tw.runs.push_back(uint32_t(cnt));
+        for (size_t x = lo; x < hi; ++x) {
+          const uint32_t h = uint32_t(e[x]);
+          tw.runs.push_back(h);
+          tw.run_of.push_back({h, off});
+          tw.in_run[h / 3 / 64] |= uint64_t(1) << (h / 3 % 64);
+        }
+        if (edges) {
+          const uint32_t key =
+              ~float_bits(edge_box_area(in.vertices[v0], in.vertices[v1])) & 0x7fffffffu;
+          (*edges)[ne++] = {key, kNone, off};
+          top_hist[key >> 20]++;
+        }
+      }
+      hi = lo;
+    }
+  }
+  std::sort(tw.run_of.begin(), tw.run_of.end());
+  if (edge_count) *edge_count = ne;
+}
+
+// The paper's order by a stable radix sort of the edge records on the BBSA bits alone.
+// Stable sort of the edge records by their 31 key bits: one MSD pass on the top 11 bits (its
+// histogram counted while the records were emitted), then 2 LSD passes of 10 bits inside each
+// bucket, which mostly fits in L2. Stable all the way, so equal keys keep the emission order.
+// One pass over memory instead of three: 30% faster than a plain 3-pass LSD on 3M records.
+const EdgeRec* sort_edges(LargeArray<EdgeRec>& edges, LargeArray<EdgeRec>& tmp, size_t ne,
+                          const uint32_t* top_hist) {
+  constexpr int kTop = 11, kLow = 10;
+  std::vector<uint32_t> start(size_t(1) << kTop);
+  uint32_t sum = 0;
+  for (size_t b = 0; b < start.size(); ++b) {
+    start[b] = sum;
+    sum += top_hist[b];
+  }
+  std::vector<uint32_t> cur(start);
+  EdgeRec* a = edges.data();
+  EdgeRec* t = tmp.data();
+  for (size_t i = 0; i < ne; ++i) t[cur[a[i].key >> (2 * kLow)]++] = a[i];
+  uint32_t h[1u << kLow];
+  for (size_t b = 0; b < start.size(); ++b) {
+    const uint32_t lo = start[b], m = top_hist[b];
+    if (m < 2) continue;
+    EdgeRec* src = t + lo;
+    EdgeRec* dst = a + lo;
+    for (int pass = 0; pass < 2; ++pass) {  // even count: the bucket ends up in t again
+      const int sh = pass * kLow;
+      std::fill(h, h + (1u << kLow), 0u);
+      for (uint32_t i = 0; i < m; ++i) h[(src[i].key >> sh) & ((1u << kLow) - 1)]++;
+      uint32_t s2 = 0;
+      for (uint32_t& x : h) {
+        uint32_t c = x;
+        x = s2;
+        s2 += c;
+      }
+      for (uint32_t i = 0; i < m; ++i) dst[h[(src[i].key >> sh) & ((1u << kLow) - 1)]++] = src[i];
+      std::swap(src, dst);
+    }
+  }
+  return t;
+}
+
+void sorted_scan(Greedy& g, const Twins& tw, LargeArray<EdgeRec>& edges, size_t ne,
+                 const uint32_t* top_hist, PairingStats& st) {
+  auto t0 = Clock::now();
+  LargeArray<EdgeRec> tmp(ne);
+  const EdgeRec* s = sort_edges(edges, tmp, ne, top_hist);
+  st.sort_s = seconds_since(t0);
+  t0 = Clock::now();
+  for (size_t i = 0; i < ne; ++i) {
+    if (s[i].a != kNone)
+      g.accept_if_free(s[i].a, s[i].b);
+    else
+      g.run(&tw.runs[s[i].b + 1], tw.runs[s[i].b]);
+  }
+  st.scan_s = seconds_since(t0);
+}
+
+// The same pairs without a global sort (EdgeOrder::Local). The greedy scan over a
+// strict total order of candidate pairs accepts exactly the pairs that are "locally dominant"
+// when they are accepted: heavier than every other candidate of both triangles among free
+// triangles (R. Preis, "Linear time 1/2-approximation algorithm for maximum weighted matching in
+// general graphs", STACS 1999). So: from a free triangle, follow best-candidate pointers (the
+// priority rises along the path) until two triangles choose each other, pair them, go on. The
+// order is the paper's: (BBSA, smaller vertex, larger vertex) descending, and inside a run of 3+
+// twins the run's pair order (first two eligible first). Only the neighbours of a triangle are
+// touched, in mesh order: no table of all edges is sorted or scanned.
+struct Priority {
+  uint64_t hi = 0, lo = 0;  // BBSA bits : smaller vertex | larger vertex : run positions
+  bool operator>(const Priority& o) const { return hi > o.hi || (hi == o.hi && lo > o.lo); }
+};
+struct Candidate {
+  uint32_t partner = kNone;
+  uint32_t h = kNone, o = kNone;  // own half-edge, partner's half-edge
+  Priority prio;
+};
+
+SLIM_INLINE Priority edge_priority(uint32_t area_bits, uint32_t i0, uint32_t i1, uint32_t i,
+                                   uint32_t j) {
+  uint32_t v0 = std::min(i0, i1), v1 = std::max(i0, i1);
+  return {uint64_t(area_bits) << 32 | v0, uint64_t(v1) << 32 | (0xffffu - i) << 16 | (0xffffu - j)};
+}
+
+void local_scan(const PairingInput& in, Greedy& g, const Twins& tw, PairingStats& st) {
+  auto t0 = Clock::now();
+  const uint32_t* tris = in.tris;
+  auto best = [&](uint32_t x) {
+    Candidate c;
+    const uint32_t* v = &tris[3 * size_t(x)];
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t h = 3 * x + k;
+      const uint64_t link = tw.link[h];
+      const uint32_t o = uint32_t(link);
+      if (o != kNone) {
+        if (g.is_used(o / 3)) continue;
+        Priority p = edge_priority(uint32_t(link >> 32), v[k], v[next3(k)], 0, 1);
+        if (p > c.prio || c.partner == kNone) c = {o / 3, h, o, p};
+      }
+    }
+    if ((tw.in_run[x / 64] >> (x % 64)) & 1) {
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t h = 3 * x + k;
+        auto it = std::lower_bound(tw.run_of.begin(), tw.run_of.end(), std::make_pair(h, 0u));
+        if (it == tw.run_of.end() || it->first != h) continue;
+        const uint32_t* run = &tw.runs[it->second + 1];
+        const uint32_t cnt = std::min<uint32_t>(tw.runs[it->second], 0xffff);
+        uint32_t i = 0;
+        while (i < cnt && run[i] != h) ++i;
+        if (i == cnt) continue;
+        for (uint32_t j = 0; j < cnt; ++j) {
+          const uint32_t o = run[j], n = o / 3;
+          if (j == i || n == x || g.is_used(n) || !g.compatible(h, o)) continue;
+          const float area = edge_box_area(in.vertices[v[k]], in.vertices[v[next3(k)]]);
+          Priority p =
+              edge_priority(float_bits(area), v[k], v[next3(k)], std::min(i, j), std::max(i, j));
+          if (p > c.prio || c.partner == kNone) c = {n, h, o, p};
+        }
+      }
+    }
+    return c;
+  };
+  std::vector<uint32_t> stack;
+  for (uint64_t s = 0; s < in.tri_count; ++s) {
+    if (g.is_used(uint32_t(s))) continue;
+    stack.push_back(uint32_t(s));
+    while (!stack.empty()) {
+      const uint32_t x = stack.back();
+      if (g.is_used(x)) {
+        stack.pop_back();
+        continue;
+      }
+      const Candidate c = best(x);
+      if (c.partner == kNone) {  // no free neighbour left: x stays unpaired
+        stack.pop_back();
+        continue;
+      }
+      const Candidate d = best(c.partner);  // >= c.prio, since x is one of its candidates
+      if (d.h == c.o && d.o == c.h) {  // the same candidate: x and its partner choose each other
+        g.set_used(x);
+        g.set_used(c.partner);
+        g.accepted.push_back(c.h);
+        g.accepted.push_back(c.o);
+        stack.pop_back();
+      } else {
+        stack.push_back(c.partner);
+      }
+    }
+  }
+  for (size_t r = 0; r < tw.runs.size(); r += tw.runs[r] + 1) g.nonmanifold++;
+  st.scan_s = seconds_since(t0);
+}
+
+// Augmenting paths of length 3 (see PairingOptions::augment): free t, pair (n, p), free u with
+// t-n and p-u manifold edges becomes (t, n) + (p, u), the candidate with the largest sum of edge
+// box areas first. Sweeps over the free triangles until nothing changes (at most 4). link(h)
+// gives BBSA bits << 32 | twin half-edge (kNone: no manifold twin). Returns the pairs gained.
+template <class LinkOf>
+uint64_t augment(const PairingInput& in, LinkOf link, uint32_t* mate) {
+  auto area = [](uint64_t l) {
+    float f;
+    const uint32_t b = uint32_t(l >> 32);
+    std::memcpy(&f, &b, 4);
+    return f;
+  };
+  std::vector<uint32_t> free_tris;
+  for (uint64_t t = 0; t < in.tri_count; ++t)
+    if (mate[t] == kNone) free_tris.push_back(uint32_t(t));
+  uint64_t gained = 0;
+  for (int sweep = 0; sweep < 4 && !free_tris.empty(); ++sweep) {
+    const uint64_t before = gained;
+    size_t kept = 0;
+    for (const uint32_t t : free_tris) {
+      if (mate[t] != kNone) continue;  // became a u earlier in this sweep
+      float best = -1.0f;
+      uint32_t bh = kNone, bo = kNone, bh2 = kNone, bo2 = kNone;
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t h = 3 * t + k;
+        const uint64_t l = link(h);
+        const uint32_t o = uint32_t(l);  // manifold edges only
+        if (o == kNone) continue;
+        const uint32_t n = o / 3;
+        if (mate[n] == kNone) continue;
+        const uint32_t p = mate[n] / 3;
+        for (int m = 0; m < 3; ++m) {
+          const uint32_t h2 = 3 * p + m;
+          const uint64_t l2 = link(h2);
+          const uint32_t o2 = uint32_t(l2);
+          if (o2 == kNone) continue;
+          const uint32_t u = o2 / 3;
+          if (u == n || u == t || mate[u] != kNone) continue;
+          const float score = area(l) + area(l2);
+          if (score > best) {
+            best = score;
+            bh = h, bo = o, bh2 = h2, bo2 = o2;
+          }
+        }
+      }
+      if (bh == kNone) {
+        free_tris[kept++] = t;
+        continue;
+      }
+      mate[t] = bo;
+      mate[bo / 3] = bh;
+      mate[bh2 / 3] = bo2;
+      mate[bo2 / 3] = bh2;
+      gained++;
+    }
+    free_tris.resize(kept);
+    if (gained == before) break;
+  }
+  return gained;
+}
+
+bool find_shared_edge(const PairingInput& in, uint32_t a, uint32_t b, bool by_position,
+                      TrianglePair& p) {
+  p.a = std::min(a, b);
+  p.b = std::max(a, b);
+  if (in.groups && in.groups[a] != in.groups[b]) return false;
+  if (!by_position) {
+    // Fast path of pair_shares_edge for index keys.
+    const uint32_t* ta = &in.tris[3 * size_t(p.a)];
+    const uint32_t* tb = &in.tris[3 * size_t(p.b)];
+    for (int i = 0; i < 3; ++i) {
+      uint32_t a0 = ta[i], a1 = ta[next3(i)];
+      if (a0 == a1) continue;
+      for (int j = 0; j < 3; ++j) {
+        uint32_t b0 = tb[j], b1 = tb[next3(j)];
+        if ((a0 == b0 && a1 == b1) || (a0 == b1 && a1 == b0)) {
+          p.ea = uint8_t(i);
+          p.eb = uint8_t(j);
+          return true;
+        }
+      }
+    }
+    return false;
+  }
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      p.ea = uint8_t(i);
+      p.eb = uint8_t(j);
+      if (pair_shares_edge(in, p, true)) return true;
+    }
+  return false;
+}
+
+using enum EdgeOrder;
+
+PairingResult heuristic(const PairingInput& in, bool coordinate_keys, EdgeOrder full, bool aug) {
+  const uint64_t T = in.tri_count;
+  if (3 * T >= 0xffffffffull)
+    throw Error("triangle pairing: " + std::to_string(T) +
+                " triangles, at most (2^32 - 1) / 3 can be paired");
+  PairingResult r;
+  Greedy g(in, coordinate_keys, aug && (coordinate_keys || full == FullTable));
+  Twins tw;
+  if (coordinate_keys || full == FullTable) {
+    full_table(in, coordinate_keys, g, r.stats);
+  } else {
+    auto t0 = Clock::now();
+    LargeArray<EdgeRec> edges;
+    size_t ne = 0;
+    std::vector<uint32_t> top_hist(2048, 0);
+    find_twins(in, g, tw, full == TwinSort ? &edges : nullptr, &ne, top_hist.data(), r.stats);
+    r.stats.table_s = seconds_since(t0);
+    if (full == TwinSort)
+      sorted_scan(g, tw, edges, ne, top_hist.data(), r.stats);
+    else
+      local_scan(in, g, tw, r.stats);
+  }
+  r.stats.heuristic_paired_fraction = T ? double(g.accepted.size()) / double(T) : 0.0;
+  LargeArray<uint32_t> mate = g.mate();
+  g.accepted = {};
+  if (aug) {
+    auto t0 = Clock::now();
+    if (!tw.link.empty()) {
+      r.stats.augmented_pairs = augment(
+          in, [&](uint32_t h) { return tw.link[h]; }, mate.data());
+    } else {
+      auto link = [&](uint32_t h) {
+        const uint32_t t = h / 3, o = g.twin[h];
+        const int k = int(h % 3);
+        if (o == kNone) return uint64_t(kNone);
+        const float a = edge_box_area(corner(in, t, k), corner(in, t, next3(k)));
+        return uint64_t(float_bits(a)) << 32 | o;
+      };
+      r.stats.augmented_pairs = augment(in, link, mate.data());
+    }
+    r.stats.augment_s = seconds_since(t0);
+  }
+  r.stats.nonmanifold_edges = g.nonmanifold;
+  collect(in, mate.data(), r);
+  return r;
+}
+
+// The window-2 pairs alone (the pre-scan).
+std::vector<TrianglePair> window_scan(const PairingInput& in, bool by_position) {
+  std::vector<TrianglePair> pairs;
+  pairs.reserve(in.tri_count / 2);
+  for (uint64_t i = 0; i + 1 < in.tri_count;) {
+    TrianglePair p;
+    if (find_shared_edge(in, uint32_t(i), uint32_t(i + 1), by_position, p)) {
+      pairs.push_back(p);
+      i += 2;
+    } else {
+      i += 1;
+    }
+  }
+  return pairs;
+}
+
+// The result of window pairs: pairs are (i, i+1) in order, so the unpaired triangles are the
+// gaps between them.
+PairingResult window_result(const PairingInput& in, std::vector<TrianglePair>&& pairs) {
+  PairingResult r;
+  r.pairs = std::move(pairs);
+  uint64_t next = 0;
+  for (const TrianglePair& p : r.pairs) {
+    for (; next < p.a; ++next) r.unpaired.push_back(uint32_t(next));
+    next = uint64_t(p.b) + 1;
+  }
+  for (; next < in.tri_count; ++next) r.unpaired.push_back(uint32_t(next));
+  PairingStats& s = r.stats;
+  s.triangles = in.tri_count;
+  s.pairs = r.pairs.size();
+  s.unpaired = r.unpaired.size();
+  s.paired_fraction = in.tri_count ? double(2 * s.pairs) / double(in.tri_count) : 0.0;
+  s.window2_paired_fraction = s.paired_fraction;
+  return r;
+}
+
+}  // namespace
+
+bool pair_shares_edge(const PairingInput& in, const TrianglePair& p, bool by_position) {
+  if (p.a == p.b || p.ea > 2 || p.eb > 2) return false;
+  if (in.groups && in.groups[p.a] != in.groups[p.b]) return false;
+  const uint32_t* ta = &in.tris[3 * size_t(p.a)];
+  const uint32_t* tb = &in.tris[3 * size_t(p.b)];
+  uint32_t a0 = ta[p.ea], a1 = ta[next3(p.ea)];
+  uint32_t b0 = tb[p.eb], b1 = tb[next3(p.eb)];
+  if (!by_position) {
+    if (a0 == a1) return false;
+    return (a0 == b0 && a1 == b1) || (a0 == b1 && a1 == b0);
+  }
+  const Vec3f &pa0 = in.vertices[a0], &pa1 = in.vertices[a1];
+  const Vec3f &pb0 = in.vertices[b0], &pb1 = in.vertices[b1];
+  if (same_bits(pa0, pa1)) return false;
+  return (same_bits(pa0, pb0) && same_bits(pa1, pb1)) ||
+         (same_bits(pa0, pb1) && same_bits(pa1, pb0));
+}
+
+PairingResult window_pairs(const PairingInput& in, bool by_position) {
+  return window_result(in, window_scan(in, by_position));
+}
+
+uint64_t weld_positions(const Vec3f* vertices, uint64_t vertex_count,
+                        std::vector<uint32_t>& remap) {
+  remap.resize(vertex_count);
+  // Open addressing over the 12 position bytes; the table holds vertex ids (first occurrence).
+  uint64_t cap = 16;
+  while (cap < 2 * vertex_count) cap *= 2;
+  std::vector<uint32_t> table(cap, kNone);
+  const uint64_t mask = cap - 1;
+  uint64_t merged = 0;
+  for (uint64_t v = 0; v < vertex_count; ++v) {
+    const Vec3f& p = vertices[v];
+    uint64_t h = float_bits(p.x) * 0x9E3779B97F4A7C15ULL;
+    h = (h ^ (h >> 29) ^ float_bits(p.y)) * 0xBF58476D1CE4E5B9ULL;
+    h = (h ^ (h >> 32) ^ float_bits(p.z)) * 0x94D049BB133111EBULL;
+    h ^= h >> 31;
+    for (uint64_t s = h & mask;; s = (s + 1) & mask) {
+      uint32_t e = table[s];
+      if (e == kNone) {
+        table[s] = uint32_t(v);
+        remap[v] = uint32_t(v);
+        break;
+      }
+      if (same_bits(vertices[e], p)) {
+        remap[v] = e;
+        merged++;
+        break;
+      }
+    }
+  }
+  return merged;
+}
+
+PairingResult pair_by_edge_heuristic(const PairingInput& in, bool coordinate_keys,
+                                     EdgeOrder order) {
+  return heuristic(in, coordinate_keys, order, false);
+}
+
+PairingResult pair_triangles(const PairingInput& in_arg, const PairingOptions& opt) {
+  auto t_all = Clock::now();
+  PairingInput in = in_arg;
+  std::vector<uint32_t> welded_tris;
+  double weld_s = 0;
+  uint64_t welded = 0;
+  if (opt.weld) {
+    auto t0 = Clock::now();
+    std::vector<uint32_t> remap;
+    welded = weld_positions(in.vertices, in.vertex_count, remap);
+    if (welded) {
+      welded_tris.resize(3 * in.tri_count);
+      for (uint64_t i = 0; i < 3 * in.tri_count; ++i) welded_tris[i] = remap[in.tris[i]];
+      in.tris = welded_tris.data();
+    }
+    weld_s = seconds_since(t0);
+  }
+
+  // Pre-scan: the window-2 pairing, kept if it is good enough.
+  auto t0 = Clock::now();
+  std::vector<TrianglePair> w = window_scan(in, opt.coordinate_keys);
+  const double window2 = in.tri_count ? double(2 * w.size()) / double(in.tri_count) : 0.0;
+  PairingResult r;
+  if (in.tri_count > 0 && window2 >= opt.prescan_threshold) {
+    r = window_result(in, std::move(w));
+    r.stats.prescan_skipped = true;
+  }
+  double prescan_s = seconds_since(t0);
+  if (!r.stats.prescan_skipped) {
+    w = {};
+    r = heuristic(in, opt.coordinate_keys, EdgeOrder::TwinSort, opt.augment);
+    r.stats.window2_paired_fraction = window2;
+  }
+  r.stats.weld_s = weld_s;
+  r.stats.welded_vertices = welded;
+  r.stats.prescan_s = prescan_s;
+  r.stats.pairing_s = seconds_since(t_all);
+  return r;
+}
+
+PairingStats pairing_stats(const PolyMesh& mesh, const PairingOptions& opt) {
+  check_mesh(mesh);
+  TriangleMesh tm = triangulate_fan({&mesh});
+  PairingInput in{tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(),
+                  tm.geom_ids.data()};
+  PairingResult r = pair_triangles(in, opt);
+  PairingStats s = r.stats;
+  if (s.prescan_skipped) {
+    PairingInput hin = in;
+    std::vector<uint32_t> remap, welded_tris;
+    if (opt.weld && weld_positions(in.vertices, in.vertex_count, remap)) {
+      welded_tris.resize(3 * in.tri_count);
+      for (uint64_t i = 0; i < 3 * in.tri_count; ++i) welded_tris[i] = remap[in.tris[i]];
+      hin.tris = welded_tris.data();
+    }
+    s.heuristic_paired_fraction = heuristic(hin, opt.coordinate_keys, EdgeOrder::TwinSort, false)
+                                      .stats.heuristic_paired_fraction;
+  }
+  return s;
+}
+
+}  // namespace slim

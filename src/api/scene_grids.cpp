@@ -1,8 +1,896 @@
-// placeholder until the grids formats land
-#include "api/scene_impl.h"
+// Grid formats: `grid`, `lossy-grid`, `lossy-grid-e2` (C. Benthin, K. Vaidyanathan, S. Woop,
+// "Ray Tracing Lossy Compressed Grid Primitives", ../shared/papers/
+// lossy-compressed-grid-primitives.txt; DESIGN.md "Grids", "Lossy 5x5 sub-grid").
+//
+// Scene::build: the meshes become grids (mesh/grids.h, section 3), each grid is cut into 5x5
+// sub-grids, and a BVH8 is built over the sub-grids, one sub-grid per leaf (section 5: "Each BVH
+// leaf references a single sub-grid"):
+//   grid           SubGridRef (16 B) referencing grid-ordered float vertices (prim/subgrid.h)
+//   lossy-grid     lossy sub-grids (prim/lossy_subgrid.h), displacement encoding 1
+//   lossy-grid-e2  the same with encoding 2
+// The lossy layout follows the BVH option: Bvh::CompressedLeafCompact selects the 72-byte
+// shared-corner sub-grid (section 9), every other node kind the 128-byte Listing 1 sub-grid.
+// Leftovers (lone quads, unpaired triangles) are stored either as 2x2 sub-grids in the same BVH
+// or as Tri4v triangle leaves in a second BVH traversed after the first, whichever the estimate
+// below says is smaller (SceneStats detail `leftover_triangle_leaves`). With the layouts above the
+// triangle leaves always win (a lone quad costs ~116 B as triangles, 140-180 B as a sub-grid);
+// the environment variable SLIM_GRID_LEFTOVERS=grids|triangles forces one (tests, experiments).
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <string>
+
+#include "api/bvh_scene.h"
+#include "mesh/grids.h"
+#include "prim/lossy_subgrid.h"
+#include "prim/subgrid.h"
+#include "prim/triangles.h"
+#include "slimrt/grids.h"
 
 namespace slim {
-std::unique_ptr<Scene::Impl> build_grid_scene(const std::vector<const PolyMesh*>&, const BuildOptions& opt) {
-  throw Error(opt.config_name() + ": not implemented yet");
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
 }
+
+enum class Layout { Uncompressed, Listing1, Shared };
+
+Layout layout_of(const BuildOptions& opt) {
+  if (opt.geometry == Geometry::Grids) return Layout::Uncompressed;
+  return opt.bvh == Bvh::CompressedLeafCompact ? Layout::Shared : Layout::Listing1;
+}
+
+uint32_t block_bytes(Layout l) {
+  switch (l) {
+    case Layout::Uncompressed:
+      return sizeof(SubGridRef);
+    case Layout::Listing1:
+      return sizeof(LossySubGrid);
+    default:
+      return sizeof(LossySubGridShared);
+  }
+}
+
+SLIM_INLINE uint32_t subgrids_along(uint32_t res) {
+  return (res - 1 + kSubGridCells - 1) / kSubGridCells;
+}
+
+// The conversion and the leftover decision, shared by every grid format and the statistics.
+struct Prepared {
+  GridSet gs;
+  bool tri_leaves = false;          // leftovers as Tri4v leaves (else as 2x2 sub-grids)
+  std::vector<uint64_t> sub_start;  // per grid: first sub-grid (grids.size() + 1 entries)
+  uint64_t leftover_cells = 0, leftover_tris = 0;
+  double seconds = 0;
+};
+
+Prepared prepare(const std::vector<const PolyMesh*>& meshes, Layout layout) {
+  auto t0 = Clock::now();
+  Prepared p;
+  p.gs = make_grids(meshes);
+  GridSet& gs = p.gs;
+  p.leftover_cells = gs.grids.size() - gs.multi_cell_grids;
+  p.leftover_tris = gs.triangles.size();
+  // Bytes per leftover primitive. As a 2x2 sub-grid: its block, its side-table entry, its 4
+  // vertices when they live outside the block, and about 24 B of BVH. As triangles: a quarter of
+  // a 176 B Tri4v block plus about 8 B of BVH per triangle (a lone quad is 2 triangles).
+  const double as_grid =
+      double(block_bytes(layout)) + sizeof(GridInfo) + (layout == Layout::Listing1 ? 0 : 48) + 24;
+  const double as_tri = 176.0 / 4 + 8;
+  p.tri_leaves = double(2 * p.leftover_cells + p.leftover_tris) * as_tri <
+                 double(p.leftover_cells + p.leftover_tris) * as_grid;
+  if (const char* force = std::getenv("SLIM_GRID_LEFTOVERS")) {
+    if (std::string(force) == "grids") p.tri_leaves = false;
+    if (std::string(force) == "triangles") p.tri_leaves = true;
+  }
+  if (p.tri_leaves) {
+    // 1-cell grids -> their two triangles A = (c00, c10, c11), B = (c00, c11, c01).
+    for (size_t gi = gs.multi_cell_grids; gi < gs.grids.size(); ++gi) {
+      const VertexGrid& g = gs.grids[gi];
+      const uint32_t c00 = gs.vertex(g, 0, 0), c10 = gs.vertex(g, 1, 0);
+      const uint32_t c01 = gs.vertex(g, 0, 1), c11 = gs.vertex(g, 1, 1);
+      gs.triangles.push_back({g.geom, gs.cell_face(g, 0, 0, 0), {c00, c10, c11}, {}});
+      gs.triangles.push_back({g.geom, gs.cell_face(g, 0, 0, 1), {c00, c11, c01}, {}});
+    }
+    if (gs.multi_cell_grids < gs.grids.size()) {
+      const VertexGrid& first = gs.grids[gs.multi_cell_grids];
+      gs.vertices.resize(first.vertex_offset);
+      if (!gs.corner_of_vertex.empty()) gs.corner_of_vertex.resize(first.vertex_offset);
+      gs.cell_faces.resize(2 * first.cell_offset);
+      gs.cell_flip.resize(first.cell_offset);
+      gs.grids.resize(gs.multi_cell_grids);
+    }
+  } else {
+    // Triangles (a, b, c) -> 2x2 grids (a, b / c, c): A = (a, b, c), B = (a, c, c) degenerate.
+    for (const LeftoverTriangle& t : gs.triangles) {
+      VertexGrid g;
+      g.geom = t.geom;
+      g.res_x = g.res_y = 2;
+      g.vertex_offset = gs.vertices.size();
+      g.cell_offset = gs.cell_faces.size() / 2;
+      gs.vertices.insert(gs.vertices.end(), {t.v[0], t.v[1], t.v[2], t.v[2]});
+      gs.cell_faces.insert(gs.cell_faces.end(), {t.face, t.face});
+      gs.cell_flip.push_back(0);
+      gs.grids.push_back(g);
+    }
+    gs.triangles.clear();
+  }
+  p.sub_start.assign(gs.grids.size() + 1, 0);
+  for (size_t gi = 0; gi < gs.grids.size(); ++gi) {
+    const VertexGrid& g = gs.grids[gi];
+    p.sub_start[gi + 1] =
+        p.sub_start[gi] + uint64_t(subgrids_along(g.res_x)) * subgrids_along(g.res_y);
+  }
+  p.seconds = seconds_since(t0);
+  return p;
+}
+
+// Side table entry of a grid: the input face of each cell, affine in (x, y) when it can be
+// (procedural scenes: one entry for the whole grid), else a table.
+GridInfo grid_info(const GridSet& gs, const VertexGrid& g, std::vector<uint32_t>& faces) {
+  GridInfo info;
+  info.geom = g.geom;
+  info.res_x = uint16_t(g.res_x);
+  info.res_y = uint16_t(g.res_y);
+  const uint32_t w = g.res_x - 1, h = g.res_y - 1;
+  const int64_t f0 = gs.cell_face(g, 0, 0, 0);
+  const int64_t dx = w > 1 ? int64_t(gs.cell_face(g, 1, 0, 0)) - f0 : 0;
+  const int64_t dy = h > 1 ? int64_t(gs.cell_face(g, 0, 1, 0)) - f0 : 0;
+  const int64_t ab = int64_t(gs.cell_face(g, 0, 0, 1)) - f0;
+  auto fits = [](int64_t v) { return v >= INT32_MIN && v <= INT32_MAX; };
+  bool affine = fits(dx) && fits(dy) && fits(ab);
+  bool same_ab = true;
+  for (uint32_t y = 0; y < h; ++y)
+    for (uint32_t x = 0; x < w; ++x) {
+      const int64_t a = gs.cell_face(g, x, y, 0), b = gs.cell_face(g, x, y, 1);
+      affine = affine && a == f0 + int64_t(x) * dx + int64_t(y) * dy && b == a + ab;
+      same_ab = same_ab && a == b;
+    }
+  if (affine) {
+    info.face0 = uint32_t(f0);
+    info.face_dx = int32_t(dx);
+    info.face_dy = int32_t(dy);
+    info.face_ab = int32_t(ab);
+    return info;
+  }
+  if (faces.size() + 2 * uint64_t(w) * h >= 0xffffffffull)
+    throw Error("grids: face table larger than 2^32 entries");
+  info.face0 = uint32_t(faces.size());
+  info.flags = same_ab ? kGridFaceTable1 : kGridFaceTable;
+  for (uint32_t y = 0; y < h; ++y)
+    for (uint32_t x = 0; x < w; ++x) {
+      faces.push_back(gs.cell_face(g, x, y, 0));
+      if (!same_ab) faces.push_back(gs.cell_face(g, x, y, 1));
+    }
+  return info;
+}
+
+// Side tables of all grids: GridInfo, GridHot (flip masks; lattices and exact vertices are filled
+// by the lossy builder) and the face and flip tables.
+void grid_tables(const Prepared& p, std::vector<GridInfo>& info, std::vector<GridHot>& hot,
+                 std::vector<uint32_t>& faces, std::vector<uint16_t>& flips) {
+  const GridSet& gs = p.gs;
+  const size_t ng = gs.grids.size();
+  info.resize(ng);
+  hot.assign(ng, GridHot{});
+  for (size_t gi = 0; gi < ng; ++gi) {
+    const VertexGrid& g = gs.grids[gi];
+    info[gi] = grid_info(gs, g, faces);
+    const uint64_t cells = uint64_t(g.res_x - 1) * (g.res_y - 1);
+    const uint8_t* f = gs.cell_flip.data() + g.cell_offset;
+    if (std::none_of(f, f + cells, [](uint8_t x) { return x != 0; })) continue;
+    if (flips.size() + p.sub_start[gi + 1] - p.sub_start[gi] >= kNoFlips)
+      throw Error("grids: flip table larger than 2^32 entries");
+    hot[gi].flips = uint32_t(flips.size());
+    const uint32_t nsx = subgrids_along(g.res_x), nsy = subgrids_along(g.res_y);
+    for (uint32_t sy = 0; sy < nsy; ++sy)
+      for (uint32_t sx = 0; sx < nsx; ++sx) {
+        uint16_t m = 0;
+        for (uint32_t j = 0; j < kSubGridCells; ++j)
+          for (uint32_t i = 0; i < kSubGridCells; ++i) {
+            const uint32_t x = kSubGridCells * sx + i, y = kSubGridCells * sy + j;
+            if (x + 1 < g.res_x && y + 1 < g.res_y && gs.flipped(g, x, y))
+              m |= uint16_t(1u << (4 * j + i));
+          }
+        flips.push_back(m);
+      }
+  }
+}
+
+// The grid formats' scene: a BVH over sub-grid blocks, the side tables the blocks refer to, and
+// optionally a second BVH of leftover triangles.
+template <class Leaf>
+class GridScene final : public BvhScene<Leaf> {
+ public:
+  std::vector<GridInfo> grid_table;
+  std::vector<GridHot> hot;
+  std::vector<uint32_t> face_table;
+  std::vector<uint16_t> flips;  // flip masks of the sub-grids of grids with flipped cells
+  std::vector<Vec3f> vertices;  // uncompressed: grid vertices; shared layout: corner lattices
+  std::vector<Vec3f> exact;     // lossy: exact vertices
+  std::unique_ptr<BvhScene<Tri4v>> tris;
+
+  void intersect(TravRay& ray, HitRecord& hit) const override {
+    BvhScene<Leaf>::intersect(ray, hit);
+    if (tris) tris->intersect(ray, hit);
+  }
+  bool occluded(TravRay& ray) const override {
+    return BvhScene<Leaf>::occluded(ray) || (tris && tris->occluded(ray));
+  }
+  void intersect_counted(TravRay& ray, HitRecord& hit, TraversalCounters& c) const override {
+    BvhScene<Leaf>::intersect_counted(ray, hit, c);
+    if (tris) tris->intersect_counted(ray, hit, c);
+  }
+  bool validate(std::string* why) const override {
+    if (!BvhScene<Leaf>::validate(why)) return false;
+    if (tris && !tris->validate(why)) {
+      if (why) *why = "leftover triangles: " + *why;
+      return false;
+    }
+    return true;
+  }
+};
+
+std::unique_ptr<BvhScene<Tri4v>> build_leftover_triangles(
+    const GridSet& gs, const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
+  const uint64_t n = gs.triangles.size();
+  if (n == 0) return nullptr;
+  if (3 * n >= 0xffffffffull) throw Error("grids: too many leftover triangles");
+  std::vector<Vec3f> v(3 * n);
+  std::vector<uint32_t> idx(3 * n), geom(n), prim(n);
+  for (uint64_t t = 0; t < n; ++t) {
+    const LeftoverTriangle& lt = gs.triangles[t];
+    for (int k = 0; k < 3; ++k) {
+      v[3 * t + k] = meshes[lt.geom]->positions[lt.v[k]];
+      idx[3 * t + k] = uint32_t(3 * t + k);
+    }
+    geom[t] = lt.geom;
+    prim[t] = lt.face;
+  }
+  auto s = std::make_unique<BvhScene<Tri4v>>();
+  TriangleSource src{v.data(), idx.data(), geom.data(), prim.data()};
+  BuildOptions o = opt;
+  if (o.bvh == Bvh::CompressedLeafCompact) o.bvh = Bvh::CompressedLeaf;
+  s->build(src, uint32_t(n), o);
+  return s;
+}
+
+// Error figures of the lossy formats (paper Table 3), per sub-grid, reduced at the end.
+struct SubGridError {
+  double sum_sq = 0;   // squared errors of the grid vertices this sub-grid owns
+  float max_err = 0;   // largest vertex error
+  float diag_pct = 0;  // max_err / box diagonal, %
+  uint32_t owned = 0;  // grid vertices owned (each grid vertex counted once over the grid)
+};
+
+struct ErrorTotals {
+  double rms = 0, max_error = 0, diag_avg_pct = 0, diag_max_pct = 0;
+  uint64_t vertices = 0, subgrids = 0;
+};
+
+// Instead of a scene: the error figures and, optionally, the decoded triangles.
+struct Extract {
+  ErrorTotals errors;
+  GridTriangles* triangles = nullptr;
+};
+
+// Appends the triangles of every sub-grid (decoded by `decode`) and the leftover triangles.
+template <class Decode>
+void extract_triangles(const Prepared& p, const std::vector<const PolyMesh*>& meshes,
+                       const std::vector<GridInfo>& table, const uint32_t* faces, Decode&& decode,
+                       GridTriangles& out) {
+  for (size_t gi = 0; gi < p.gs.grids.size(); ++gi) {
+    const VertexGrid& g = p.gs.grids[gi];
+    const uint32_t nsx = subgrids_along(g.res_x);
+    for (uint64_t si = p.sub_start[gi]; si < p.sub_start[gi + 1]; ++si) {
+      const uint32_t sx = uint32_t((si - p.sub_start[gi]) % nsx),
+                     sy = uint32_t((si - p.sub_start[gi]) / nsx);
+      const uint32_t gx = kSubGridCells * sx, gy = kSubGridCells * sy;
+      const uint32_t rx = std::min(kSubGridRes, g.res_x - gx),
+                     ry = std::min(kSubGridRes, g.res_y - gy);
+      SubGridVerts w;
+      decode(si, w);
+      auto vert = [&](uint32_t i, uint32_t j) { return detail::subgrid_vertex(w, int(5 * j + i)); };
+      for (uint32_t j = 0; j + 1 < ry; ++j)
+        for (uint32_t i = 0; i + 1 < rx; ++i) {
+          if (p.gs.flipped(g, gx + i, gy + j)) {
+            out.vertices.insert(out.vertices.end(), {vert(i, j), vert(i + 1, j), vert(i, j + 1)});
+            out.vertices.insert(out.vertices.end(),
+                                {vert(i + 1, j + 1), vert(i, j + 1), vert(i + 1, j)});
+          } else {
+            out.vertices.insert(out.vertices.end(),
+                                {vert(i, j), vert(i + 1, j), vert(i + 1, j + 1)});
+            out.vertices.insert(out.vertices.end(),
+                                {vert(i, j), vert(i + 1, j + 1), vert(i, j + 1)});
+          }
+          for (int tri = 0; tri < 2; ++tri) {
+            out.geom.push_back(g.geom);
+            out.face.push_back(grid_face(table[gi], faces, gx + i, gy + j, tri));
+          }
+        }
+    }
+  }
+  for (const LeftoverTriangle& t : p.gs.triangles) {
+    for (uint32_t v : t.v) out.vertices.push_back(meshes[t.geom]->positions[v]);
+    out.geom.push_back(t.geom);
+    out.face.push_back(t.face);
+  }
+}
+
+ErrorTotals reduce_errors(const std::vector<SubGridError>& e) {
+  ErrorTotals t;
+  double sum_sq = 0, sum_pct = 0;
+  for (const SubGridError& s : e) {
+    sum_sq += s.sum_sq;
+    t.vertices += s.owned;
+    t.max_error = std::max(t.max_error, double(s.max_err));
+    sum_pct += s.diag_pct;
+    t.diag_max_pct = std::max(t.diag_max_pct, double(s.diag_pct));
+  }
+  t.subgrids = e.size();
+  t.rms = t.vertices ? std::sqrt(sum_sq / double(t.vertices)) : 0.0;
+  t.diag_avg_pct = e.empty() ? 0.0 : sum_pct / double(e.size());
+  return t;
+}
+
+// Calls fn(sub-grid index, grid index, sx, sy) for every sub-grid, in parallel.
+template <class F>
+void for_each_subgrid(const Prepared& p, F&& fn) {
+  const uint64_t n = p.sub_start.back();
+  tbb::parallel_for(
+      tbb::blocked_range<uint64_t>(0, n, 256), [&](const tbb::blocked_range<uint64_t>& r) {
+        size_t gi = size_t(std::upper_bound(p.sub_start.begin(), p.sub_start.end(), r.begin()) -
+                           p.sub_start.begin()) -
+                    1;
+        for (uint64_t s = r.begin(); s != r.end(); ++s) {
+          while (s >= p.sub_start[gi + 1]) ++gi;
+          const VertexGrid& g = p.gs.grids[gi];
+          const uint64_t local = s - p.sub_start[gi];
+          const uint32_t nsx = subgrids_along(g.res_x);
+          fn(s, gi, uint32_t(local % nsx), uint32_t(local / nsx));
+        }
+      });
+}
+
+// The original vertices of a sub-grid and, for the lossy formats, its exact-vertex indices.
+void gather_subgrid(const Prepared& p, const std::vector<const PolyMesh*>& meshes,
+                    const ExactPositions* ex, size_t gi, uint32_t sx, uint32_t sy,
+                    SubGridInput& in) {
+  const VertexGrid& g = p.gs.grids[gi];
+  const uint32_t gx = kSubGridCells * sx, gy = kSubGridCells * sy;
+  in.res_x = std::min(kSubGridRes, g.res_x - gx);
+  in.res_y = std::min(kSubGridRes, g.res_y - gy);
+  const Vec3f* pos = meshes[g.geom]->positions.data();
+  const uint32_t* ex_begin = nullptr;
+  const uint32_t* ex_end = nullptr;
+  if (ex && gi < ex->start.size() - 1 && ex->count(gi)) {
+    ex_begin = ex->pos.data() + ex->start[gi];
+    ex_end = ex->pos.data() + ex->start[gi + 1];
+  }
+  for (uint32_t j = 0; j < kSubGridRes; ++j)
+    for (uint32_t i = 0; i < kSubGridRes; ++i) {
+      const uint32_t k = 5 * j + i;
+      in.exact[k] = kNotExact;
+      if (i >= in.res_x || j >= in.res_y) {
+        in.v[k] = in.v[5 * std::min(j, in.res_y - 1) + std::min(i, in.res_x - 1)];
+        continue;
+      }
+      in.v[k] = pos[p.gs.vertex(g, gx + i, gy + j)];
+      if (ex_begin) {
+        const uint32_t at = (gy + j) * g.res_x + gx + i;
+        const uint32_t* it = std::lower_bound(ex_begin, ex_end, at);
+        if (it != ex_end && *it == at) in.exact[k] = uint32_t(it - ex_begin);
+      }
+    }
+}
+
+SubGridError measure_error(const SubGridInput& in, const SubGridVerts& w, const VertexGrid& g,
+                           uint32_t gx, uint32_t gy) {
+  SubGridError e;
+  Box3f box;
+  for (uint32_t j = 0; j < in.res_y; ++j)
+    for (uint32_t i = 0; i < in.res_x; ++i) {
+      const Vec3f& o = in.v[5 * j + i];
+      box.extend(o);
+      const double dx = double(w.p[0][5 * j + i]) - o.x, dy = double(w.p[1][5 * j + i]) - o.y,
+                   dz = double(w.p[2][5 * j + i]) - o.z;
+      const double sq = dx * dx + dy * dy + dz * dz;
+      e.max_err = std::max(e.max_err, float(std::sqrt(sq)));
+      // Each grid vertex once: a sub-grid owns its last column/row only at the grid's border.
+      const bool own = (i + 1 < in.res_x || gx + i + 1 == g.res_x) &&
+                       (j + 1 < in.res_y || gy + j + 1 == g.res_y);
+      if (own) {
+        e.sum_sq += sq;
+        e.owned++;
+      }
+    }
+  const float diag = length(box.size());
+  e.diag_pct = diag > 0 ? 100.0f * e.max_err / diag : 0.0f;
+  return e;
+}
+
+void add_grid_details(const Prepared& p, SceneStats& st, double encode_s) {
+  const GridConversionFigures& f = p.gs.figures;
+  uint64_t full = 0, subgrids = p.sub_start.back();
+  for (size_t gi = 0; gi < p.gs.grids.size(); ++gi) {
+    const VertexGrid& g = p.gs.grids[gi];
+    full += uint64_t((g.res_x - 1) / kSubGridCells) * ((g.res_y - 1) / kSubGridCells);
+  }
+  auto& d = st.details;
+  d.emplace_back("grids", double(f.grids));
+  d.emplace_back("grid_cells", double(f.grid_cells));
+  d.emplace_back("mean_grid_cells", f.grids ? double(f.grid_cells) / double(f.grids) : 0.0);
+  d.emplace_back("largest_grid_cells", double(f.largest_grid_cells));
+  d.emplace_back("paired_cells", double(f.paired_cells));
+  d.emplace_back("subgrids", double(subgrids));
+  d.emplace_back("full_subgrids", double(full));
+  d.emplace_back("full_subgrid_triangle_pct",
+                 f.triangles ? 100.0 * double(full) * 32.0 / double(f.triangles) : 0.0);
+  d.emplace_back("leftover_cells", double(p.leftover_cells));
+  d.emplace_back("leftover_triangles", double(p.leftover_tris));
+  d.emplace_back("leftover_triangle_leaves", p.tri_leaves ? 1.0 : 0.0);
+  d.emplace_back("conversion_s", p.seconds);
+  d.emplace_back("encode_s", encode_s);
+}
+
+template <class Leaf>
+void finish_scene(GridScene<Leaf>& s, const Prepared& p, const std::vector<const PolyMesh*>& meshes,
+                  const BuildOptions& opt) {
+  s.tris = build_leftover_triangles(p.gs, meshes, opt);
+  if (s.tris) {
+    s.mem.bvh_bytes += s.tris->mem.bvh_bytes;
+    s.mem.geometry_bytes += s.tris->mem.geometry_bytes;
+    s.bounds = s.bvh.root ? merge(s.bounds, s.tris->bounds) : s.tris->bounds;
+  }
+  s.mem.other_bytes += s.grid_table.size() * sizeof(GridInfo) + s.hot.size() * sizeof(GridHot) +
+                       s.face_table.size() * 4 + s.flips.size() * 2;
+  s.stats.input_faces = p.gs.figures.input_faces;
+  s.stats.triangles = p.gs.figures.triangles;
+  s.stats.skipped_faces = p.gs.figures.skipped_faces;
+  s.mem.triangles = p.gs.figures.triangles;
+}
+
+// One sub-grid per leaf (section 5).
+BuildOptions subgrid_bvh_options(const BuildOptions& opt) {
+  BuildOptions o = opt;
+  o.max_leaf_size = 1;
+  return o;
+}
+
+std::unique_ptr<Scene::Impl> build_uncompressed(Prepared& p,
+                                                const std::vector<const PolyMesh*>& meshes,
+                                                const BuildOptions& opt,
+                                                Extract* extract = nullptr) {
+  auto t0 = Clock::now();
+  auto s = std::make_unique<GridScene<SubGridLeaf>>();
+  const GridSet& gs = p.gs;
+  const size_t ng = gs.grids.size();
+  const uint64_t nv =
+      ng ? gs.grids.back().vertex_offset + uint64_t(gs.grids.back().res_x) * gs.grids.back().res_y
+         : 0;
+  if (nv >= 0xffffffffull) throw Error("grid: more than 2^32 - 1 grid vertices");
+  grid_tables(p, s->grid_table, s->hot, s->face_table, s->flips);
+  s->vertices.resize(nv);
+  for (const VertexGrid& g : gs.grids) {
+    const Vec3f* pos = meshes[g.geom]->positions.data();
+    for (uint64_t i = 0; i < uint64_t(g.res_x) * g.res_y; ++i)
+      s->vertices[g.vertex_offset + i] = pos[gs.vertices[g.vertex_offset + i]];
+  }
+  s->ctx = {s->vertices.data(), s->grid_table.data(), s->hot.data(), s->face_table.data(),
+            s->flips.data()};
+  const uint64_t n = p.sub_start.back();
+  std::vector<SubGridRef> blocks(n);
+  std::vector<Box3f> bounds(n);
+  for_each_subgrid(p, [&](uint64_t si, size_t gi, uint32_t sx, uint32_t sy) {
+    const VertexGrid& g = gs.grids[gi];
+    SubGridRef& b = blocks[si];
+    const uint32_t gx = kSubGridCells * sx, gy = kSubGridCells * sy;
+    b.vertex = uint32_t(g.vertex_offset + uint64_t(gy) * g.res_x + gx);
+    b.grid = uint32_t(gi);
+    b.grid_x = uint16_t(gx);
+    b.grid_y = uint16_t(gy);
+    b.stride = uint16_t(g.res_x);
+    b.res_x = uint8_t(std::min(kSubGridRes, g.res_x - gx));
+    b.res_y = uint8_t(std::min(kSubGridRes, g.res_y - gy));
+    SubGridVerts w;
+    SubGridLeaf::decode(s->ctx, b, w);
+    bounds[si] = subgrid_bounds(w, b.res_x, b.res_y);
+  });
+  const double encode_s = seconds_since(t0);
+  if (extract) {
+    if (extract->triangles)
+      extract_triangles(
+          p, meshes, s->grid_table, s->face_table.data(),
+          [&](uint64_t si, SubGridVerts& w) { SubGridLeaf::decode(s->ctx, blocks[si], w); },
+          *extract->triangles);
+    return nullptr;
+  }
+  SubGridLeaf::Source src{blocks.data(), bounds.data()};
+  s->build(src, uint32_t(n), subgrid_bvh_options(opt));
+  s->mem.geometry_bytes += s->vertices.size() * sizeof(Vec3f);
+  add_grid_details(p, s->stats, encode_s);
+  s->stats.details.emplace_back("grid_vertices", double(nv));
+  finish_scene(*s, p, meshes, opt);
+  return s;
+}
+
+// Lossy formats: the exact vertices, the blocks, their bounds and the error figures.
+template <class Leaf, class Block>
+std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const PolyMesh*>& meshes,
+                                         const BuildOptions& opt, int enc, bool shared_corners,
+                                         Extract* extract) {
+  auto t0 = Clock::now();
+  auto s = std::make_unique<GridScene<Leaf>>();
+  const GridSet& gs = p.gs;
+  const size_t ng = gs.grids.size();
+  Box3f scene_box;
+  for (const PolyMesh* m : meshes) scene_box.extend(m->bounds());
+  const int bias = displacement_bias(scene_box.empty() ? 1.0f : length(scene_box.size()));
+  const ExactPositions ex = find_exact_positions(gs, meshes);
+  grid_tables(p, s->grid_table, s->hot, s->face_table, s->flips);
+  s->exact.resize(ex.pos.size());
+  for (size_t gi = 0; gi < ng; ++gi) {
+    const VertexGrid& g = gs.grids[gi];
+    if (ex.count(gi) > kMaxExactIndex + 1)
+      throw Error("lossy grids: a grid with more than 2^18 shared vertices");
+    s->hot[gi].exact = uint32_t(ex.start[gi]);
+    const Vec3f* pos = meshes[g.geom]->positions.data();
+    for (uint64_t e = ex.start[gi]; e < ex.start[gi + 1]; ++e) {
+      const uint32_t at = ex.pos[e];
+      s->exact[e] = pos[gs.vertex(g, at % g.res_x, at / g.res_x)];
+    }
+  }
+  if (shared_corners) {
+    for (size_t gi = 0; gi < ng; ++gi) {
+      const VertexGrid& g = gs.grids[gi];
+      const uint32_t nsx = subgrids_along(g.res_x), nsy = subgrids_along(g.res_y);
+      if (s->vertices.size() + uint64_t(nsx + 1) * (nsy + 1) >= 0xffffffffull)
+        throw Error("lossy grids: more than 2^32 - 1 sub-grid corners");
+      s->hot[gi].lattice_first = uint32_t(s->vertices.size());
+      s->hot[gi].lattice_row = nsx + 1;
+      const Vec3f* pos = meshes[g.geom]->positions.data();
+      for (uint32_t ly = 0; ly <= nsy; ++ly)
+        for (uint32_t lx = 0; lx <= nsx; ++lx)
+          s->vertices.push_back(pos[gs.vertex(g, std::min(kSubGridCells * lx, g.res_x - 1),
+                                              std::min(kSubGridCells * ly, g.res_y - 1))]);
+    }
+  }
+  s->ctx.grids = s->grid_table.data();
+  s->ctx.hot = s->hot.data();
+  s->ctx.faces = s->face_table.data();
+  s->ctx.flips = s->flips.data();
+  s->ctx.exact = s->exact.data();
+  s->ctx.corners = s->vertices.data();
+  s->ctx.bias = bias;
+
+  const uint64_t n = p.sub_start.back();
+  std::vector<Block> blocks(n);
+  std::vector<Box3f> bounds(n);
+  std::vector<SubGridError> errs(n);
+  for_each_subgrid(p, [&](uint64_t si, size_t gi, uint32_t sx, uint32_t sy) {
+    const VertexGrid& g = gs.grids[gi];
+    SubGridInput in;
+    gather_subgrid(p, meshes, &ex, gi, sx, sy, in);
+    Block& b = blocks[si];
+    b = Block{};
+    if (enc == 1)
+      encode_subgrid<1>(in, bias, b.displ);
+    else
+      encode_subgrid<2>(in, bias, b.displ);
+    b.res = uint8_t(in.res_x | (in.res_y << 4));
+    const uint32_t gx = kSubGridCells * sx, gy = kSubGridCells * sy;
+    if constexpr (std::is_same_v<Block, LossySubGrid>) {
+      const uint32_t rx = in.res_x, ry = in.res_y;
+      b.corner[0] = in.v[0];
+      b.corner[1] = in.v[rx - 1];
+      b.corner[2] = in.v[5 * (ry - 1)];
+      b.corner[3] = in.v[5 * (ry - 1) + rx - 1];
+      b.object_id = g.geom;
+      b.primitive_id = uint32_t(gi);
+      b.grid_x = uint16_t(gx);
+      b.grid_y = uint16_t(gy);
+      b.grid_res_x = uint16_t(g.res_x);
+      b.grid_res_y = uint16_t(g.res_y);
+    } else {
+      b.corner = s->hot[gi].lattice_first + sy * s->hot[gi].lattice_row + sx;
+      b.grid = uint32_t(gi);
+    }
+    SubGridVerts w;
+    Leaf::decode(s->ctx, b, w);
+    bounds[si] = subgrid_bounds(w, in.res_x, in.res_y);
+    errs[si] = measure_error(in, w, g, gx, gy);
+  });
+  const double encode_s = seconds_since(t0);
+  const ErrorTotals et = reduce_errors(errs);
+  errs = {};
+  if (extract) {
+    extract->errors = et;
+    if (extract->triangles)
+      extract_triangles(
+          p, meshes, s->grid_table, s->face_table.data(),
+          [&](uint64_t si, SubGridVerts& w) { Leaf::decode(s->ctx, blocks[si], w); },
+          *extract->triangles);
+    return nullptr;
+  }
+  LossySource src{reinterpret_cast<const uint8_t*>(blocks.data()), sizeof(Block), bounds.data()};
+  s->build(src, uint32_t(n), subgrid_bvh_options(opt));
+  s->mem.geometry_bytes += (s->vertices.size() + s->exact.size()) * sizeof(Vec3f);
+  add_grid_details(p, s->stats, encode_s);
+  auto& d = s->stats.details;
+  d.emplace_back("rms_error", et.rms);
+  d.emplace_back("max_error", et.max_error);
+  d.emplace_back("diag_avg_pct", et.diag_avg_pct);
+  d.emplace_back("diag_max_pct", et.diag_max_pct);
+  d.emplace_back("exact_vertices", double(s->exact.size()));
+  d.emplace_back("shared_corners", double(s->vertices.size()));
+  d.emplace_back("displacement_bias", double(bias));
+  d.emplace_back("block_bytes", double(sizeof(Block)));
+  finish_scene(*s, p, meshes, opt);
+  return s;
+}
+
+std::unique_ptr<Scene::Impl> build_lossy_any(Prepared& p,
+                                             const std::vector<const PolyMesh*>& meshes,
+                                             const BuildOptions& opt, int enc, Layout layout,
+                                             Extract* extract = nullptr) {
+  if (layout == Layout::Shared)
+    return enc == 1 ? build_lossy<LossySharedLeaf<1>, LossySubGridShared>(p, meshes, opt, 1, true,
+                                                                          extract)
+                    : build_lossy<LossySharedLeaf<2>, LossySubGridShared>(p, meshes, opt, 2, true,
+                                                                          extract);
+  return enc == 1 ? build_lossy<LossyGridLeaf<1>, LossySubGrid>(p, meshes, opt, 1, false, extract)
+                  : build_lossy<LossyGridLeaf<2>, LossySubGrid>(p, meshes, opt, 2, false, extract);
+}
+
+}  // namespace
+
+std::unique_ptr<Scene::Impl> build_grid_scene(const std::vector<const PolyMesh*>& meshes,
+                                              const BuildOptions& opt) {
+  const Layout layout = layout_of(opt);
+  Prepared p = prepare(meshes, layout);
+  if (layout == Layout::Uncompressed) return build_uncompressed(p, meshes, opt);
+  return build_lossy_any(p, meshes, opt, opt.geometry == Geometry::LossyGridsE2 ? 2 : 1, layout);
+}
+
+// ---- public statistics (slimrt/grids.h) -------------------------------------------------------
+
+GridStats grid_stats(const std::vector<const PolyMesh*>& meshes) {
+  for (const PolyMesh* m : meshes) check_mesh(*m);
+  auto t0 = Clock::now();
+  GridSet gs = make_grids(meshes);
+  GridStats s;
+  const GridConversionFigures& f = gs.figures;
+  s.input_faces = f.input_faces;
+  s.triangles = f.triangles;
+  s.skipped_faces = f.skipped_faces;
+  s.cells = f.cells;
+  s.paired_cells = f.paired_cells;
+  s.grids = f.grids;
+  s.grid_cells = f.grid_cells;
+  s.mean_grid_cells = f.grids ? double(f.grid_cells) / double(f.grids) : 0.0;
+  s.largest_grid_cells = f.largest_grid_cells;
+  for (size_t gi = 0; gi < gs.multi_cell_grids; ++gi) {
+    const VertexGrid& g = gs.grids[gi];
+    s.subgrids += uint64_t(subgrids_along(g.res_x)) * subgrids_along(g.res_y);
+    s.full_subgrids += uint64_t((g.res_x - 1) / kSubGridCells) * ((g.res_y - 1) / kSubGridCells);
+  }
+  s.full_subgrid_triangle_pct =
+      s.triangles ? 100.0 * double(s.full_subgrids) * 32.0 / double(s.triangles) : 0.0;
+  s.single_cells = f.single_cells;
+  s.leftover_triangles = f.leftover_triangles;
+  s.seconds = seconds_since(t0);
+  return s;
+}
+
+GridErrorStats grid_error(const std::vector<const PolyMesh*>& meshes, int encoding) {
+  for (const PolyMesh* m : meshes) check_mesh(*m);
+  if (encoding != 1 && encoding != 2) throw Error("grid_error: encoding must be 1 or 2");
+  BuildOptions opt = BuildOptions::from_config(encoding == 1 ? "lossy-grid" : "lossy-grid-e2");
+  const Layout layout = layout_of(opt);
+  Prepared p = prepare(meshes, layout);
+  Extract x;
+  build_lossy_any(p, meshes, opt, encoding, layout, &x);
+  const ErrorTotals& et = x.errors;
+  GridErrorStats e;
+  e.rms = et.rms;
+  e.max_error = et.max_error;
+  e.diag_avg_pct = et.diag_avg_pct;
+  e.diag_max_pct = et.diag_max_pct;
+  e.vertices = et.vertices;
+  e.subgrids = et.subgrids;
+  e.exact_vertices = find_exact_positions(p.gs, meshes).pos.size();
+  e.leftovers = p.leftover_cells + p.leftover_tris == 0 ? "none"
+                : p.tri_leaves                          ? "triangles"
+                                                        : "grids";
+  return e;
+}
+
+GridTriangles grid_triangles(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
+  for (const PolyMesh* m : meshes) check_mesh(*m);
+  if (opt.geometry != Geometry::Grids && opt.geometry != Geometry::LossyGrids &&
+      opt.geometry != Geometry::LossyGridsE2)
+    throw Error("grid_triangles: " + opt.config_name() + " is not a grid configuration");
+  const Layout layout = layout_of(opt);
+  Prepared p = prepare(meshes, layout);
+  GridTriangles t;
+  Extract x;
+  x.triangles = &t;
+  if (layout == Layout::Uncompressed)
+    build_uncompressed(p, meshes, opt, &x);
+  else
+    build_lossy_any(p, meshes, opt, opt.geometry == Geometry::LossyGridsE2 ? 2 : 1, layout, &x);
+  return t;
+}
+
+// ---- grid attributes (section 6) --------------------------------------------------------------
+
+struct GridAttributes::Impl {
+  GridSet gs;
+  // Per mesh, per face: the cells of that face as (grid, x, y) in a CSR layout.
+  struct CellRef {
+    uint32_t grid, x, y;
+  };
+  std::vector<std::vector<uint64_t>> face_start;  // [geom][face] -> first entry in cells[geom]
+  std::vector<std::vector<CellRef>> cells;
+};
+
+GridAttributes::GridAttributes() = default;
+GridAttributes::~GridAttributes() = default;
+GridAttributes::GridAttributes(GridAttributes&&) noexcept = default;
+GridAttributes& GridAttributes::operator=(GridAttributes&&) noexcept = default;
+
+GridAttributes GridAttributes::build(const std::vector<const PolyMesh*>& meshes) {
+  for (const PolyMesh* m : meshes) check_mesh(*m);
+  GridAttributes a;
+  a.impl_ = std::make_unique<Impl>();
+  Impl& im = *a.impl_;
+  GridBuildOptions gopt;
+  gopt.corners = true;
+  im.gs = make_grids(meshes, gopt);
+  GridSet& gs = im.gs;
+  // Leftover triangles as the 2x2 grids (a, b / c, c) Scene::build makes of them in its 2x2 mode.
+  for (const LeftoverTriangle& t : gs.triangles) {
+    VertexGrid g;
+    g.geom = t.geom;
+    g.res_x = g.res_y = 2;
+    g.vertex_offset = gs.vertices.size();
+    g.cell_offset = gs.cell_faces.size() / 2;
+    gs.vertices.insert(gs.vertices.end(), {t.v[0], t.v[1], t.v[2], t.v[2]});
+    gs.corner_of_vertex.insert(gs.corner_of_vertex.end(),
+                               {t.corner[0], t.corner[1], t.corner[2], t.corner[2]});
+    gs.cell_faces.insert(gs.cell_faces.end(), {t.face, t.face});
+    gs.cell_flip.push_back(0);
+    gs.grids.push_back(g);
+  }
+  im.face_start.resize(meshes.size());
+  im.cells.resize(meshes.size());
+  for (size_t g = 0; g < meshes.size(); ++g)
+    im.face_start[g].assign(meshes[g]->face_count() + 1, 0);
+  auto for_each_cell = [&](auto&& fn) {
+    for (size_t gi = 0; gi < gs.grids.size(); ++gi) {
+      const VertexGrid& g = gs.grids[gi];
+      for (uint32_t y = 0; y + 1 < g.res_y; ++y)
+        for (uint32_t x = 0; x + 1 < g.res_x; ++x) {
+          const uint32_t fa = gs.cell_face(g, x, y, 0), fb = gs.cell_face(g, x, y, 1);
+          fn(g.geom, fa, uint32_t(gi), x, y);
+          if (fb != fa) fn(g.geom, fb, uint32_t(gi), x, y);
+        }
+    }
+  };
+  for_each_cell([&](uint32_t geom, uint32_t f, uint32_t, uint32_t, uint32_t) {
+    im.face_start[geom][f + 1]++;
+  });
+  for (size_t g = 0; g < meshes.size(); ++g) {
+    auto& fs = im.face_start[g];
+    for (size_t f = 0; f + 1 < fs.size(); ++f) fs[f + 1] += fs[f];
+    im.cells[g].resize(fs.back());
+  }
+  std::vector<std::vector<uint64_t>> fill(meshes.size());
+  for (size_t g = 0; g < meshes.size(); ++g)
+    fill[g].assign(im.face_start[g].begin(), im.face_start[g].end() - 1);
+  for_each_cell([&](uint32_t geom, uint32_t f, uint32_t gi, uint32_t x, uint32_t y) {
+    im.cells[geom][fill[geom][f]++] = {gi, x, y};
+  });
+  return a;
+}
+
+uint64_t GridAttributes::grid_vertex_count() const { return impl_ ? impl_->gs.vertices.size() : 0; }
+
+namespace {
+
+template <class T>
+std::vector<T> grid_ordered_impl(const GridSet& gs, uint32_t geom, const std::vector<T>& values,
+                                 const std::vector<uint32_t>& indices, const PolyMesh* /*unused*/) {
+  std::vector<T> out(gs.vertices.size());
+  for (const VertexGrid& g : gs.grids) {
+    if (g.geom != geom) continue;
+    for (uint64_t i = 0; i < uint64_t(g.res_x) * g.res_y; ++i) {
+      const uint64_t at = g.vertex_offset + i;
+      const uint64_t idx = indices.empty() ? gs.vertices[at] : indices[gs.corner_of_vertex[at]];
+      if (idx < values.size()) out[at] = values[idx];
+    }
+  }
+  return out;
+}
+
+template <class T>
+T lerp3(const T& a, const T& b, const T& c, float u, float v);
+template <>
+Vec2f lerp3(const Vec2f& a, const Vec2f& b, const Vec2f& c, float u, float v) {
+  const float w = 1.0f - u - v;
+  return {w * a.x + u * b.x + v * c.x, w * a.y + u * b.y + v * c.y};
+}
+template <>
+Vec3f lerp3(const Vec3f& a, const Vec3f& b, const Vec3f& c, float u, float v) {
+  return a * (1.0f - u - v) + b * u + c * v;
+}
+
+template <class T>
+bool interpolate_impl(const GridAttributes::Impl& im, const std::vector<T>& values, const Hit& hit,
+                      T& out) {
+  if (!hit.valid() || hit.kind != PrimKind::Grid || hit.geomID >= im.cells.size()) return false;
+  const auto& fs = im.face_start[hit.geomID];
+  if (hit.primID + 1 >= fs.size()) return false;
+  const GridSet& gs = im.gs;
+  for (uint64_t e = fs[hit.primID]; e < fs[hit.primID + 1]; ++e) {
+    const GridAttributes::Impl::CellRef& c = im.cells[hit.geomID][e];
+    const VertexGrid& g = gs.grids[c.grid];
+    const float gu = hit.u * float(g.res_x - 1), gv = hit.v * float(g.res_y - 1);
+    const float cu = gu - float(c.x), cv = gv - float(c.y);
+    // The hit's cell (allowing for rounding at the cell's borders).
+    const float tol = 1e-3f;
+    if (cu < -tol || cu > 1 + tol || cv < -tol || cv > 1 + tol) continue;
+    const float u = std::clamp(cu, 0.0f, 1.0f), v = std::clamp(cv, 0.0f, 1.0f);
+    if (values.size() < g.vertex_offset + uint64_t(g.res_x) * g.res_y) return false;
+    auto at = [&](uint32_t dx, uint32_t dy) {
+      return values[g.vertex_offset + uint64_t(c.y + dy) * g.res_x + c.x + dx];
+    };
+    if (gs.flipped(g, c.x, c.y)) {
+      // A = (p00, p10, p01) holds u + v <= 1: p = p00 + u (p10 - p00) + v (p01 - p00);
+      // B = (p11, p01, p10): p = p11 + (1 - u)(p01 - p11) + (1 - v)(p10 - p11).
+      if (u + v <= 1.0f)
+        out = lerp3(at(0, 0), at(1, 0), at(0, 1), u, v);
+      else
+        out = lerp3(at(1, 1), at(0, 1), at(1, 0), 1.0f - u, 1.0f - v);
+    } else {
+      // A = (p00, p10, p11) holds v <= u: p = p00 + (u - v)(p10 - p00) + v (p11 - p00);
+      // B = (p00, p11, p01): p = p00 + u (p11 - p00) + (v - u)(p01 - p00).
+      if (v <= u)
+        out = lerp3(at(0, 0), at(1, 0), at(1, 1), u - v, v);
+      else
+        out = lerp3(at(0, 0), at(1, 1), at(0, 1), u, v - u);
+    }
+    return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+std::vector<Vec2f> GridAttributes::grid_ordered(uint32_t geom, const std::vector<Vec2f>& values,
+                                                const std::vector<uint32_t>& indices) const {
+  if (!impl_) return {};
+  return grid_ordered_impl(impl_->gs, geom, values, indices, nullptr);
+}
+std::vector<Vec3f> GridAttributes::grid_ordered(uint32_t geom, const std::vector<Vec3f>& values,
+                                                const std::vector<uint32_t>& indices) const {
+  if (!impl_) return {};
+  return grid_ordered_impl(impl_->gs, geom, values, indices, nullptr);
+}
+bool GridAttributes::interpolate(const std::vector<Vec2f>& grid_values, const Hit& hit,
+                                 Vec2f& out) const {
+  return impl_ && interpolate_impl(*impl_, grid_values, hit, out);
+}
+bool GridAttributes::interpolate(const std::vector<Vec3f>& grid_values, const Hit& hit,
+                                 Vec3f& out) const {
+  return impl_ && interpolate_impl(*impl_, grid_values, hit, out);
+}
+
 }  // namespace slim

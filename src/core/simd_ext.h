@@ -1,0 +1,139 @@
+// SIMD wrapper extensions used by the grid primitives (prim/subgrid.h, prim/lossy_subgrid.h):
+// integer bit operations on vint8, float/int reinterpretation, table gathers, two-half loads and
+// a byte shuffle for unpacking 3-byte codes. Same rules as core/simd.h: raw intrinsics live here
+// only, and the scalar path gives bit-identical results.
+//
+// Names are chosen so that they cannot collide with operators core/simd.h may add later.
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+
+#include "core/simd.h"
+
+namespace slim::simd {
+
+#if defined(SLIM_SIMD_AVX2)
+
+// 8 floats from two unaligned 4-float halves: lanes 0-3 from lo, lanes 4-7 from hi.
+SLIM_INLINE vfloat8 load2x4(const float* lo, const float* hi) {
+  return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(lo)), _mm_loadu_ps(hi), 1);
+}
+// Swaps the two 4-lane halves.
+SLIM_INLINE vfloat8 swap_halves(vfloat8 a) { return _mm256_permute2f128_ps(a.v, a.v, 1); }
+
+SLIM_INLINE vint8 iand(vint8 a, vint8 b) { return _mm256_and_si256(a.v, b.v); }
+SLIM_INLINE vint8 ior(vint8 a, vint8 b) { return _mm256_or_si256(a.v, b.v); }
+SLIM_INLINE vint8 isub(vint8 a, vint8 b) { return _mm256_sub_epi32(a.v, b.v); }
+template <int N>
+SLIM_INLINE vint8 shr(vint8 a) {
+  return _mm256_srli_epi32(a.v, N);
+}
+template <int N>
+SLIM_INLINE vint8 shl(vint8 a) {
+  return _mm256_slli_epi32(a.v, N);
+}
+SLIM_INLINE vbool8 ieq(vint8 a, vint8 b) {
+  return _mm256_castsi256_ps(_mm256_cmpeq_epi32(a.v, b.v));
+}
+SLIM_INLINE vfloat8 as_float(vint8 a) { return _mm256_castsi256_ps(a.v); }
+SLIM_INLINE vint8 as_int(vfloat8 a) { return _mm256_castps_si256(a.v); }
+// m ? a : 0
+SLIM_INLINE vfloat8 mask_zero(vbool8 m, vfloat8 a) { return _mm256_and_ps(m.m, a.v); }
+// Lane i is true iff bit i of m is set.
+SLIM_INLINE vbool8 lanes_from_bits(uint32_t m) {
+  const __m256i bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+  return _mm256_castsi256_ps(
+      _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(int(m)), bit), bit));
+}
+// base[idx[i]] for each lane.
+SLIM_INLINE vfloat8 gather(const float* base, vint8 idx) {
+  return _mm256_i32gather_ps(base, idx.v, 4);
+}
+// Byte shuffle: lanes 0-3 built from the 16 bytes at lo, lanes 4-7 from the 16 bytes at hi; ctrl
+// byte b of each half selects source byte b & 15 of that half, or zero if b & 0x80 (pshufb).
+SLIM_INLINE vint8 load_shuffle_2x16(const uint8_t* lo, const uint8_t* hi, const uint8_t* ctrl) {
+  __m256i src = _mm256_inserti128_si256(_mm256_castsi128_si256(_mm_loadu_si128((const __m128i*)lo)),
+                                        _mm_loadu_si128((const __m128i*)hi), 1);
+  return _mm256_shuffle_epi8(src, _mm256_loadu_si256((const __m256i*)ctrl));
+}
+
+#else
+
+SLIM_INLINE vfloat8 load2x4(const float* lo, const float* hi) {
+  vfloat8 r;
+  std::memcpy(r.v, lo, 16);
+  std::memcpy(r.v + 4, hi, 16);
+  return r;
+}
+SLIM_INLINE vfloat8 swap_halves(vfloat8 a) {
+  vfloat8 r;
+  for (int i = 0; i < 8; ++i) r.v[i] = a.v[i ^ 4];
+  return r;
+}
+
+#define SLIM_EXT_IBINOP(name, op)                                                       \
+  SLIM_INLINE vint8 name(vint8 a, vint8 b) {                                            \
+    vint8 r;                                                                            \
+    for (int i = 0; i < 8; ++i) r.v[i] = int32_t(uint32_t(a.v[i]) op uint32_t(b.v[i])); \
+    return r;                                                                           \
+  }
+SLIM_EXT_IBINOP(iand, &)
+SLIM_EXT_IBINOP(ior, |)
+SLIM_EXT_IBINOP(isub, -)
+#undef SLIM_EXT_IBINOP
+
+template <int N>
+SLIM_INLINE vint8 shr(vint8 a) {
+  vint8 r;
+  for (int i = 0; i < 8; ++i) r.v[i] = int32_t(uint32_t(a.v[i]) >> N);
+  return r;
+}
+template <int N>
+SLIM_INLINE vint8 shl(vint8 a) {
+  vint8 r;
+  for (int i = 0; i < 8; ++i) r.v[i] = int32_t(uint32_t(a.v[i]) << N);
+  return r;
+}
+SLIM_INLINE vbool8 ieq(vint8 a, vint8 b) {
+  vbool8 r;
+  for (int i = 0; i < 8; ++i) r.bits |= uint32_t(a.v[i] == b.v[i]) << i;
+  return r;
+}
+SLIM_INLINE vfloat8 as_float(vint8 a) {
+  vfloat8 r;
+  std::memcpy(r.v, a.v, 32);
+  return r;
+}
+SLIM_INLINE vint8 as_int(vfloat8 a) {
+  vint8 r;
+  std::memcpy(r.v, a.v, 32);
+  return r;
+}
+SLIM_INLINE vfloat8 mask_zero(vbool8 m, vfloat8 a) {
+  vfloat8 r;
+  for (int i = 0; i < 8; ++i) r.v[i] = (m.bits >> i) & 1 ? a.v[i] : 0.0f;
+  return r;
+}
+SLIM_INLINE vbool8 lanes_from_bits(uint32_t m) { return {m & 0xffu}; }
+SLIM_INLINE vfloat8 gather(const float* base, vint8 idx) {
+  vfloat8 r;
+  for (int i = 0; i < 8; ++i) r.v[i] = base[idx.v[i]];
+  return r;
+}
+SLIM_INLINE vint8 load_shuffle_2x16(const uint8_t* lo, const uint8_t* hi, const uint8_t* ctrl) {
+  uint8_t src[32], out[32];
+  std::memcpy(src, lo, 16);
+  std::memcpy(src + 16, hi, 16);
+  for (int i = 0; i < 32; ++i) {
+    const uint8_t c = ctrl[i];
+    out[i] = (c & 0x80) ? 0 : src[(i & 16) + (c & 15)];
+  }
+  vint8 r;
+  std::memcpy(r.v, out, 32);
+  return r;
+}
+
+#endif
+
+}  // namespace slim::simd

@@ -1,0 +1,442 @@
+// Lossy compressed 5x5 sub-grids: C. Benthin, K. Vaidyanathan, S. Woop, "Ray Tracing Lossy
+// Compressed Grid Primitives" (../shared/papers/lossy-compressed-grid-primitives.txt), section 4;
+// DESIGN.md "Lossy 5x5 sub-grid (128 B)".
+//
+// A sub-grid is a bilinear patch through its 4 corner vertices plus 21 displacements (the 25
+// vertices minus the corners), each quantized to 3 bytes (section 4.1). Two layouts:
+//   LossySubGrid        128 B  the paper's Listing 1: self-contained (corners inside)
+//   LossySubGridShared   72 B  section 9 ("future work"): the corners are shared with the
+//                              neighbouring sub-grids through a per-grid corner lattice, and the
+//                              fields the grid implies (object id, grid position and resolution)
+//                              come from the grid side table
+// Both decode to the same vertices for the same displacement codes.
+//
+// Displacement codes (24 bits, 3 little-endian bytes; the exponent sits at bits 13-18 in both):
+//   encoding 1 (section 4.1, the paper's choice):  bits 0-2 octant (sign of x, y, z), 3-12 index
+//     into a 1024-entry table of first-octant unit vectors, 13-18 exponent, 19-23 mantissa: the
+//     length is the float 2^(exponent + bias - 127) * (1 + mantissa / 32);
+//   encoding 2 (section 4.1, the alternative): bits 0-2 signs, 3-7 |x|, 8-12 |y|, 19-23 |z| as
+//     5-bit fixed point of the shared scale 2^(exponent + bias - 132), 13-18 shared exponent.
+//   Exponent 0 is the zero displacement. Exponent 63 is an escape: the vertex is stored exactly in
+//   the scene's exact-vertex array, at (grid's first exact vertex) + the 18 other bits. slimrt uses
+//   it for vertices shared with another grid or with leftover triangles, so that both sides decode
+//   them to the same bits (DESIGN.md: "keep them exact"); a grid's own sub-grid borders need no
+//   escape (see below).
+//   `bias` is one per scene (from its size), so that the 62 binades cover any displacement.
+//
+// Watertightness (section 4.3, DESIGN.md): patch points are lerps (1-t)*a + t*b with per-edge
+// weights w0(i) = (n-1-i)/(n-1), w1(i) = i/(n-1), exact at both ends, evaluated as
+// w0(j) * (w0(i) c00 + w1(i) c10) + w1(j) * (w0(i) c01 + w1(i) c11), so a border point depends
+// only on the two corners of its border; the encoder is deterministic; decoding is IEEE mul/add
+// only (no fused ops) in the same order on every path. Two sub-grids sharing a border therefore
+// decode its vertices to the same bits, and the watertight triangle test closes the seam.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <type_traits>
+
+#include "core/ray.h"
+#include "core/simd.h"
+#include "core/simd_ext.h"
+#include "prim/subgrid.h"
+#include "slimrt/math.h"
+#include "slimrt/scene.h"
+
+namespace slim {
+
+// ---- unit vector table (section 4.1) ---------------------------------------------------------
+
+// 1024 unit vectors of the first octant, on 45 rings of an equal-area map of the octant
+// (Clarberg, "Fast equal-area mapping of the (hemi)sphere using SIMD", 2008): ring r at radius
+// rho = r/44 (z = 1 - rho^2), ring r holding r+1 points (one fewer on rings 4, 8, ..., 44, so that
+// there are exactly 1024) evenly spaced in azimuth from the xz-plane to the yz-plane inclusive.
+// The poles and octant borders are in the table, so pure axis or in-plane displacements (a
+// heightfield's) are exact in direction.
+struct UnitVectorTable {
+  static constexpr int kRings = 45;
+  static constexpr int kEntries = 1024;
+  alignas(64) float x[kEntries];
+  alignas(64) float y[kEntries];
+  alignas(64) float z[kEntries];
+  uint16_t ring_start[kRings + 1];
+
+  UnitVectorTable();
+  // Up to 9 entries around the direction d (components >= 0, |d| > 0): the 3x3 neighbourhood of
+  // its ring and azimuth cell. O(1); contains the nearest entry for all but rare directions
+  // (nearest() checks them all the same way).
+  int candidates(const double d[3], uint32_t out[9]) const;
+  // The entry with the largest dot product among candidates(d).
+  uint32_t nearest(const double d[3]) const;
+};
+extern const UnitVectorTable kUnitVectors;
+
+// ---- displacement codes (section 4.1) ---------------------------------------------------------
+
+constexpr uint32_t kDisplExpShift = 13;
+constexpr uint32_t kDisplEscape = 63;
+constexpr uint32_t kMaxExactIndex = (1u << 18) - 1;
+
+SLIM_INLINE uint32_t displ_exponent(uint32_t code) { return (code >> kDisplExpShift) & 63; }
+SLIM_INLINE uint32_t escape_code(uint32_t index) {
+  return (index & 0x1fff) | (kDisplEscape << kDisplExpShift) | ((index >> 13) << 19);
+}
+SLIM_INLINE uint32_t escape_index(uint32_t code) { return (code & 0x1fff) | ((code >> 19) << 13); }
+
+SLIM_INLINE uint32_t load_code(const uint8_t* p) {
+  return uint32_t(p[0]) | (uint32_t(p[1]) << 8) | (uint32_t(p[2]) << 16);
+}
+SLIM_INLINE void store_code(uint8_t* p, uint32_t c) {
+  p[0] = uint8_t(c);
+  p[1] = uint8_t(c >> 8);
+  p[2] = uint8_t(c >> 16);
+}
+
+SLIM_INLINE float float_from_bits(uint32_t b) {
+  float f;
+  std::memcpy(&f, &b, 4);
+  return f;
+}
+
+// Scene-wide exponent bias for a scene whose box has diagonal `diag` (see the header comment).
+int displacement_bias(float diag);
+
+// The decoded vertex patch + displacement(code), exactly as the SIMD decoder computes it (not for
+// escape codes). kEnc = 1 or 2.
+template <int kEnc>
+SLIM_INLINE Vec3f decode_vertex(const Vec3f& patch, uint32_t code, int bias) {
+  const uint32_t e = displ_exponent(code);
+  float c[3];
+  if constexpr (kEnc == 1) {
+    const uint32_t k = (code >> 3) & 1023, m = code >> 19;
+    const float len = e ? float_from_bits(((e + uint32_t(bias)) << 23) | (m << 18)) : 0.0f;
+    c[0] = kUnitVectors.x[k] * len;
+    c[1] = kUnitVectors.y[k] * len;
+    c[2] = kUnitVectors.z[k] * len;
+  } else {
+    const float scale = e ? float_from_bits((e + uint32_t(bias) - 5) << 23) : 0.0f;
+    c[0] = float((code >> 3) & 31) * scale;
+    c[1] = float((code >> 8) & 31) * scale;
+    c[2] = float(code >> 19) * scale;
+  }
+  for (int a = 0; a < 3; ++a)
+    if (code & (1u << a)) c[a] = -c[a];
+  return {patch.x + c[0], patch.y + c[1], patch.z + c[2]};
+}
+
+// The code whose decoded vertex (decode_vertex) is closest to `target`: encoding 1 tries the
+// table candidates around the direction with the two nearest lengths each; encoding 2 the
+// smallest shared exponent that holds the largest component, each mantissa rounded both ways.
+// Deterministic: the same (patch, target, bias) always gives the same code.
+uint32_t encode_displacement1(const Vec3f& patch, const Vec3f& target, int bias);
+uint32_t encode_displacement2(const Vec3f& patch, const Vec3f& target, int bias);
+template <int kEnc>
+uint32_t encode_displacement(const Vec3f& patch, const Vec3f& target, int bias) {
+  return kEnc == 1 ? encode_displacement1(patch, target, bias)
+                   : encode_displacement2(patch, target, bias);
+}
+
+// ---- bilinear patch (section 4) ---------------------------------------------------------------
+
+// Lane tables of the patch weights for a sub-grid of n vertices along an axis (n = 2..5): lane
+// k = 5*j + i of u0/u1 holds w0(i)/w1(i), of v0/v1 w0(j)/w1(j); positions past n repeat the last
+// one (so unused lanes hold border copies), lanes 25-31 are 0.
+struct PatchWeights {
+  alignas(32) float u0[6][32];
+  alignas(32) float u1[6][32];
+  alignas(32) float v0[6][32];
+  alignas(32) float v1[6][32];
+  float w0[6][5], w1[6][5];  // scalar weights
+  PatchWeights();
+};
+extern const PatchWeights kPatchWeights;
+
+// Patch point (i, j) of a res_x x res_y sub-grid with corners c[0] = (0,0), c[1] = (res_x-1, 0),
+// c[2] = (0, res_y-1), c[3] = (res_x-1, res_y-1): the scalar twin of the SIMD evaluation.
+SLIM_INLINE Vec3f patch_point(const Vec3f c[4], uint32_t i, uint32_t j, uint32_t res_x,
+                              uint32_t res_y) {
+  const float a0 = kPatchWeights.w0[res_x][i], a1 = kPatchWeights.w1[res_x][i];
+  const float b0 = kPatchWeights.w0[res_y][j], b1 = kPatchWeights.w1[res_y][j];
+  Vec3f r;
+  for (int a = 0; a < 3; ++a) {
+    const float top = a0 * c[0][a] + a1 * c[1][a];
+    const float bot = a0 * c[2][a] + a1 * c[3][a];
+    r[a] = b0 * top + b1 * bot;
+  }
+  return r;
+}
+
+// Position (row-major k = 5*j + i) of displacement slot s (0..20): the 25 positions of the 5x5
+// layout without the corners 0, 4, 20, 24.
+SLIM_INLINE int displ_slot_position(int s) { return s < 3 ? s + 1 : s < 18 ? s + 2 : s + 3; }
+// Slot of position k, or -1 for the 4 corners of the 5x5 layout.
+SLIM_INLINE int displ_position_slot(int k) {
+  if (k == 0 || k == 4 || k == 20 || k == 24) return -1;
+  return k < 4 ? k - 1 : k < 20 ? k - 2 : k - 3;
+}
+
+namespace detail {
+
+// pshufb control and source offsets that unpack the 3-byte codes of 8 consecutive positions
+// (lanes of group g = positions 8g .. 8g+7) into 8 ints; corner lanes get 0.
+struct CodeUnpack {
+  alignas(32) uint8_t ctrl[3][32];
+  uint8_t lo[3], hi[3];  // byte offsets of the two 16-byte source windows
+  CodeUnpack();
+};
+extern const CodeUnpack kCodeUnpack;
+
+}  // namespace detail
+
+// Decompression (section 4.3), 8 positions at a time: patch + decoded displacement for the 25
+// vertices. `corner` = the 4 patch corners (c00, c10, c01, c11), `displ` = the 63 code bytes
+// (7 readable bytes must follow them). Escape codes are left for the caller: the return value has
+// bit k set for each position k with an escape code, whose code is then in codes[k].
+template <int kEnc>
+SLIM_INLINE uint32_t decode_subgrid(const Vec3f corner[4], const uint8_t* displ, uint32_t res_x,
+                                    uint32_t res_y, int bias, SubGridVerts& w, uint32_t* codes) {
+  using namespace simd;
+  const PatchWeights& pw = kPatchWeights;
+  const detail::CodeUnpack& cu = detail::kCodeUnpack;
+  uint32_t escapes = 0;
+  vfloat8 c[3][4];
+  for (int a = 0; a < 3; ++a)
+    for (int q = 0; q < 4; ++q) c[a][q] = vfloat8(corner[q][a]);
+  for (int g = 0; g < 3; ++g) {
+    const vfloat8 u0 = vfloat8::load(&pw.u0[res_x][8 * g]),
+                  u1 = vfloat8::load(&pw.u1[res_x][8 * g]);
+    const vfloat8 v0 = vfloat8::load(&pw.v0[res_y][8 * g]),
+                  v1 = vfloat8::load(&pw.v1[res_y][8 * g]);
+    vfloat8 d[3];
+    const vint8 code = load_shuffle_2x16(displ + cu.lo[g], displ + cu.hi[g], cu.ctrl[g]);
+    const vint8 e = iand(shr<kDisplExpShift>(code), vint8(63));
+    const vbool8 zero = ieq(e, vint8(0));
+    const uint32_t esc = ieq(e, vint8(int(kDisplEscape))).mask();
+    if (esc) {
+      escapes |= esc << (8 * g);
+      code.storeu(reinterpret_cast<int32_t*>(codes + 8 * g));
+    }
+    if constexpr (kEnc == 1) {
+      const vint8 k = iand(shr<3>(code), vint8(1023));
+      const vint8 m = shr<19>(code);
+      const vfloat8 len =
+          select(zero, vfloat8(0.0f), as_float(ior(shl<23>(e + vint8(bias)), shl<18>(m))));
+      d[0] = gather(kUnitVectors.x, k) * len;
+      d[1] = gather(kUnitVectors.y, k) * len;
+      d[2] = gather(kUnitVectors.z, k) * len;
+    } else {
+      const vfloat8 scale = select(zero, vfloat8(0.0f), as_float(shl<23>(e + vint8(bias - 5))));
+      d[0] = to_float(iand(shr<3>(code), vint8(31))) * scale;
+      d[1] = to_float(iand(shr<8>(code), vint8(31))) * scale;
+      d[2] = to_float(shr<19>(code)) * scale;
+    }
+    d[0] = d[0] ^ as_float(shl<31>(code));
+    d[1] = d[1] ^ as_float(shl<31>(shr<1>(code)));
+    d[2] = d[2] ^ as_float(shl<31>(shr<2>(code)));
+    for (int a = 0; a < 3; ++a) {
+      const vfloat8 top = u0 * c[a][0] + u1 * c[a][1];
+      const vfloat8 bot = u0 * c[a][2] + u1 * c[a][3];
+      (v0 * top + v1 * bot + d[a]).store(&w.p[a][8 * g]);
+    }
+  }
+  // Position 24 is the patch corner (4,4), or unused in a partial sub-grid (where its clamped
+  // weights give the same): the patch evaluates it to c11 exactly, plus a zero displacement.
+  for (int a = 0; a < 3; ++a) {
+    alignas(32) float last[8] = {corner[3][a] + 0.0f, 0, 0, 0, 0, 0, 0, 0};
+    vfloat8::load(last).store(&w.p[a][24]);
+  }
+  return escapes;
+}
+
+// Replaces the escaped positions by their exact vertices.
+SLIM_INLINE void apply_escapes(uint32_t escapes, const uint32_t* codes, const Vec3f* exact,
+                               SubGridVerts& w) {
+  while (escapes) {
+    const int k = simd::pop_lowest(escapes);
+    const Vec3f& p = exact[escape_index(codes[k])];
+    w.p[0][k] = p.x;
+    w.p[1][k] = p.y;
+    w.p[2][k] = p.z;
+  }
+}
+
+// ---- Listing 1: the self-contained 128-byte sub-grid -----------------------------------------
+
+struct LossySubGrid {
+  Vec3f corner[4];          // 48 B: bilinearPatchVtx: sub-grid vertices (0,0), (res_x-1,0),
+                            //       (0,res_y-1), (res_x-1,res_y-1), exact floats
+  uint8_t displ[63];        // 63 B: 21 displacement codes, slots in row-major position order
+  uint8_t res;              //  1 B: resX (bits 0-3), resY (bits 4-7): 2..5 vertices
+  uint32_t object_id;       //  4 B: input mesh (Hit::geomID)
+  uint32_t primitive_id;    //  4 B: grid (GridInfo index: input faces, exact vertices)
+  uint16_t grid_x, grid_y;  //  4 B: position of vertex (0,0) in the grid
+  uint16_t grid_res_x, grid_res_y;  // 4 B: the grid's resolution (per-grid u,v, section 5)
+};
+static_assert(sizeof(LossySubGrid) == 128, "Listing 1: the lossy 5x5 sub-grid is 128 bytes");
+static_assert(offsetof(LossySubGrid, displ) == 48 && offsetof(LossySubGrid, res) == 111 &&
+                  offsetof(LossySubGrid, object_id) == 112,
+              "Listing 1 field order");
+
+// ---- section 9: corners shared through the grid's corner lattice, 72 bytes -------------------
+
+// The corner lattice of a grid (GridHot::lattice_first / lattice_row): the vertices at x in
+// {0, 4, 8, ..., res_x-1} and y in {0, 4, ..., res_y-1}, row-major, in the scene's corner array.
+// Each corner is stored once for the up to 4 sub-grids around it.
+struct LossySubGridShared {
+  uint8_t displ[63];  // 63 B: as in Listing 1
+  uint8_t res;        //  1 B: resX (bits 0-3), resY (bits 4-7)
+  uint32_t corner;    //  4 B: lattice corner of vertex (0,0) in the scene's corner array; the
+                      //       others are corner+1, corner+row, corner+row+1
+  uint32_t grid;      //  4 B: GridInfo / GridHot index
+};
+static_assert(sizeof(LossySubGridShared) == 72, "shared-corner lossy sub-grid is 72 bytes");
+
+// ---- leaf formats ---------------------------------------------------------------------------
+
+// Build-time source for both lossy leaves: encoded blocks and their (decoded) bounds.
+struct LossySource {
+  const uint8_t* blocks = nullptr;
+  uint32_t block_bytes = 0;
+  const Box3f* bounds = nullptr;
+};
+
+struct LossyContext {
+  const GridInfo* grids = nullptr;
+  const GridHot* hot = nullptr;
+  const uint32_t* faces = nullptr;  // face table
+  const uint16_t* flips = nullptr;  // flip masks
+  const Vec3f* exact = nullptr;     // exact vertices (escape codes)
+  const Vec3f* corners = nullptr;   // shared layout: corner lattices
+  int bias = 0;
+};
+
+template <class Block, int kEnc>
+struct LossyLeafBase {
+  using Context = LossyContext;
+  static constexpr uint32_t kBlockPrims = 1;
+  static constexpr uint32_t kBlockBytes = sizeof(Block);
+  using Source = LossySource;
+
+  static Box3f source_bounds(const Source& s, uint32_t i) { return s.bounds[i]; }
+  static uint64_t source_key(const Source& s, uint32_t i) {
+    return subgrid_key(s.blocks + uint64_t(i) * kBlockBytes, kBlockBytes);
+  }
+  static void encode(const Source& s, const uint32_t* prims, uint32_t, uint8_t* out) {
+    std::memcpy(out, s.blocks + uint64_t(prims[0]) * kBlockBytes, kBlockBytes);
+  }
+};
+
+// Leaf format: one LossySubGrid (Listing 1) per block.
+template <int kEnc>
+struct LossyGridLeaf : LossyLeafBase<LossySubGrid, kEnc> {
+  using Context = LossyContext;
+
+  static SLIM_INLINE void decode(const Context& ctx, const LossySubGrid& b, SubGridVerts& w) {
+    alignas(32) uint32_t codes[32];
+    uint32_t esc =
+        decode_subgrid<kEnc>(b.corner, b.displ, b.res & 15, b.res >> 4, ctx.bias, w, codes);
+    if (esc) apply_escapes(esc, codes, ctx.exact + ctx.hot[b.primitive_id].exact, w);
+  }
+  static SLIM_INLINE uint32_t flips(const Context& ctx, const LossySubGrid& b) {
+    return subgrid_flips(ctx.hot[b.primitive_id], ctx.flips, b.grid_x / kSubGridCells,
+                         b.grid_y / kSubGridCells,
+                         (b.grid_res_x + kSubGridCells - 2) / kSubGridCells);
+  }
+
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect(const Context& ctx, const uint8_t* p, TravRay& ray,
+                                    HitRecord& hit, Stats& st) {
+    simd::prefetch(p + 64);  // the codes' cache line, fetched alongside the corners'
+    const auto& b = *reinterpret_cast<const LossySubGrid*>(p);
+    SubGridVerts w;
+    decode(ctx, b, w);
+    SubGridHit h;
+    if (!intersect_subgrid<kAny>(w, b.res & 15, b.res >> 4, flips(ctx, b), ray, h, st))
+      return false;
+    if constexpr (!kAny)
+      record_grid_hit(h, ctx.grids[b.primitive_id], ctx.faces, b.grid_x, b.grid_y, hit);
+    return true;
+  }
+
+  template <class F>
+  static void visit(const Context& ctx, const uint8_t* p, F&& fn) {
+    const auto& b = *reinterpret_cast<const LossySubGrid*>(p);
+    SubGridVerts w;
+    decode(ctx, b, w);
+    fn(subgrid_bounds(w, b.res & 15, b.res >> 4), subgrid_key(p, sizeof(LossySubGrid)));
+  }
+};
+
+// Leaf format: one LossySubGridShared per block.
+template <int kEnc>
+struct LossySharedLeaf : LossyLeafBase<LossySubGridShared, kEnc> {
+  using Context = LossyContext;
+
+  static SLIM_INLINE void decode(const Context& ctx, const LossySubGridShared& b, SubGridVerts& w) {
+    const uint32_t row = ctx.hot[b.grid].lattice_row;
+    const Vec3f c[4] = {ctx.corners[b.corner], ctx.corners[b.corner + 1],
+                        ctx.corners[b.corner + row], ctx.corners[b.corner + row + 1]};
+    alignas(32) uint32_t codes[32];
+    uint32_t esc = decode_subgrid<kEnc>(c, b.displ, b.res & 15, b.res >> 4, ctx.bias, w, codes);
+    if (esc) apply_escapes(esc, codes, ctx.exact + ctx.hot[b.grid].exact, w);
+  }
+  // Sub-grid position (sx, sy) in its grid, from its lattice corner.
+  static SLIM_INLINE void position(const Context& ctx, const LossySubGridShared& b, uint32_t& sx,
+                                   uint32_t& sy) {
+    const GridHot& g = ctx.hot[b.grid];
+    const uint32_t c = b.corner - g.lattice_first;
+    sx = c % g.lattice_row;
+    sy = c / g.lattice_row;
+  }
+  static SLIM_INLINE uint32_t flips(const Context& ctx, const LossySubGridShared& b) {
+    const GridHot& g = ctx.hot[b.grid];
+    if (g.flips == kNoFlips) return 0;
+    uint32_t sx, sy;
+    position(ctx, b, sx, sy);
+    return subgrid_flips(g, ctx.flips, sx, sy, g.lattice_row - 1);
+  }
+
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect(const Context& ctx, const uint8_t* p, TravRay& ray,
+                                    HitRecord& hit, Stats& st) {
+    const auto& b = *reinterpret_cast<const LossySubGridShared*>(p);
+    SubGridVerts w;
+    decode(ctx, b, w);
+    SubGridHit h;
+    if (!intersect_subgrid<kAny>(w, b.res & 15, b.res >> 4, flips(ctx, b), ray, h, st))
+      return false;
+    if constexpr (!kAny) {
+      uint32_t sx, sy;
+      position(ctx, b, sx, sy);
+      record_grid_hit(h, ctx.grids[b.grid], ctx.faces, kSubGridCells * sx, kSubGridCells * sy, hit);
+    }
+    return true;
+  }
+
+  template <class F>
+  static void visit(const Context& ctx, const uint8_t* p, F&& fn) {
+    const auto& b = *reinterpret_cast<const LossySubGridShared*>(p);
+    SubGridVerts w;
+    decode(ctx, b, w);
+    fn(subgrid_bounds(w, b.res & 15, b.res >> 4), subgrid_key(p, sizeof(LossySubGridShared)));
+  }
+};
+
+// ---- encoder --------------------------------------------------------------------------------
+
+// One sub-grid to encode: its res_x x res_y vertices v[5*j + i] (the original floats) and, per
+// position, kNotExact or the index in its grid's exact-vertex list.
+constexpr uint32_t kNotExact = 0xffffffffu;
+struct SubGridInput {
+  Vec3f v[25];
+  uint32_t exact[25];
+  uint32_t res_x = 5, res_y = 5;
+};
+
+// Encodes the 21 displacement codes of the sub-grid (corners = v at the 4 patch corners) into
+// displ[63]; positions outside res_x x res_y and the patch corners get code 0.
+template <int kEnc>
+void encode_subgrid(const SubGridInput& in, int bias, uint8_t displ[63]);
+
+}  // namespace slim

@@ -1,0 +1,325 @@
+// Grid primitives, part 1 (lossy-compressed-grid-primitives.txt; DESIGN.md "Grids"):
+//   - the per-grid side table (GridInfo) that maps a sub-grid cell back to the input face;
+//   - the ray / 5x5 sub-grid kernel of section 5: a decompressed sub-grid (25 vertices) is moved
+//     to ray space once, then the 8 triangles of one row are tested at a time with the 8-wide
+//     watertight test (core/watertight.h), 4 rows at most;
+//   - the uncompressed `grid` leaf (SubGrid, 16 B): a sub-grid that references the grid-ordered
+//     float vertices, the counterpart of Embree's grid primitive (section 7).
+// The lossy 128-byte sub-grid of section 4 is in prim/lossy_subgrid.h and uses the same kernel.
+//
+// Triangulation of a grid cell (x,y): triangle A = (p(x,y), p(x+1,y), p(x+1,y+1)) and triangle
+// B = (p(x,y), p(x+1,y+1), p(x,y+1)): the c0-c2 diagonal of the cell, as mesh/grids.h lays cells
+// out so that this is the fan triangulation of the input face.
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+#include <type_traits>
+
+#include "core/ray.h"
+#include "core/simd.h"
+#include "core/simd_ext.h"
+#include "core/watertight.h"
+#include "slimrt/math.h"
+#include "slimrt/scene.h"
+
+namespace slim {
+
+// Sub-grid resolution in vertices (section 3: 5x5 vertices = 4x4 quads = 32 triangles).
+constexpr uint32_t kSubGridRes = 5;
+constexpr uint32_t kSubGridCells = kSubGridRes - 1;
+
+// ---- per-grid side table ---------------------------------------------------------------------
+
+enum GridFlags : uint32_t {
+  kGridFaceTable = 1,   // faces come from the face table, 2 entries per cell (A, B)
+  kGridFaceTable1 = 2,  // faces come from the face table, 1 entry per cell (A = B)
+};
+
+// One grid of the scene, what a hit needs (28 B, read once per closest hit). The face of cell
+// (x,y), triangle tri (0 = A, 1 = B) is
+//   affine: face0 + x * face_dx + y * face_dy + tri * face_ab  (e.g. terrain: 0 + x + y * N)
+//   table:  face_table[face0 + cell * 2 + tri] or face_table[face0 + cell]  (cell = y*(res_x-1)+x)
+struct GridInfo {
+  uint32_t geom = 0;                              // 4 B: input mesh (Hit::geomID)
+  uint16_t res_x = 0, res_y = 0;                  // 4 B: vertices
+  uint32_t flags = 0;                             // 4 B: GridFlags
+  uint32_t face0 = 0;                             // 4 B
+  int32_t face_dx = 0, face_dy = 0, face_ab = 0;  // 12 B
+};
+static_assert(sizeof(GridInfo) == 28, "grid side-table entry is 28 bytes");
+
+// What the decoder of a sub-grid may need from its grid (16 B).
+constexpr uint32_t kNoFlips = 0xffffffffu;
+struct GridHot {
+  uint32_t lattice_first = 0;  // shared-corner lossy layout: first corner of the grid's lattice
+  uint32_t lattice_row = 0;    //   and corners per lattice row (= sub-grids per row + 1)
+  uint32_t exact = 0;          // lossy: first of the grid's exact vertices
+  uint32_t flips = kNoFlips;   // first of the grid's per-sub-grid flip masks, or kNoFlips
+};
+static_assert(sizeof(GridHot) == 16, "grid decoder entry is 16 bytes");
+
+// Flip mask of a sub-grid: bit 4*j + i set if cell (i, j) is triangulated along its anti-diagonal
+// (mesh/grids.h: the cell keeps its input quad's fan diagonal).
+SLIM_INLINE uint32_t subgrid_flips(const GridHot& h, const uint16_t* table, uint32_t sx,
+                                   uint32_t sy, uint32_t subgrids_x) {
+  return h.flips == kNoFlips ? 0u : table[h.flips + sy * subgrids_x + sx];
+}
+
+SLIM_INLINE uint32_t grid_face(const GridInfo& g, const uint32_t* table, uint32_t x, uint32_t y,
+                               int tri) {
+  if (g.flags & (kGridFaceTable | kGridFaceTable1)) {
+    const uint64_t cell = uint64_t(y) * (g.res_x - 1u) + x;
+    return g.flags & kGridFaceTable ? table[g.face0 + 2 * cell + tri] : table[g.face0 + cell];
+  }
+  return uint32_t(int64_t(g.face0) + int64_t(x) * g.face_dx + int64_t(y) * g.face_dy +
+                  int64_t(tri) * g.face_ab);
+}
+
+// ---- the 5x5 kernel (section 5) --------------------------------------------------------------
+
+// A decompressed sub-grid: vertex (i,j) of axis a at p[a][5*j + i]; 32 lanes (25 used) so that
+// whole 8-lane groups can be processed.
+struct alignas(32) SubGridVerts {
+  float p[3][32];
+};
+
+// Where a ray hit a sub-grid: the cell, which of its two triangles, the cell-local coordinates
+// (cu, cv) in [0,1]^2 and the geometric normal of that triangle.
+struct SubGridHit {
+  float t = 0, cu = 0, cv = 0;
+  uint32_t cell_x = 0, cell_y = 0;
+  int tri = 0;
+  Vec3f Ng;
+};
+
+namespace detail {
+
+SLIM_INLINE int closest_lane8(uint32_t m, const simd::vfloat8& t) {
+  alignas(32) float tt[8];
+  t.store(tt);
+  int best = simd::pop_lowest(m);
+  while (m) {
+    int i = simd::pop_lowest(m);
+    if (tt[i] < tt[best]) best = i;
+  }
+  return best;
+}
+
+SLIM_INLINE Vec3f subgrid_vertex(const SubGridVerts& w, int k) {
+  return {w.p[0][k], w.p[1][k], w.p[2][k]};
+}
+
+}  // namespace detail
+
+// The 32 lanes of a decompressed sub-grid in ray space: core/watertight.h's to_ray_space, the
+// same operations in the same order (so that a vertex a triangle leaf shares transforms to the
+// same bits; GridKernel.RaySpaceMatchesCore checks it), with the per-ray scalars fetched once.
+SLIM_INLINE void subgrid_to_ray_space(const WatertightRay& wr, const SubGridVerts& w,
+                                      float (*r)[32]) {
+  using namespace simd;
+  const float* px = w.p[wr.kx];
+  const float* py = w.p[wr.ky];
+  const float* pz = w.p[wr.kz];
+  const vfloat8 ox(wr.org[wr.kx]), oy(wr.org[wr.ky]), oz(wr.org[wr.kz]);
+  const vfloat8 sx(wr.Sx), sy(wr.Sy), sz(wr.Sz);
+  for (int g = 0; g < 4; ++g) {
+    const vfloat8 ax = vfloat8::load(px + 8 * g) - ox;
+    const vfloat8 ay = vfloat8::load(py + 8 * g) - oy;
+    const vfloat8 az = vfloat8::load(pz + 8 * g) - oz;
+    fnmadd(sx, az, ax).store(&r[0][8 * g]);
+    fnmadd(sy, az, ay).store(&r[1][8 * g]);
+    (sz * az).store(&r[2][8 * g]);
+  }
+}
+
+// Intersects the (res_x-1) x (res_y-1) cells of a decompressed sub-grid. Lanes 0-3 of a row hold
+// triangles A of cells 0-3, lanes 4-7 triangles B, the latter with their corners rotated to
+// (p11, p01, p00) so that all three corner vectors are two 4-float loads from the ray-space rows
+// (the same directed edges, so the watertight edge functions are the ones a neighbour computes).
+// Flipped cells (bit 4*j + i of `flips`) are A = (p00, p10, p01), B = (p11, p01, p10): only the
+// third corner changes, and their outer edges keep their directions.
+// Closest hit: lowers ray.tfar and fills h; any hit: returns at the first hit.
+template <bool kAny, class Stats>
+SLIM_INLINE bool intersect_subgrid(const SubGridVerts& w, uint32_t res_x, uint32_t res_y,
+                                   uint32_t flips, TravRay& ray, SubGridHit& h, Stats& st) {
+  using namespace simd;
+  alignas(32) float r[3][32];
+  subgrid_to_ray_space(ray.wt, w, r);
+  const uint32_t cells = (1u << (res_x - 1)) - 1;
+  const uint32_t valid = cells | (cells << 4);
+  bool found = false;
+  int best_row = 0, best_lane = 0;
+  float best_u = 0, best_v = 0;
+
+  for (uint32_t j = 0; j + 1 < res_y; ++j) {
+    const int a = int(5 * j);
+    // V0: A p(i,j) | B p(i+1,j+1); V1: A p(i+1,j) | B p(i,j+1); V2: A p(i+1,j+1) | B p(i,j).
+    RayVertex<vfloat8> V0{load2x4(&r[0][a], &r[0][a + 6]), load2x4(&r[1][a], &r[1][a + 6]),
+                          load2x4(&r[2][a], &r[2][a + 6])};
+    RayVertex<vfloat8> V1{load2x4(&r[0][a + 1], &r[0][a + 5]), load2x4(&r[1][a + 1], &r[1][a + 5]),
+                          load2x4(&r[2][a + 1], &r[2][a + 5])};
+    RayVertex<vfloat8> V2{swap_halves(V0.x), swap_halves(V0.y), swap_halves(V0.z)};
+    if (const uint32_t f = (flips >> (4 * j)) & 15) {  // flipped: A p(i,j+1) | B p(i+1,j)
+      const vbool8 m = lanes_from_bits(f | (f << 4));
+      V2.x = select(m, load2x4(&r[0][a + 5], &r[0][a + 1]), V2.x);
+      V2.y = select(m, load2x4(&r[1][a + 5], &r[1][a + 1]), V2.y);
+      V2.z = select(m, load2x4(&r[2][a + 5], &r[2][a + 1]), V2.z);
+    }
+    if constexpr (!std::is_same_v<Stats, NoStats>) st.prims(2 * int(res_x - 1));
+    vfloat8 t(0.0f), u(0.0f), v(0.0f);
+    uint32_t m = intersect_triangles(V0, V1, V2, valid, ray.tnear, ray.tfar, t, u, v);
+    if (!m) continue;
+    if constexpr (kAny) return true;
+    const int lane = detail::closest_lane8(m, t);
+    ray.tfar = t[lane];
+    best_row = int(j);
+    best_lane = lane;
+    best_u = u[lane];
+    best_v = v[lane];
+    found = true;
+  }
+
+  if constexpr (!kAny) {
+    if (!found) return false;
+    const int i = best_lane & 3, j = best_row;
+    const int k00 = 5 * j + i, k10 = k00 + 1, k01 = k00 + 5, k11 = k00 + 6;
+    h.t = ray.tfar;
+    h.cell_x = uint32_t(i);
+    h.cell_y = uint32_t(j);
+    const bool flipped = (flips >> (4 * j + i)) & 1;
+    int c0, c1, c2;  // corners as tested: point = c0 + u (c1 - c0) + v (c2 - c0)
+    if (best_lane < 4) {
+      h.tri = 0;
+      c0 = k00;
+      c1 = k10;
+      c2 = flipped ? k01 : k11;
+      h.cu = flipped ? best_u : best_u + best_v;
+      h.cv = best_v;
+    } else {
+      h.tri = 1;
+      c0 = k11;
+      c1 = k01;
+      c2 = flipped ? k10 : k00;
+      h.cu = flipped ? 1.0f - best_u : 1.0f - best_u - best_v;
+      h.cv = 1.0f - best_v;
+    }
+    const Vec3f p0 = detail::subgrid_vertex(w, c0), p1 = detail::subgrid_vertex(w, c1),
+                p2 = detail::subgrid_vertex(w, c2);
+    h.Ng = cross(p1 - p0, p2 - p0);
+  }
+  return found;
+}
+
+// Bounds of the res_x x res_y vertices of a decompressed sub-grid.
+inline Box3f subgrid_bounds(const SubGridVerts& w, uint32_t res_x, uint32_t res_y) {
+  Box3f b;
+  for (uint32_t j = 0; j < res_y; ++j)
+    for (uint32_t i = 0; i < res_x; ++i) b.extend(detail::subgrid_vertex(w, int(5 * j + i)));
+  return b;
+}
+
+// Fills the public hit from a sub-grid hit: per-grid u,v (section 5:
+// grid_u = (triangle_u + gridX) / (gridResX - 1)), the input face, PrimKind::Grid.
+SLIM_INLINE void record_grid_hit(const SubGridHit& h, const GridInfo& g, const uint32_t* faces,
+                                 uint32_t grid_x, uint32_t grid_y, HitRecord& hit) {
+  hit.t = h.t;
+  hit.u = (float(grid_x + h.cell_x) + h.cu) / float(g.res_x - 1u);
+  hit.v = (float(grid_y + h.cell_y) + h.cv) / float(g.res_y - 1u);
+  hit.Ng = h.Ng;
+  hit.geomID = g.geom;
+  hit.primID = grid_face(g, faces, grid_x + h.cell_x, grid_y + h.cell_y, h.tri);
+  hit.kind = PrimKind::Grid;
+}
+
+// 64-bit key of a sub-grid block for validate()'s "every primitive once" fingerprint; never 0.
+inline uint64_t subgrid_key(const uint8_t* block, uint32_t bytes) {
+  uint64_t h = 0xcbf29ce484222325ull;
+  for (uint32_t i = 0; i < bytes; ++i) h = (h ^ block[i]) * 0x100000001b3ull;
+  return h | 1;
+}
+
+// ---- the uncompressed grid leaf (`grid`) -----------------------------------------------------
+
+// A 5x5 sub-grid of a grid stored as float vertices (grid-ordered, row-major per grid): 16 B.
+struct SubGridRef {
+  uint32_t vertex;          // 4 B: index of the sub-grid's vertex (0,0) in the vertex array
+  uint32_t grid;            // 4 B: GridInfo index
+  uint16_t grid_x, grid_y;  // 4 B: position of vertex (0,0) in the grid
+  uint16_t stride;          // 2 B: the grid's res_x (vertices per grid row)
+  uint8_t res_x, res_y;     // 2 B: vertices of this sub-grid (2..5; < 5 at the right/bottom)
+};
+static_assert(sizeof(SubGridRef) == 16, "uncompressed sub-grid reference is 16 bytes");
+
+// Leaf format: one SubGridRef per block (BvhScene, kBlockPrims = 1).
+struct SubGridLeaf {
+  struct Context {
+    const Vec3f* vertices = nullptr;  // grid-ordered vertices of every grid
+    const GridInfo* grids = nullptr;
+    const GridHot* hot = nullptr;
+    const uint32_t* faces = nullptr;  // face table
+    const uint16_t* flips = nullptr;  // flip masks
+  };
+  static constexpr uint32_t kBlockPrims = 1;
+  static constexpr uint32_t kBlockBytes = sizeof(SubGridRef);
+
+  // Build-time source: the blocks, already encoded, and their bounds.
+  struct Source {
+    const SubGridRef* blocks = nullptr;
+    const Box3f* bounds = nullptr;
+  };
+  static Box3f source_bounds(const Source& s, uint32_t i) { return s.bounds[i]; }
+  static uint64_t source_key(const Source& s, uint32_t i) {
+    return subgrid_key(reinterpret_cast<const uint8_t*>(&s.blocks[i]), kBlockBytes);
+  }
+  static void encode(const Source& s, const uint32_t* prims, uint32_t n, uint8_t* out) {
+    std::memcpy(out, &s.blocks[prims[0]], kBlockBytes);
+  }
+
+  // Gathers the sub-grid's vertices (unused positions of partial sub-grids repeat the last
+  // valid row/column, so that every lane holds a finite vertex).
+  static SLIM_INLINE void decode(const Context& ctx, const SubGridRef& b, SubGridVerts& w) {
+    // The 5 rows lie res_x * 12 bytes apart: start fetching all of them at once.
+    for (uint32_t j = 0; j < b.res_y; ++j) {
+      const Vec3f* row = ctx.vertices + b.vertex + uint64_t(j) * b.stride;
+      simd::prefetch(row);
+      simd::prefetch(reinterpret_cast<const uint8_t*>(row) + 59);
+    }
+    for (uint32_t j = 0; j < kSubGridRes; ++j) {
+      const Vec3f* row =
+          ctx.vertices + b.vertex + uint64_t(j < b.res_y ? j : b.res_y - 1) * b.stride;
+      for (uint32_t i = 0; i < kSubGridRes; ++i) {
+        const Vec3f& p = row[i < b.res_x ? i : b.res_x - 1];
+        w.p[0][5 * j + i] = p.x;
+        w.p[1][5 * j + i] = p.y;
+        w.p[2][5 * j + i] = p.z;
+      }
+    }
+    for (int k = 25; k < 32; ++k) w.p[0][k] = w.p[1][k] = w.p[2][k] = 0.0f;
+  }
+
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect(const Context& ctx, const uint8_t* p, TravRay& ray,
+                                    HitRecord& hit, Stats& st) {
+    const auto& b = *reinterpret_cast<const SubGridRef*>(p);
+    SubGridVerts w;
+    decode(ctx, b, w);
+    SubGridHit h;
+    const uint32_t flips =
+        subgrid_flips(ctx.hot[b.grid], ctx.flips, b.grid_x / kSubGridCells,
+                      b.grid_y / kSubGridCells, (b.stride + kSubGridCells - 2) / kSubGridCells);
+    if (!intersect_subgrid<kAny>(w, b.res_x, b.res_y, flips, ray, h, st)) return false;
+    if constexpr (!kAny) record_grid_hit(h, ctx.grids[b.grid], ctx.faces, b.grid_x, b.grid_y, hit);
+    return true;
+  }
+
+  template <class F>
+  static void visit(const Context& ctx, const uint8_t* p, F&& fn) {
+    const auto& b = *reinterpret_cast<const SubGridRef*>(p);
+    SubGridVerts w;
+    decode(ctx, b, w);
+    fn(subgrid_bounds(w, b.res_x, b.res_y), subgrid_key(p, kBlockBytes));
+  }
+};
+
+}  // namespace slim

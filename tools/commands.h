@@ -12,6 +12,7 @@ namespace slim::cli {
 int cmd_info(int argc, char** argv);
 int cmd_render(int argc, char** argv);
 int cmd_bench(int argc, char** argv);
+int cmd_verify(int argc, char** argv);  // cmd_verify.cpp
 
 // `slimrt info` sections of the technique issues, each in its own file (info_*.cpp). Each
 // prints a human-readable section to stdout, or fills `out` when json is true.

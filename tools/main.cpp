@@ -33,6 +33,7 @@ int main(int argc, char** argv) {
     if (cmd == "info") return slim::cli::cmd_info(argc - 1, argv + 1);
     if (cmd == "render") return slim::cli::cmd_render(argc - 1, argv + 1);
     if (cmd == "bench") return slim::cli::cmd_bench(argc - 1, argv + 1);
+    if (cmd == "verify") return slim::cli::cmd_verify(argc - 1, argv + 1);
   } catch (const slim::Error& e) {
     std::fprintf(stderr, "slimrt: error: %s\n", e.what());
     return 1;

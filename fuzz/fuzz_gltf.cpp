@@ -1,0 +1,6 @@
+// libFuzzer target: the glTF 2.0 JSON reader (src/io/gltf.h, binary = false) on arbitrary bytes.
+#include "fuzz_gltf_common.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  return slim::fuzz::fuzz_gltf(data, size, false);
+}

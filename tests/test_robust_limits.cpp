@@ -1,0 +1,449 @@
+// Limits (issue 8, part 7): what every configuration does with meshes of 0 and 1 faces, with
+// coordinates near 1e30 and 1e-30, with all-coplanar and all-degenerate input, and with rays that
+// start exactly on a surface. Each result is documented in the test that checks it. (Headers
+// claiming 2^31 - 1 faces: RobustLimits.HeaderClaimingTwoToThe31Faces... in
+// test_robust_io.cpp.)
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "slimrt/costa.h"
+#include "slimrt/grids.h"
+#include "test_util.h"
+
+using namespace slim;
+using namespace slim::test;
+
+namespace {
+
+bool does_not_apply(const std::string& what) {
+  return what.find("does not apply") != std::string::npos ||
+         what.find("not implemented") != std::string::npos;
+}
+
+// Builds `config` over the mesh; false (and no failure) if it does not apply.
+bool build_or_skip(const PolyMesh& m, const std::string& config, Scene& s) {
+  try {
+    s = Scene::build(m, BuildOptions::from_config(config));
+  } catch (const Error& e) {
+    if (does_not_apply(e.what())) return false;
+    ADD_FAILURE() << config << ": " << e.what();
+    return false;
+  }
+  std::string why;
+  EXPECT_TRUE(s.validate(&why)) << config << ": " << why;
+  return true;
+}
+
+Ray make_ray(Vec3f org, Vec3f dir, float tnear = 0.0f, float tfar = kInf) {
+  Ray r;
+  r.org = org;
+  r.dir = dir;
+  r.tnear = tnear;
+  r.tfar = tfar;
+  return r;
+}
+
+// A flat n x n grid of quads in the plane z = 0 over [0, n]^2 (face j*n + i covers cell (i, j)).
+PolyMesh flat_grid(int n) {
+  PolyMesh m;
+  m.name = "flat";
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) m.positions.push_back({float(i), float(j), 0.0f});
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const uint32_t a = j * (n + 1) + i;
+      m.face_sizes.push_back(4);
+      m.face_indices.insert(m.face_indices.end(), {a, a + 1, a + n + 2, a + n + 1});
+    }
+  return m;
+}
+
+// Icosphere (3 subdivisions, 1280 triangles) of radius `scale`, jittered radially by +-1%.
+PolyMesh sphere(float scale) {
+  const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
+  std::vector<Vec3f> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
+                          {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<uint32_t> f = {0, 11, 5, 0, 5,  1,  0,  1,  7,  0,  7,  10, 0,  10, 11,
+                             1, 5,  9, 5, 11, 4,  11, 10, 2,  10, 7,  6,  7,  1,  8,
+                             3, 9,  4, 3, 4,  2,  3,  2,  6,  3,  6,  8,  3,  8,  9,
+                             4, 9,  5, 2, 4,  11, 6,  2,  10, 8,  6,  7,  9,  8,  1};
+  for (int l = 0; l < 3; ++l) {
+    std::vector<uint32_t> nf;
+    std::vector<std::pair<uint64_t, uint32_t>> mids;
+    auto midpoint = [&](uint32_t a, uint32_t b) {
+      const uint64_t key = uint64_t(std::min(a, b)) << 32 | std::max(a, b);
+      for (auto& [k, i] : mids)
+        if (k == key) return i;
+      v.push_back((v[a] + v[b]) * 0.5f);
+      mids.push_back({key, uint32_t(v.size() - 1)});
+      return uint32_t(v.size() - 1);
+    };
+    for (size_t i = 0; i < f.size(); i += 3) {
+      const uint32_t a = f[i], b = f[i + 1], c = f[i + 2];
+      const uint32_t ab = midpoint(a, b), bc = midpoint(b, c), ca = midpoint(c, a);
+      nf.insert(nf.end(), {a, ab, ca, b, bc, ab, c, ca, bc, ab, bc, ca});
+    }
+    f.swap(nf);
+  }
+  Rng rng(3);
+  PolyMesh m;
+  m.name = "sphere";
+  for (Vec3f& p : v) {
+    const double r = 1.0 + 0.02 * (rng.uniform() - 0.5);
+    const Vec3f n = normalize(p);
+    // Scale in double so that the tiny and huge spheres are the same shape, not underflowed.
+    m.positions.push_back({float(double(n.x) * r * scale), float(double(n.y) * r * scale),
+                           float(double(n.z) * r * scale)});
+  }
+  m.face_indices = f;
+  m.face_sizes.assign(f.size() / 3, 3);
+  return m;
+}
+
+}  // namespace
+
+// 0 faces (with and without vertices): every configuration builds an empty scene (README:
+// "a mesh with no faces builds an empty scene"); every query misses; memory is small.
+TEST(RobustLimits, ZeroFacesBuildAnEmptyScene) {
+  PolyMesh none;
+  PolyMesh verts;
+  verts.positions = {{0, 0, 0}, {1, 2, 3}};
+  for (const PolyMesh* m : {&none, &verts}) {
+    int built = 0;
+    for (const std::string& c : all_config_names()) {
+      SCOPED_TRACE(c);
+      Scene s;
+      if (!build_or_skip(*m, c, s)) continue;
+      ++built;
+      EXPECT_EQ(s.stats().triangles, 0u);
+      EXPECT_FALSE(s.intersect(make_ray({0, 0, -1}, {0, 0, 1})).valid());
+      EXPECT_FALSE(s.occluded(make_ray({0, 0, -1}, {0, 0, 1})));
+      EXPECT_LT(s.memory().total(), 4096u) << c;
+    }
+    EXPECT_EQ(built, int(all_config_names().size())) << "every configuration applies";
+  }
+}
+
+// 1 face (a triangle, a quad, a pentagon): every configuration hits it exactly where the
+// double-precision reference does, and misses beside it.
+TEST(RobustLimits, OneFace) {
+  PolyMesh tri, quad, penta;
+  tri.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  tri.face_sizes = {3};
+  tri.face_indices = {0, 1, 2};
+  quad.positions = {{0, 0, 0}, {1, 0, 0.1f}, {1, 1, 0}, {0, 1, 0.1f}};
+  quad.face_sizes = {4};
+  quad.face_indices = {0, 1, 2, 3};
+  penta.positions = {{0, 0, 0}, {2, 0, 0}, {2, 2, 0}, {1, 1, 0}, {0, 2, 0}};
+  penta.face_sizes = {5};
+  penta.face_indices = {0, 1, 2, 3, 4};
+  for (const PolyMesh* m : {&tri, &quad, &penta}) {
+    const std::vector<RefTri> ref = reference_triangles({m});
+    int built = 0;
+    for (const std::string& c : all_config_names()) {
+      SCOPED_TRACE(c + " on a " + std::to_string(m->face_sizes[0]) + "-gon");
+      Scene s;
+      if (!build_or_skip(*m, c, s)) continue;
+      ++built;
+      Rng rng(9);
+      for (int i = 0; i < 200; ++i) {
+        const Vec3f o(rng.uniform() * 2.4f - 0.2f, rng.uniform() * 2.4f - 0.2f, 1.0f);
+        const Ray r = make_ray(o, {0.01f, -0.02f, -1.0f});
+        const Hit h = s.intersect(r);
+        const RefHit rh = reference_intersect(ref, r);
+        // Lossy formats move vertices; the test points stay off the edges by 1e-3.
+        const bool near_edge = std::fabs(o.x) < 1e-2f || std::fabs(o.y) < 1e-2f;
+        if (near_edge) continue;
+        if (c.find('V') != std::string::npos || c.rfind("lossy", 0) == 0) {
+          EXPECT_EQ(h.valid(), rh.valid()) << o.x << "," << o.y;
+        } else {
+          EXPECT_TRUE(agrees(h, rh, 1e-5)) << o.x << "," << o.y << ": " << h.t << " vs " << rh.t;
+        }
+        if (h.valid()) {
+          EXPECT_EQ(h.primID, 0u);
+        }
+        EXPECT_EQ(s.occluded(r), h.valid());
+      }
+    }
+    EXPECT_GE(built, 20);
+  }
+}
+
+
+bool lossy(const std::string& c) {
+  return c.rfind("lossy-grid", 0) == 0 || (c.rfind("costa", 0) == 0 && c.find('V') != std::string::npos);
+}
+
+// Coordinates near 1e30 and 1e-30, measured with a jittered sphere of that radius, rays from
+// inside with directions of length ~0.5 (t is then ~ the radius). Result, the same for every
+// configuration (they share the float watertight test of src/core/watertight.h), by radius:
+//   1e-22 and below   exact: every edge function underflows to 0, the double fallback decides
+//   1e-21 .. 1e-15    most or all rays MISS: T = U*az + V*bz + W*cz (~ radius^3) underflows to 0
+//                     while U, V, W do not, so t = 0 fails tnear < t
+//   1e-14 .. 1e-13    hits, but t is off (denormal T loses its bits)
+//   1e-12 .. 1e13     exact (the range slimrt is made for)
+//   1e14 .. 1e20      hits with a wrong t, at the top of the range t = +inf (T overflows)
+//   1e21 and above    every ray MISSES: the edge functions overflow to inf/NaN
+// So: near 1e-30 every configuration is exact; near 1e30 nothing is hit. This test asserts that
+// (allowing 1e30 to become exact if the triangle test learns to fall back to double there) and
+// that the scenes build and validate. Hits with t = +inf at 1e14-1e20: see
+// DISABLED_ReportedHitsHaveFiniteT below.
+TEST(RobustLimits, CoordinatesNear1e30And1e30Reciprocal) {
+  // Radius 2^-100 (7.9e-31) and 2^100 (1.3e30): powers of two, so that the scaled sphere is the
+  // unit sphere's floats times 2^+-100 exactly, and every format can be compared with itself at
+  // radius 1 (lossy formats too: their encoders only see a scaled box).
+  const PolyMesh unit = sphere(1.0f);
+  for (float scale : {0x1p-100f, 0x1p100f}) {
+    const PolyMesh m = sphere(scale);
+    const std::vector<RefTri> ref = reference_triangles({&m});
+    int built = 0;
+    for (const std::string& c : all_config_names()) {
+      SCOPED_TRACE(c + " at radius " + std::to_string(scale));
+      Scene s, s1;
+      if (!build_or_skip(m, c, s) || !build_or_skip(unit, c, s1)) continue;
+      ++built;
+      Rng rng(77);
+      uint64_t hits = 0, exact = 0;
+      const int n = 200;
+      for (int i = 0; i < n; ++i) {
+        const Vec3f o1(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f);
+        const Vec3f d(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f);
+        const Ray ray = make_ray(o1 * scale, d);
+        const Hit h = s.intersect(ray);
+        const Hit h1 = s1.intersect(make_ray(o1, d));
+        const RefHit rh = reference_intersect(ref, ray);
+        ASSERT_TRUE(rh.valid() && h1.valid());
+        if (!h.valid()) continue;
+        ++hits;
+        EXPECT_TRUE(std::isfinite(h.t) && h.t > 0.0f) << h.t;
+        // Lossless: the double reference. Lossy: the same format at radius 1, scaled.
+        const double want = lossy(c) ? double(h1.t) * scale : rh.t;
+        exact += std::fabs(double(h.t) - want) <= 1e-5 * want;
+      }
+      // The lossy grids do not scale: at 2^+-100 every displacement encodes as 0 (the sub-grids
+      // become their bilinear patches, 22% of the radius off on a torus; their statistics then
+      // report diag_max_pct = 0). They stay watertight. See DISABLED_LossyGridErrorIsScaleFree.
+      const bool grid_exception = c.rfind("lossy-grid", 0) == 0;
+      if (scale < 1.0f) {
+        EXPECT_EQ(hits, uint64_t(n)) << "near 1e-30 every ray hits";
+        if (!grid_exception) {
+          EXPECT_EQ(exact, uint64_t(n));
+        }
+      } else if (!grid_exception) {
+        EXPECT_TRUE(hits == 0 || exact == uint64_t(n))
+            << "near 1e30: today every ray misses; hits must then all be right";
+      }
+      std::printf("  radius %g %-14s %3llu of %d rays hit, %3llu at the expected t\n", scale,
+                  c.c_str(), (unsigned long long)hits, n, (unsigned long long)exact);
+    }
+    EXPECT_GE(built, 20);
+  }
+}
+
+// Known problem (reported in issue 8): the lossy grid encoders lose every displacement when the
+// scene is scaled by 2^+-100, and the error statistics then read 0.
+TEST(RobustLimits, DISABLED_LossyGridErrorIsScaleFree) {
+  const PolyMesh unit = load("torus:32");
+  for (float scale : {0x1p-100f, 0x1p100f})
+    for (int enc : {1, 2}) {
+      PolyMesh m = unit;
+      for (Vec3f& p : m.positions) p = p * scale;
+      const GridErrorStats e1 = grid_error({&unit}, enc), e = grid_error({&m}, enc);
+      EXPECT_NEAR(e.rms / scale, e1.rms, 1e-3 * e1.rms) << scale << " encoding " << enc;
+      EXPECT_NEAR(e.diag_max_pct, e1.diag_max_pct, 1e-3 * e1.diag_max_pct) << scale;
+    }
+}
+
+// Known problem (reported in issue 8): between radius 1e14 and 1e20 hits are reported with a
+// wrong t, up to t = +inf, because T overflows in float while det does not. A reported hit should
+// have a finite t (or the test should fall back to double, as it does for zero edge functions).
+TEST(RobustLimits, DISABLED_ReportedHitsHaveFiniteTAtAnyScale) {
+  for (int k = -32; k <= 32; ++k) {
+    const float scale = float(std::pow(10.0, k));
+    const PolyMesh m = sphere(scale);
+    const std::vector<RefTri> ref = reference_triangles({&m});
+    const Scene s = Scene::build(m, BuildOptions::from_config("bvh8-tri4v"));
+    Rng rng(77);
+    for (int i = 0; i < 100; ++i) {
+      Vec3f o(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f);
+      const Vec3f d(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f);
+      o = Vec3f(float(double(o.x) * scale), float(double(o.y) * scale), float(double(o.z) * scale));
+      const Ray ray = make_ray(o, d);
+      const Hit h = s.intersect(ray);
+      const RefHit rh = reference_intersect(ref, ray);
+      EXPECT_TRUE(h.valid()) << "radius " << scale;
+      if (h.valid()) {
+        EXPECT_NEAR(h.t, rh.t, 1e-5 * rh.t) << "radius " << scale;
+      }
+    }
+  }
+}
+
+// All faces in one plane (a flat 16 x 16 quad grid at z = 0; every configuration, including the
+// grids and the quantized meshes whose box is flat in z):
+//   rays crossing the plane hit the face under them at the exact t (lossy formats too: a flat
+//     grid has no displacement and a flat box quantizes z exactly);
+//   rays lying in the plane (parallel to it, starting on it) miss everything: the watertight
+//     test sees every triangle edge-on (det = 0), as Embree does;
+//   rays parallel to the plane, just above it, miss.
+TEST(RobustLimits, AllCoplanar) {
+  const int n = 16;
+  const PolyMesh m = flat_grid(n);
+  int built = 0;
+  for (const std::string& c : all_config_names()) {
+    SCOPED_TRACE(c);
+    Scene s;
+    if (!build_or_skip(m, c, s)) continue;
+    ++built;
+    Rng rng(5);
+    for (int i = 0; i < 300; ++i) {
+      const float x = 0.05f + (n - 0.1f) * rng.uniform(), y = 0.05f + (n - 0.1f) * rng.uniform();
+      if (std::fabs(x - std::round(x)) < 1e-3f || std::fabs(y - std::round(y)) < 1e-3f) continue;
+      const uint32_t face = uint32_t(std::floor(y)) * n + uint32_t(std::floor(x));
+      for (const Vec3f d : {Vec3f(0, 0, -1), Vec3f(0.001f, -0.002f, -1)}) {
+        const Hit h = s.intersect(make_ray({x, y, 1.0f}, d));
+        ASSERT_TRUE(h.valid()) << x << "," << y;
+        EXPECT_NEAR(h.t, 1.0f, 1e-6f);
+        if (d.x == 0) {
+          EXPECT_EQ(h.primID, face);
+        }
+      }
+      const Hit up = s.intersect(make_ray({x, y, -2.0f}, {0, 0, 1}));
+      ASSERT_TRUE(up.valid());
+      EXPECT_EQ(up.primID, face);
+      EXPECT_NEAR(up.t, 2.0f, 2e-6f);  // 1 ulp: T / det rounds when the vertices are quantized
+      // In the plane: from outside the grid across it, and from inside a face along it.
+      EXPECT_FALSE(s.intersect(make_ray({-1.0f, y, 0.0f}, {1, 0, 0})).valid());
+      EXPECT_FALSE(s.occluded(make_ray({-1.0f, y, 0.0f}, {1, 0.3f, 0})));
+      EXPECT_FALSE(s.intersect(make_ray({x, y, 0.0f}, {1, 1, 0})).valid());
+      EXPECT_FALSE(s.intersect(make_ray({x, y, 1e-6f}, {1, 0.5f, 0})).valid());
+    }
+  }
+  EXPECT_GE(built, 20);
+}
+
+// All faces degenerate or using a NaN/Inf vertex. Degenerate faces here are exactly so in float:
+// corners on a dyadic lattice, so that "collinear" is exact, repeated indices, or one point.
+// Documented result, every configuration:
+//   - faces with a NaN/Inf vertex are skipped and counted (README), nothing is hit;
+//   - faces with a repeated corner (a triangle A, C, A or a quad of one point) are never hit:
+//     an edge function of a repeated pair is exactly 0, and the double-precision fallback then
+//     finds det = 0;
+//   - exactly collinear corners can be hit, but only ON their segment: the shear into ray space
+//     rounds, which can give the projected triangle a tiny area (Woop et al. accept it; so does
+//     Embree's robust mode). So a ray aimed exactly at a corner of such a face may hit it at that
+//     corner (t = 1 here), and a ray that passes the segment misses it.
+TEST(RobustLimits, AllDegenerate) {
+  PolyMesh m;
+  Rng rng(11);
+  auto dyadic = [&] { return float(int(rng.next() % 512) - 256) / 256.0f; };
+  for (int i = 0; i < 200; ++i) {
+    const Vec3f a(dyadic(), dyadic(), dyadic());
+    const Vec3f d(dyadic(), dyadic(), dyadic());
+    const uint32_t b = uint32_t(m.positions.size());
+    m.positions.insert(m.positions.end(), {a, a + d * 0.5f, a + d});  // exact: dyadic
+    switch (i % 4) {
+      case 0:  // collinear triangle
+        m.face_sizes.push_back(3), m.face_indices.insert(m.face_indices.end(), {b, b + 1, b + 2});
+        break;
+      case 1:  // repeated index
+        m.face_sizes.push_back(3), m.face_indices.insert(m.face_indices.end(), {b, b + 2, b});
+        break;
+      case 2:  // one point, as a quad
+        m.face_sizes.push_back(4), m.face_indices.insert(m.face_indices.end(), {b, b, b, b});
+        break;
+      default:  // collinear quad
+        m.face_sizes.push_back(4),
+            m.face_indices.insert(m.face_indices.end(), {b, b + 1, b + 2, b + 1});
+    }
+  }
+  PolyMesh nan = flat_grid(4);
+  for (size_t i = 0; i < nan.positions.size(); i += 2)
+    nan.positions[i].z = i % 4 ? std::numeric_limits<float>::infinity() : NAN;
+  EXPECT_EQ(summarize(m).degenerate_faces, m.face_count());
+  for (const PolyMesh* mesh : {&m, &nan}) {
+    int built = 0;
+    uint64_t corner_hits = 0, corner_rays = 0;
+    for (const std::string& c : all_config_names()) {
+      SCOPED_TRACE(c);
+      Scene s;
+      if (!build_or_skip(*mesh, c, s)) continue;
+      ++built;
+      if (mesh == &nan) {
+        EXPECT_EQ(s.stats().skipped_faces, 16u);  // every face has a bad corner
+      }
+      Rng r2(3);
+      for (int i = 0; i < 300; ++i) {
+        // Exactly at a corner (t = 1), or at random points of the box.
+        const bool at_corner = mesh == &m && i % 2 == 0;
+        const Vec3f p = at_corner ? mesh->positions[r2.next() % mesh->positions.size()]
+                                  : Vec3f(4 * r2.uniform() - 2, 4 * r2.uniform() - 2, 0.3f);
+        const Vec3f o(p.x + 0.3f, p.y - 2.0f, p.z + 1.0f);
+        const Ray ray = make_ray(o, p - o);
+        const Hit h = s.intersect(ray);
+        corner_rays += at_corner;
+        if (!h.valid()) {
+          EXPECT_FALSE(s.occluded(ray));
+          continue;
+        }
+        corner_hits++;
+        EXPECT_TRUE(at_corner) << "a ray that passes no corner hit face " << h.primID;
+        EXPECT_TRUE(h.primID % 4 == 0 || h.primID % 4 == 3)
+            << "face " << h.primID << " with a repeated corner was hit";
+        EXPECT_NEAR(h.t, 1.0f, 1e-5f) << "a collinear face was hit off its segment";
+      }
+    }
+    EXPECT_GE(built, 20);
+    if (mesh == &m)
+      std::printf("  degenerate faces: %llu of %llu rays aimed at corners hit a collinear face\n",
+                  (unsigned long long)corner_hits, (unsigned long long)corner_rays);
+  }
+}
+
+// Rays that start exactly on a surface. slimrt reports hits with tnear < t <= tfar (Woop et al.,
+// as Embree) and treats a negative tnear as 0, so a surface through the origin (t = 0) is never
+// reported: a ray leaving a face, edge or vertex of a closed mesh does not hit that surface again,
+// whichever way it points, and finds the next surface instead. A hit at t = 0 is only possible for
+// no ray at all; a surface at the smallest t > 0 (an origin 1e-30 below the plane) is reported.
+TEST(RobustLimits, RaysStartingOnASurface) {
+  const PolyMesh flat = flat_grid(4);
+  for (const std::string& c : all_config_names()) {
+    SCOPED_TRACE(c);
+    Scene s;
+    if (!build_or_skip(flat, c, s)) continue;
+    for (const Vec3f o : {Vec3f(1.25f, 2.5f, 0), Vec3f(1.0f, 2.5f, 0), Vec3f(2, 2, 0)})  // face,
+      for (const Vec3f d : {Vec3f(0, 0, 1), Vec3f(0, 0, -1), Vec3f(0.3f, 0.1f, 1)})      // edge,
+        for (float tnear : {0.0f, -1.0f}) {                                              // vertex
+          EXPECT_FALSE(s.intersect(make_ray(o, d, tnear)).valid()) << o.x << "," << o.y;
+          EXPECT_FALSE(s.occluded(make_ray(o, d, tnear)));
+        }
+    const Hit h = s.intersect(make_ray({1.25f, 2.5f, -1e-30f}, {0, 0, 1}));
+    ASSERT_TRUE(h.valid());
+    EXPECT_NEAR(h.t, 1e-30f, 1e-36f);
+  }
+  // A closed sphere: rays starting exactly at a vertex, pointing inward, hit the far side (never
+  // t = 0, nor a t of rounding size); pointing outward, they hit nothing. For the lossy formats
+  // the surface is their decoded one (an input vertex is up to their error off it, so a ray from
+  // it may meet the decoded surface right away): their rays start at decoded vertices.
+  const PolyMesh ball = sphere(1.0f);
+  for (const std::string& c : all_config_names()) {
+    SCOPED_TRACE(c);
+    Scene s;
+    if (!build_or_skip(ball, c, s)) continue;
+    const BuildOptions opt = BuildOptions::from_config(c);
+    std::vector<Vec3f> origins = ball.positions;
+    if (c.rfind("lossy-grid", 0) == 0) origins = grid_triangles({&ball}, opt).vertices;
+    if (c.rfind("costa", 0) == 0) origins = costa_triangles({&ball}, opt).vertices;
+    for (size_t i = 0; i < origins.size(); i += 7) {
+      const Vec3f o = origins[i];
+      const Hit h = s.intersect(make_ray(o, o * -1.0f));
+      ASSERT_TRUE(h.valid());
+      EXPECT_GT(h.t, 1.5f) << "vertex " << i;  // the far side: t ~ 2 (direction = -radius)
+      EXPECT_FALSE(s.intersect(make_ray(o, o)).valid()) << "outward from vertex " << i;
+    }
+  }
+}

@@ -1,0 +1,619 @@
+// `slimrt verify SCENE [--config NAME...] [--rays N] [--threads N] [--seed S]`
+//
+// Watertightness and hit-distance checks of every slimrt configuration on a closed mesh (issue 8;
+// the idea of Embree's `verify` suite): rays start strictly inside the mesh and go
+//   1/3 in random directions,
+//   1/3 exactly at mesh vertices     (direction = vertex - origin, not normalized),
+//   1/3 exactly at edge midpoints    (edges of the fan triangles, diagonals included),
+// so every ray must hit: a miss of intersect() or an occluded() == false is a leak. Each hit is
+// also compared with the first surface crossing of the input mesh, t_ref, given by `bvh8-tri4v`
+// on the same ray (an uncompressed, watertight reference): a hit farther than t_ref by more than
+// the format's stated error is counted as `far`, one nearer by more than that as `near`.
+//
+// Tolerances, in scene units along the ray (t * |dir|):
+//   lossless formats: 1e-5 * (distance to the reference hit) + 1e-6 * (box diagonal) (rounding:
+//     two formats may hit the two triangles of a shared edge, whose t differ in the last bits);
+//   lossy formats (lossy-grid*, costa-*V*): that plus e / max(|cos theta|, 0.05), where e bounds
+//     the distance of every decoded vertex from its input vertex and theta is the angle between
+//     the ray and the input surface normal at t_ref. Each decoded triangle is the convex hull of
+//     decoded vertices within e of the input ones, so the decoded surface lies within e of the
+//     input surface and, where it is locally flat, the crossing moves by at most e / |cos theta|
+//     along the ray; below |cos theta| = 0.05 (grazing by less than 3 degrees) the bound is held
+//     at 20 e. e is
+//       lossy-grid, lossy-grid-e2: the scene statistic "max_error" (largest |decoded - input| over
+//         all grid vertices; if absent, "diag_max_pct" / 100 * the box diagonal, which bounds it);
+//       costa-*V*: half a quantization step, |step| / 2 with step = (box size) / 65535 per axis
+//         (Costa et al., Listing 4: 16 bits per component in the scene box; codes round to nearest).
+//
+// SCENE is anything slim::load() reads, or `sphere:L`: an icosahedron subdivided L times
+// (20 * 4^L triangles, 1 <= L <= 9) with vertices jittered radially by +-1%, closed and welded.
+// Inside points are sampled in the box and kept when the parity of their crossings with the
+// reference scene is odd along 2 of 3 directions. Exit code 0 when no configuration leaks or
+// misplaces a hit, 1 otherwise (also when a configuration fails to build or validate), 2 when
+// the mesh is not closed (boundary or non-manifold edges; --allow-open runs it anyway).
+// Configurations that throw "does not apply" or "not implemented" are listed as such.
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <map>
+#include <string>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "commands.h"
+#include "slimrt/costa.h"
+#include "slimrt/grids.h"
+#include "slimrt/slimrt.h"
+
+namespace slim::cli {
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// Icosphere subdivided `levels` times, vertices jittered radially by +-1%; closed and welded.
+PolyMesh jittered_sphere(int levels, uint32_t seed) {
+  const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
+  std::vector<Vec3f> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
+                          {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<uint32_t> f = {0, 11, 5, 0, 5,  1,  0,  1,  7,  0,  7,  10, 0,  10, 11,
+                             1, 5,  9, 5, 11, 4,  11, 10, 2,  10, 7,  6,  7,  1,  8,
+                             3, 9,  4, 3, 4,  2,  3,  2,  6,  3,  6,  8,  3,  8,  9,
+                             4, 9,  5, 2, 4,  11, 6,  2,  10, 8,  6,  7,  9,  8,  1};
+  for (int l = 0; l < levels; ++l) {
+    std::unordered_map<uint64_t, uint32_t> mid;
+    auto midpoint = [&](uint32_t a, uint32_t b) {
+      const uint64_t key = uint64_t(std::min(a, b)) << 32 | std::max(a, b);
+      auto it = mid.find(key);
+      if (it != mid.end()) return it->second;
+      v.push_back((v[a] + v[b]) * 0.5f);
+      return mid[key] = uint32_t(v.size() - 1);
+    };
+    std::vector<uint32_t> nf;
+    nf.reserve(f.size() * 4);
+    for (size_t i = 0; i < f.size(); i += 3) {
+      const uint32_t a = f[i], b = f[i + 1], c = f[i + 2];
+      const uint32_t ab = midpoint(a, b), bc = midpoint(b, c), ca = midpoint(c, a);
+      nf.insert(nf.end(), {a, ab, ca, b, bc, ab, c, ca, bc, ab, bc, ca});
+    }
+    f.swap(nf);
+  }
+  Rng rng(seed);
+  for (Vec3f& p : v) p = normalize(p) * (1.0f + 0.02f * (rng.uniform() - 0.5f));
+  PolyMesh m;
+  m.name = "sphere:" + std::to_string(levels);
+  m.positions = std::move(v);
+  m.face_indices = std::move(f);
+  m.face_sizes.assign(m.face_indices.size() / 3, 3);
+  return m;
+}
+
+PolyMesh load_scene(const std::string& name) {
+  if (name.rfind("sphere:", 0) == 0) {
+    const std::string d = name.substr(7);
+    const bool ok = d.size() == 1 && d[0] >= '1' && d[0] <= '9';
+    if (!ok) throw Error(name + ": expected sphere:L with L a subdivision level from 1 to 9");
+    return jittered_sphere(d[0] - '0', 5);
+  }
+  return load(name);
+}
+
+struct Closedness {
+  uint64_t edges = 0, boundary = 0, nonmanifold = 0;
+};
+
+// Polygon edges counted over positions welded by their exact bits (a closed mesh may duplicate
+// vertices along seams of its attributes).
+Closedness closedness(const PolyMesh& m) {
+  std::unordered_map<uint64_t, uint32_t> weld_of;
+  std::vector<uint32_t> weld(m.positions.size());
+  for (size_t i = 0; i < m.positions.size(); ++i) {
+    uint32_t b[3];
+    std::memcpy(b, &m.positions[i], 12);
+    const uint64_t key = (uint64_t(b[0]) * 0x9E3779B97F4A7C15ULL) ^
+                         (uint64_t(b[1]) * 0xC2B2AE3D27D4EB4FULL) ^ (uint64_t(b[2]) << 17) ^ b[2];
+    // Hash collisions of different positions would merge them: compare before trusting a key.
+    auto it = weld_of.find(key);
+    if (it != weld_of.end() && m.positions[it->second] == m.positions[i]) {
+      weld[i] = weld[it->second];
+    } else {
+      weld[i] = uint32_t(i);
+      if (it == weld_of.end()) weld_of.emplace(key, uint32_t(i));
+    }
+  }
+  std::unordered_map<uint64_t, uint32_t> uses;
+  uint64_t c = 0;
+  for (uint32_t n : m.face_sizes) {
+    for (uint32_t k = 0; k < n; ++k) {
+      uint32_t a = weld[m.face_indices[c + k]], b = weld[m.face_indices[c + (k + 1) % n]];
+      if (a == b) continue;
+      uses[uint64_t(std::min(a, b)) << 32 | std::max(a, b)]++;
+    }
+    c += n;
+  }
+  Closedness r;
+  r.edges = uses.size();
+  for (const auto& [k, u] : uses) {
+    if (u == 1) r.boundary++;
+    if (u > 2) r.nonmanifold++;
+  }
+  return r;
+}
+
+// The targets of the rays: vertices used by a finite face, and midpoints (in float, as the test
+// suite does) of the fan-triangle edges, diagonals included.
+struct Targets {
+  std::vector<Vec3f> vertices, midpoints;
+};
+
+Targets make_targets(const PolyMesh& m) {
+  Targets t;
+  std::vector<char> used(m.positions.size(), 0);
+  std::unordered_map<uint64_t, char> seen;
+  uint64_t c = 0;
+  for (uint32_t n : m.face_sizes) {
+    bool finite = true;
+    for (uint32_t k = 0; k < n; ++k) finite = finite && is_finite(m.positions[m.face_indices[c + k]]);
+    if (finite) {
+      for (uint32_t k = 0; k < n; ++k) used[m.face_indices[c + k]] = 1;
+      auto edge = [&](uint32_t a, uint32_t b) {
+        if (a == b) return;
+        if (seen.emplace(uint64_t(std::min(a, b)) << 32 | std::max(a, b), 1).second)
+          t.midpoints.push_back((m.positions[a] + m.positions[b]) * 0.5f);
+      };
+      for (uint32_t k = 1; k + 1 < n; ++k) {
+        const uint32_t a = m.face_indices[c], b = m.face_indices[c + k],
+                       d = m.face_indices[c + k + 1];
+        edge(a, b), edge(b, d), edge(d, a);
+      }
+    }
+    c += n;
+  }
+  for (size_t i = 0; i < m.positions.size(); ++i)
+    if (used[i]) t.vertices.push_back(m.positions[i]);
+  return t;
+}
+
+// Number of surface crossings along the ray from p in direction d (odd = inside a closed mesh).
+uint32_t crossings(const Scene& ref, Vec3f p, Vec3f d) {
+  uint32_t n = 0;
+  Ray r;
+  r.org = p;
+  r.dir = d;
+  r.tnear = 0.0f;
+  for (int it = 0; it < 100000; ++it) {
+    const Hit h = ref.intersect(r);
+    if (!h.valid()) break;
+    ++n;
+    r.tnear = h.t;
+  }
+  return n;
+}
+
+const Vec3f kParityDirs[3] = {{0.5377f, 0.8622f, -0.3188f},
+                               {-0.7431f, 0.2016f, 0.6378f},
+                               {0.1347f, -0.5811f, -0.8024f}};
+
+// Inside a closed mesh: an odd number of crossings along 2 of 3 directions (one direction can
+// be fooled by a ray through an edge counted twice).
+bool is_inside(const Scene& ref, Vec3f p) {
+  int odd = 0;
+  for (const Vec3f& d : kParityDirs) odd += crossings(ref, p, d) & 1;
+  return odd >= 2;
+}
+
+std::vector<Vec3f> inside_points(const Scene& ref, const Box3f& box, uint32_t want, uint32_t seed,
+                                 uint64_t& tried) {
+  std::vector<Vec3f> pts;
+  Rng rng(seed, 91);
+  const Vec3f lo = box.lo, s = box.size();
+  for (tried = 0; pts.size() < want && tried < uint64_t(want) * 200; ++tried) {
+    const Vec3f p(lo.x + s.x * (0.02f + 0.96f * rng.uniform()),
+                  lo.y + s.y * (0.02f + 0.96f * rng.uniform()),
+                  lo.z + s.z * (0.02f + 0.96f * rng.uniform()));
+    if (is_inside(ref, p)) pts.push_back(p);
+  }
+  return pts;
+}
+
+// The rays of one run: ray i depends only on (seed, i), so every configuration traces the same.
+struct RaySource {
+  const std::vector<Vec3f>* inside;
+  const Targets* targets;
+  uint64_t seed;
+
+  Ray operator()(uint64_t i, uint32_t* origin = nullptr) const {
+    Rng rng(seed ^ (i * 0x9E3779B97F4A7C15ULL), 5);
+    const uint32_t o = rng.next() % uint32_t(inside->size());
+    if (origin) *origin = o;
+    const Vec3f org = (*inside)[o];
+    Vec3f target;
+    const uint32_t kind = uint32_t(i % 3);
+    if (kind == 1 && !targets->vertices.empty()) {
+      target = targets->vertices[(i / 3 + uint64_t(rng.next()) * 7919) % targets->vertices.size()];
+    } else if (kind == 2 && !targets->midpoints.empty()) {
+      target = targets->midpoints[(i / 3 + uint64_t(rng.next()) * 7919) % targets->midpoints.size()];
+    } else {
+      Vec3f d;
+      do {
+        d = Vec3f(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f);
+      } while (dot(d, d) < 1e-4f);
+      target = org + d;
+    }
+    Ray r;
+    r.org = org;
+    r.dir = target - org;  // not normalized: aimed exactly at the target
+    r.tnear = 0.0f;
+    r.tfar = kInf;
+    return r;
+  }
+};
+
+// Formats whose leaves hold their own (decoded) triangles, exposed by grid_triangles() and
+// costa_triangles(): grids re-triangulate cells, costa tessellates 5+-gons with GLU and may
+// quantize vertices.
+bool uses_own_geometry(const std::string& name) {
+  return name == "grid" || name.rfind("lossy-grid", 0) == 0 || name.rfind("costa", 0) == 0;
+}
+
+// The decoded triangles of such a format as a triangle PolyMesh (face i = decoded triangle i).
+PolyMesh decoded_mesh(const PolyMesh& mesh, const BuildOptions& opt) {
+  const std::vector<const PolyMesh*> meshes{&mesh};
+  std::vector<Vec3f> v;
+  if (opt.geometry == Geometry::Quantized)
+    v = costa_triangles(meshes, opt).vertices;
+  else
+    v = grid_triangles(meshes, opt).vertices;
+  PolyMesh m;
+  m.name = "decoded";
+  m.positions = std::move(v);
+  m.face_sizes.assign(m.positions.size() / 3, 3);
+  m.face_indices.resize(m.face_sizes.size() * 3);
+  for (uint32_t i = 0; i < m.face_indices.size(); ++i) m.face_indices[i] = i;
+  return m;
+}
+
+bool lossy_config(const std::string& name) {
+  return name.rfind("lossy-grid", 0) == 0 ||
+         (name.rfind("costa", 0) == 0 && name.find('V') != std::string::npos);
+}
+
+double detail_of(const SceneStats& st, const char* key, double fallback) {
+  for (const auto& [k, v] : st.details)
+    if (k == key) return v;
+  return fallback;
+}
+
+struct Row {
+  std::string config, status, note;
+  uint64_t rays = 0, leaks = 0, occluded_leaks = 0, far = 0, near = 0;
+  double error_bound = 0;  // e (scene units); 0 for lossless
+  double max_excess = 0;   // largest |t - t_ref| * |dir| among hits, scene units
+  bool own_reference = false;  // t_ref from the format's decoded triangles
+  uint64_t beyond_bound = 0;   // lossy: hits off the input surface by more than e / |cos|
+  uint64_t beyond_random = 0;  //   of them, rays in random directions (not aimed at a vertex/edge)
+  double max_input_dev = 0;    // lossy: largest |t - t_input| * |dir|
+  double build_s = 0, trace_s = 0;
+  bool failed = false;
+};
+
+struct Counts {
+  uint64_t leaks = 0, occluded_leaks = 0, far = 0, near = 0, beyond_bound = 0, beyond_random = 0;
+  uint64_t skipped = 0;
+  double max_excess = -INFINITY, max_input_dev = 0;
+  uint64_t first_bad = UINT64_MAX;  // smallest ray index with a problem, to reproduce it
+};
+
+}  // namespace
+
+int cmd_verify(int argc, char** argv) {
+  CLI::App app{"Watertightness and hit-distance checks of every configuration on a closed mesh.",
+               "slimrt verify"};
+  std::string scene_name;
+  std::vector<std::string> configs;
+  uint64_t rays = 1000000;
+  int threads = 0;
+  uint64_t seed = 1;
+  bool allow_open = false;
+  int64_t explain = -1;
+  app.add_option("scene", scene_name,
+                 "closed mesh: a file (.obj .ply .gltf .glb, optionally .xz), torus:N, or sphere:L "
+                 "(jittered icosphere, 20*4^L triangles)")
+      ->required();
+  app.add_option("--config", configs,
+                 "configurations (repeatable or comma-separated); default: all_config_names()")
+      ->delimiter(',');
+  app.add_option("--rays", rays, "rays per configuration (1/3 random, 1/3 at vertices, 1/3 at "
+                                 "edge midpoints)")
+      ->check(CLI::Range(uint64_t(3), uint64_t(1) << 40))
+      ->capture_default_str();
+  app.add_option("--threads", threads, "threads, 0 = all cores")
+      ->check(CLI::Range(0, 4096))
+      ->capture_default_str();
+  app.add_option("--seed", seed, "seed of the rays and inside points")->capture_default_str();
+  app.add_flag("--allow-open", allow_open, "run even if the mesh has boundary/non-manifold edges");
+  app.add_option("--explain", explain,
+                 "print ray number I (as in 'first bad ray #I') and every configuration's hit");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  if (configs.empty()) configs = all_config_names();
+  for (const std::string& c : configs) BuildOptions::from_config(c);  // unknown names: error now
+
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  const auto t_load = std::chrono::steady_clock::now();
+  const PolyMesh mesh = load_scene(scene_name);
+  const MeshSummary sum = summarize(mesh);
+  const Closedness cl = closedness(mesh);
+  std::printf("scene %s: %llu vertices, %llu faces, %llu fan triangles, %llu edges "
+              "(%llu boundary, %llu non-manifold), loaded in %.2f s\n",
+              scene_name.c_str(), (unsigned long long)sum.vertices, (unsigned long long)sum.faces,
+              (unsigned long long)sum.fan_triangles, (unsigned long long)cl.edges,
+              (unsigned long long)cl.boundary, (unsigned long long)cl.nonmanifold,
+              seconds_since(t_load));
+  if ((cl.boundary || cl.nonmanifold || cl.edges == 0) && !allow_open) {
+    std::fprintf(stderr,
+                 "slimrt verify: %s is not a closed manifold mesh (%llu boundary, %llu "
+                 "non-manifold edges): rays from inside can leave through its holes. Use "
+                 "--allow-open to run anyway.\n",
+                 scene_name.c_str(), (unsigned long long)cl.boundary,
+                 (unsigned long long)cl.nonmanifold);
+    return 2;
+  }
+
+  BuildOptions ref_opt = BuildOptions::from_config("bvh8-tri4v");
+  ref_opt.threads = threads;
+  Scene ref;
+  arena.execute([&] { ref = Scene::build(mesh, ref_opt); });
+  const Box3f box = mesh.bounds();
+  const double diag = length(box.size());
+  uint64_t tried = 0;
+  std::vector<Vec3f> inside;
+  arena.execute([&] { inside = inside_points(ref, box, 4096, uint32_t(seed), tried); });
+  if (inside.size() < 16) {
+    std::fprintf(stderr,
+                 "slimrt verify: found %zu points inside %s in %llu tries: is it closed?\n",
+                 inside.size(), scene_name.c_str(), (unsigned long long)tried);
+    return 2;
+  }
+  const Targets targets = make_targets(mesh);
+  const RaySource source{&inside, &targets, seed * 0xD1B54A32D192ED03ULL + 1};
+  std::printf("rays per configuration: %llu (%llu random, %llu at %zu vertices, %llu at %zu edge "
+              "midpoints), from %zu inside points (%llu sampled)\n",
+              (unsigned long long)rays, (unsigned long long)((rays + 2) / 3),
+              (unsigned long long)((rays + 1) / 3), targets.vertices.size(),
+              (unsigned long long)(rays / 3), targets.midpoints.size(), inside.size(),
+              (unsigned long long)tried);
+
+  // Reference: t (in ray units) and |cos theta| at the first crossing of the input surface.
+  std::vector<float> t_ref(rays), cos_ref(rays);
+  const auto t_ref0 = std::chrono::steady_clock::now();
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<uint64_t>(0, rays, 4096), [&](const auto& r) {
+      for (uint64_t i = r.begin(); i < r.end(); ++i) {
+        const Ray ray = source(i);
+        const Hit h = ref.intersect(ray);
+        t_ref[i] = h.valid() ? h.t : kInf;
+        const float ln = length(h.Ng) * length(ray.dir);
+        cos_ref[i] = h.valid() && ln > 0 ? std::fabs(dot(h.Ng, ray.dir)) / ln : 1.0f;
+      }
+    });
+  });
+  std::printf("reference bvh8-tri4v: %.2f s\n\n", seconds_since(t_ref0));
+
+  std::vector<Row> table;
+  bool any_failed = false;
+  for (const std::string& name : configs) {
+    Row row;
+    row.config = name;
+    std::fprintf(stderr, "verify %s: %s ...", scene_name.c_str(), name.c_str());
+    std::fflush(stderr);
+    BuildOptions opt = BuildOptions::from_config(name);
+    opt.threads = threads;
+    Scene s;
+    const auto t_build = std::chrono::steady_clock::now();
+    try {
+      arena.execute([&] { s = Scene::build(mesh, opt); });
+    } catch (const Error& e) {
+      const std::string what = e.what();
+      if (what.find("does not apply") != std::string::npos ||
+          what.find("not implemented") != std::string::npos) {
+        row.status = "n/a";
+        row.note = what;
+      } else {
+        row.status = "BUILD ERROR";
+        row.note = what;
+        row.failed = true;
+      }
+      std::fprintf(stderr, " %s\n", row.status.c_str());
+      any_failed |= row.failed;
+      table.push_back(row);
+      continue;
+    }
+    row.build_s = seconds_since(t_build);
+    std::string why;
+    if (!s.validate(&why)) {
+      row.failed = true;
+      row.note = "validate(): " + why;
+    }
+    const bool lossy = lossy_config(name);
+    if (lossy) {
+      if (name.rfind("lossy-grid", 0) == 0) {
+        row.error_bound = detail_of(s.stats(), "max_error",
+                                    detail_of(s.stats(), "diag_max_pct", 100.0) / 100.0 * diag);
+      } else {
+        const Vec3f step = box.size() * (1.0f / 65535.0f);
+        row.error_bound = 0.5 * length(step);
+      }
+    }
+    const double e = row.error_bound;
+
+    // Formats that store their own triangles (grids, costa) are held to the first crossing of
+    // their decoded geometry; the others share the input's triangles.
+    const std::vector<float>* tref = &t_ref;
+    std::vector<float> t_own;
+    // Origins that are inside the input but not inside the decoded surface (closer to the
+    // surface than the format's error) cannot expect a hit: their rays are skipped.
+    std::vector<char> origin_ok(inside.size(), 1);
+    if (uses_own_geometry(name)) {
+      try {
+        const PolyMesh own = decoded_mesh(mesh, opt);
+        Scene own_ref;
+        arena.execute([&] {
+          own_ref = Scene::build(own, ref_opt);
+          tbb::parallel_for(size_t(0), inside.size(),
+                            [&](size_t k) { origin_ok[k] = is_inside(own_ref, inside[k]); });
+          t_own.resize(rays);
+          tbb::parallel_for(tbb::blocked_range<uint64_t>(0, rays, 4096), [&](const auto& r) {
+            for (uint64_t i = r.begin(); i < r.end(); ++i) {
+              const Hit h = own_ref.intersect(source(i));
+              t_own[i] = h.valid() ? h.t : kInf;
+            }
+          });
+        });
+        tref = &t_own;
+        row.own_reference = true;
+      } catch (const Error& err) {
+        row.note = std::string("decoded geometry unavailable (") + err.what() +
+                   "): checked against the input with the error bound";
+      }
+    }
+    if (explain >= 0 && uint64_t(explain) < rays) {
+      const Ray r = source(uint64_t(explain));
+      const Hit h = s.intersect(r);
+      std::printf("ray #%lld org (%a, %a, %a) dir (%a, %a, %a): input t %.9g |cos| %.4f; "
+                  "%s: own reference t %.9g, hit t %.9g face %u, occluded %d\n",
+                  (long long)explain, r.org.x, r.org.y, r.org.z, r.dir.x, r.dir.y, r.dir.z,
+                  t_ref[explain], cos_ref[explain], name.c_str(), (*tref)[explain], h.t, h.primID,
+                  int(s.occluded(r)));
+    }
+    // Against the own reference (or the input for formats without decoded triangles): rounding
+    // only. Against the input, lossy formats: the error bound e / |cos theta| (informational when
+    // the own reference is available, see the header comment).
+    const bool bound_is_hard = lossy && !row.own_reference;
+    tbb::enumerable_thread_specific<Counts> tls;
+    const auto t_trace = std::chrono::steady_clock::now();
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<uint64_t>(0, rays, 4096), [&](const auto& r) {
+        Counts& c = tls.local();
+        for (uint64_t i = r.begin(); i < r.end(); ++i) {
+          uint32_t origin;
+          const Ray ray = source(i, &origin);
+          if (!origin_ok[origin]) {
+            c.skipped++;
+            continue;
+          }
+          const Hit h = s.intersect(ray);
+          const bool occ = s.occluded(ray);
+          bool bad = false;
+          if (!h.valid()) c.leaks++, bad = true;
+          if (!occ) c.occluded_leaks++, bad = true;
+          const double len = length(ray.dir);
+          const float tr = (*tref)[i];
+          if (h.valid() && std::isfinite(tr)) {
+            const double excess = (double(h.t) - double(tr)) * len;
+            const double tol = 1e-5 * double(tr) * len + 1e-6 * diag +
+                               (bound_is_hard ? e / std::max(double(cos_ref[i]), 0.05) : 0.0);
+            c.max_excess = std::max(c.max_excess, std::fabs(excess));
+            if (excess > tol) c.far++, bad = true;
+            if (excess < -tol) c.near++, bad = true;
+          }
+          if (lossy && h.valid() && std::isfinite(t_ref[i])) {
+            const double dev = std::fabs(double(h.t) - double(t_ref[i])) * len;
+            c.max_input_dev = std::max(c.max_input_dev, dev);
+            if (dev > 1e-5 * double(t_ref[i]) * len + 1e-6 * diag +
+                          e / std::max(double(cos_ref[i]), 0.05))
+              c.beyond_bound++, c.beyond_random += i % 3 == 0;
+          }
+          if (bad) c.first_bad = std::min(c.first_bad, i);
+        }
+      });
+    });
+    row.trace_s = seconds_since(t_trace);
+    Counts total;
+    for (const Counts& c : tls) {
+      total.leaks += c.leaks;
+      total.occluded_leaks += c.occluded_leaks;
+      total.far += c.far;
+      total.near += c.near;
+      total.max_excess = std::max(total.max_excess, c.max_excess);
+      total.beyond_bound += c.beyond_bound;
+      total.beyond_random += c.beyond_random;
+      total.skipped += c.skipped;
+      total.max_input_dev = std::max(total.max_input_dev, c.max_input_dev);
+      total.first_bad = std::min(total.first_bad, c.first_bad);
+    }
+    row.rays = rays - total.skipped;
+    if (total.skipped) {
+      const size_t outside = size_t(std::count(origin_ok.begin(), origin_ok.end(), 0));
+      row.note += (row.note.empty() ? "" : "; ") + std::to_string(total.skipped) + " rays from " +
+                  std::to_string(outside) + " origins outside the decoded surface skipped";
+    }
+    row.leaks = total.leaks;
+    row.occluded_leaks = total.occluded_leaks;
+    row.far = total.far;
+    row.near = total.near;
+    row.max_excess = std::isfinite(total.max_excess) ? total.max_excess : 0.0;
+    row.beyond_bound = total.beyond_bound;
+    row.beyond_random = total.beyond_random;
+    row.max_input_dev = total.max_input_dev;
+    if (row.leaks || row.occluded_leaks || row.far || row.near) row.failed = true;
+    if (total.first_bad != UINT64_MAX) {
+      const Ray r = source(total.first_bad);
+      char buf[256];
+      std::snprintf(buf, sizeof buf, "first bad ray #%llu: org (%a, %a, %a) dir (%a, %a, %a)",
+                    (unsigned long long)total.first_bad, r.org.x, r.org.y, r.org.z, r.dir.x,
+                    r.dir.y, r.dir.z);
+      row.note += (row.note.empty() ? "" : "; ") + std::string(buf);
+    }
+    row.status = row.failed ? "FAIL" : "ok";
+    any_failed |= row.failed;
+    std::fprintf(stderr, " %s (build %.2f s, rays %.2f s)\n", row.status.c_str(), row.build_s,
+                 row.trace_s);
+    table.push_back(row);
+  }
+
+  std::printf("| config | rays | leaks (intersect) | leaks (occluded) | far | near | max |t - t_ref| "
+              "| reference | lossy: error bound e | lossy: beyond e/cos (max dev.) | status |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: | ---: | --- |\n");
+  for (const Row& r : table) {
+    if (r.status == "n/a" || r.status == "BUILD ERROR") {
+      std::printf("| %s | - | - | - | - | - | - | - | - | - | %s: %s |\n", r.config.c_str(),
+                  r.status.c_str(), r.note.c_str());
+      continue;
+    }
+    char bound[32] = "-", beyond[64] = "-";
+    if (r.error_bound > 0) {
+      std::snprintf(bound, sizeof bound, "%.3g", r.error_bound);
+      std::snprintf(beyond, sizeof beyond, "%llu, %llu random (%.3g)",
+                    (unsigned long long)r.beyond_bound, (unsigned long long)r.beyond_random,
+                    r.max_input_dev);
+    }
+    std::printf("| %s | %llu | %llu | %llu | %llu | %llu | %.3g | %s | %s | %s | %s%s%s |\n",
+                r.config.c_str(), (unsigned long long)r.rays, (unsigned long long)r.leaks,
+                (unsigned long long)r.occluded_leaks, (unsigned long long)r.far,
+                (unsigned long long)r.near, r.max_excess,
+                r.own_reference ? "own decoded" : "input", bound, beyond, r.status.c_str(),
+                r.note.empty() ? "" : ": ", r.note.c_str());
+  }
+  std::printf("\nbox diagonal %.6g; distances are |t - t_ref| * |dir| in scene units; %s\n", diag,
+              any_failed ? "FAILED" : "no leaks, every hit within its bound");
+  return any_failed ? 1 : 0;
+}
+
+}  // namespace slim::cli

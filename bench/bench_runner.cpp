@@ -215,6 +215,7 @@ OwnGeometry own_geometry_from(const Tris& t) {
 
 std::optional<OwnGeometry> own_geometry(const std::vector<const PolyMesh*>& meshes,
                                         const std::string& config) {
+  if (EmbreeScene::is_config(config)) return std::nullopt;  // Embree reads the input itself
   BuildOptions bo = BuildOptions::from_config(config);
   if (bo.geometry == Geometry::Quantized) return own_geometry_from(costa_triangles(meshes, bo));
   if (bo.geometry == Geometry::Grids || bo.geometry == Geometry::LossyGrids ||

@@ -24,8 +24,16 @@ namespace slim {
 
 constexpr uint32_t kInvalidID = 0xffffffffu;
 
-// A ray segment [tnear, tfar]. Rays with a NaN or zero direction, NaN origin or tnear > tfar
-// (or NaN bounds) never hit anything.
+// The coordinate range slimrt supports. Beyond it the float products of the watertight test
+// overflow (t = inf or a miss) or underflow (misses), as in every float ray tracer. So:
+// Scene::build throws slim::Error when a vertex used by a finite face lies beyond
+// +-kMaxCoordinate, or when the scene's extent (box diagonal) is nonzero and below kMinExtent;
+// rays whose origin lies beyond +-kMaxCoordinate miss.
+constexpr float kMaxCoordinate = 1e12f;
+constexpr float kMinExtent = 1e-12f;
+
+// A ray segment [tnear, tfar]. Rays with a NaN or zero direction, a NaN origin or one beyond
+// +-kMaxCoordinate, or tnear > tfar (or NaN bounds) never hit anything.
 struct Ray {
   Vec3f org;
   float tnear = 0.0f;

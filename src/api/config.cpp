@@ -28,6 +28,10 @@ constexpr Named kConfigs[] = {
     {"grid", Geometry::Grids, Bvh::Quantized8},
     {"lossy-grid", Geometry::LossyGrids, Bvh::Quantized8},
     {"lossy-grid-e2", Geometry::LossyGridsE2, Bvh::Quantized8},
+    // Beyond BENCHMARK.md (issue 7): the 128-byte sub-grids under the compressed-leaf BVH instead
+    // of QBVH8, and the 72-byte shared-corner sub-grids (the paper's section 9) under it.
+    {"lossy-grid-clbvh", Geometry::LossyGrids, Bvh::CompressedLeaf},
+    {"lossy-grid-shared", Geometry::LossyGrids, Bvh::CompressedLeafCompact},
 };
 
 bool valid_costa(const std::string& o) {

@@ -43,6 +43,9 @@ struct RaySetupBounds {
 // direction, NaN bounds or tnear > tfar (documented behaviour: a miss).
 SLIM_INLINE bool make_trav_ray(const Ray& r, const RaySetupBounds& sb, TravRay& tr) {
   if (!is_finite(r.org) || !is_finite(r.dir)) return false;
+  if (std::fabs(r.org.x) > kMaxCoordinate || std::fabs(r.org.y) > kMaxCoordinate ||
+      std::fabs(r.org.z) > kMaxCoordinate)
+    return false;  // documented (slimrt/scene.h): the watertight test would overflow
   if (!(r.tnear <= r.tfar)) return false;  // also false for NaN bounds
   if (r.dir.x == 0.0f && r.dir.y == 0.0f && r.dir.z == 0.0f) return false;
   tr.org = r.org;

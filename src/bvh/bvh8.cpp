@@ -132,6 +132,15 @@ class Collapser {
         max_leaf_[i] = std::max(max_leaf_[n.first], max_leaf_[n.first + 1]);
       }
     }
+    // Child slots of each subtree if flattened into one wide node (a leaf or a multi-leaf
+    // candidate takes one), for gather().
+    slots_.assign(nn, 0);
+    for (size_t i = nn; i-- > 0;) {
+      const Bvh2Node& n = b2_.nodes[i];
+      slots_[i] = n.is_leaf() || multileaf_candidate(uint32_t(i))
+                      ? 1
+                      : slots_[n.first] + slots_[n.first + 1];
+    }
     out_.bounds = b2_.nodes[0].box;
     root_area_ = std::max(out_.bounds.half_area(), 1e-30f);
     node_size_.assign(nn, 0);
@@ -157,28 +166,42 @@ class Collapser {
     return prims_[i] < 8 * enc_.block_prims && leaves_[i] <= 8 && max_leaf_[i] <= enc_.block_prims;
   }
 
-  // Up to 8 BVH2 nodes below node i, opening the largest-area inner child first.
+  // Up to 8 BVH2 nodes below node i. Opening the largest-area inner child until there are 8
+  // (the usual greedy collapse) leaves the slack at the bottom: a balanced BVH2 of 2^19 leaves
+  // becomes 2^18 wide nodes of 2 leaves each. So the slots are spent where the tree needs them:
+  // with S = slots_[i] and cap = the largest power of 8 below S (the children of a complete
+  // 8-wide tree of the smallest height that holds S), first every child with more than cap slots
+  // is opened (largest area first); then, with slots left, children whose whole subtree fits the
+  // slots left are flattened into this node, largest area first. Bottom nodes are then full, and
+  // the slack sits in the few nodes at the top.
   int gather(uint32_t i, uint32_t* kids) const {
     const Bvh2Node& n = b2_.nodes[i];
     int k = 0;
     kids[k++] = n.first;
     kids[k++] = n.first + 1;
-    while (k < 8) {
+    uint64_t cap = 1;
+    while (cap * 8 < slots_[i]) cap *= 8;
+    auto openable = [&](uint32_t c) { return !b2_.nodes[c].is_leaf() && !multileaf_candidate(c); };
+    auto open_best = [&](auto&& eligible) {
       int best = -1;
       float best_area = -1.0f;
       for (int c = 0; c < k; ++c) {
-        const Bvh2Node& cn = b2_.nodes[kids[c]];
-        if (cn.is_leaf() || multileaf_candidate(kids[c])) continue;
-        float a = cn.box.half_area();
+        if (!openable(kids[c]) || !eligible(kids[c])) continue;
+        const float a = b2_.nodes[kids[c]].box.half_area();
         if (a > best_area) {
           best_area = a;
           best = c;
         }
       }
-      if (best < 0) break;
-      uint32_t open = kids[best];
+      if (best < 0) return false;
+      const uint32_t open = kids[best];
       kids[best] = b2_.nodes[open].first;
       kids[k++] = b2_.nodes[open].first + 1;
+      return true;
+    };
+    while (k < 8 && open_best([&](uint32_t c) { return slots_[c] > cap; })) {
+    }
+    while (k < 8 && open_best([&](uint32_t c) { return slots_[c] <= uint32_t(8 - k + 1); })) {
     }
     return k;
   }
@@ -359,7 +382,7 @@ class Collapser {
   NodeKind kind_;
   const LeafEncoder& enc_;
   Bvh8& out_;
-  std::vector<uint32_t> prims_, leaves_, max_leaf_;
+  std::vector<uint32_t> prims_, leaves_, max_leaf_, slots_;
   std::vector<uint64_t> node_size_, leaf_size_;
   std::unordered_map<uint32_t, std::vector<uint8_t>> multi_cache_;
   double sah_ = 0;

@@ -30,7 +30,7 @@ void AlignedBytes::reserve(uint64_t n) {
 uint64_t AlignedBytes::append(uint64_t n, uint64_t align) {
   uint64_t off = (size_ + align - 1) & ~(align - 1);
   if (off + n > cap_) reserve(std::max(off + n, cap_ + cap_ / 2 + 4096));
-  std::memset(data_ + size_, 0, off + n - size_);
+  if (off + n > size_) std::memset(data_ + size_, 0, off + n - size_);  // data_ may be null if 0
   size_ = off + n;
   return off;
 }

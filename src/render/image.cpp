@@ -6,6 +6,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -78,6 +79,15 @@ void write_image(const Image& img, const std::string& path) {
       throw Error(path + ": cannot write PNG: " + why);
     }
     return;
+  }
+  // Open the file ourselves first: Debian's tinyexr leaks its buffers when it cannot open the
+  // output (LeakSanitizer, RenderFiles.WriteErrors), and our message names the system error.
+  errno = 0;
+  if (std::FILE* f = std::fopen(path.c_str(), "wb")) {
+    std::fclose(f);
+  } else {
+    std::string why = errno ? std::strerror(errno) : "cannot open";
+    throw Error(path + ": cannot write EXR: " + why);
   }
   const char* err = nullptr;
   int rc =

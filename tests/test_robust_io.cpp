@@ -289,8 +289,11 @@ PolyMesh read_as(const Finding& f) {
 // Inputs found by ./fuzz.sh. Each must give a slim::Error or a mesh that passes check_mesh.
 TEST(RobustFuzzFindings, CrashingInputsStayFixed) {
   const std::vector<Finding> findings = {
-      // (none so far: see the issue 8 report for the fuzzing hours per target)
       {"obj", "f 1 2 3\n"},
+      // fuzz_obj, 150 s run: a 'vw' joint id beyond int range (tinyobjloader converted the float
+      // to int: UBSan "inf is outside the range of representable values of type 'int'").
+      {"obj", "v 0 0 0\nvw 0 111111111111111111111111111111111111111111111111 8 4\n"},
+      {"obj", "v 0 0 0\nvw 0 1e300 0.5\n"},
       {"ply", "ply\nformat binary_little_endian 1.0\nelement face 1\n"
               "property list uchar int vertex_indices\nend_header\n\x03"},
   };
@@ -301,5 +304,13 @@ TEST(RobustFuzzFindings, CrashingInputsStayFixed) {
     } catch (const std::exception& e) {
       ADD_FAILURE() << f.target << ": exception other than slim::Error: " << e.what();
     }
+  }
+  // The 'vw' finding is refused by the pre-scan, before tinyobjloader sees it.
+  try {
+    read_as({"obj", "v 0 0 0\nvw 0 1e300 0.5\n"});
+    ADD_FAILURE() << "vw with an out-of-range joint id was accepted";
+  } catch (const slim::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("finding.obj:2:"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("out of range"), std::string::npos) << e.what();
   }
 }

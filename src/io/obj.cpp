@@ -14,6 +14,8 @@
 
 #include "io/obj.h"
 
+#include <cmath>
+#include <cstdlib>
 #include <streambuf>
 #include <unordered_map>
 
@@ -54,6 +56,16 @@ bool statement(std::string_view s, char kw, std::string_view& rest) {
   ++i;
   if (i < s.size() && s[i] != ' ' && s[i] != '\t') return false;
   rest = s.substr(i);
+  return true;
+}
+
+// 'vw' statement (tinyobjloader's vertex weights extension): rest = after the keyword.
+bool vertex_weight_statement(std::string_view s, std::string_view& rest) {
+  size_t i = 0;
+  while (i < s.size() && (s[i] == ' ' || s[i] == '\t')) ++i;
+  if (s.size() < i + 3 || s[i] != 'v' || s[i + 1] != 'w' || (s[i + 2] != ' ' && s[i + 2] != '\t'))
+    return false;
+  rest = s.substr(i + 2);
   return true;
 }
 
@@ -141,6 +153,18 @@ PolyMesh read_obj(const std::string& src, std::string_view data) {
         throw_at_line(src, line,
                       "vertex has " + std::to_string(coords) + " coordinates; expected x y z");
       if (bad >= 0) throw_at_line(src, line, "vertex coordinate is not a number; expected x y z");
+      return true;
+    }
+    if (vertex_weight_statement(text, rest)) {
+      // tinyobjloader converts the joint ids of 'vw' lines from float to int unchecked (undefined
+      // behaviour for huge values, found by fuzz/fuzz_obj.cpp); slimrt ignores vertex weights, so
+      // numbers that do not fit an int are refused here.
+      for_each_token(rest, [&](int64_t, std::string_view t) {
+        const std::string tok(t.substr(0, 64));
+        const double v = std::strtod(tok.c_str(), nullptr);
+        if (t.size() > 32 || !(std::fabs(v) < 2147483647.0))
+          throw_at_line(src, line, "vertex weight line has a number out of range: " + excerpt(t));
+      });
       return true;
     }
     int64_t n = face_corners(text);

@@ -636,8 +636,7 @@ std::string report_markdown(const BenchReport& report) {
     if (r.agreement_embree_tri) vs_tri = 100.0 * *r.agreement_embree_tri;
     if (r.config == "embree-tri") vs_tri = agree;
     std::string note;
-    if (r.hit_agreement && *r.hit_agreement < kLosslessAgreement)
-      note = "ERROR: agreement < 99.9%";
+    if (r.hit_agreement && *r.hit_agreement < kLosslessAgreement) note = "ERROR: agreement < 99.9%";
     std::string psnr_cell = r.error.psnr_identical ? "inf" : cell(r.error.psnr_db, "%.2f");
     o << cell(r.build_s, "%.3f") << " | " << cell(r.build_mprims_s, "%.2f") << " | "
       << cell(mb, "%.2f") << " | " << cell(r.bytes_per_triangle, "%.1f") << " | "

@@ -27,8 +27,8 @@ namespace slim::fuzz {
   std::fprintf(stderr, "slimrt fuzz check failed: %s %s\n", what, detail.c_str());
   std::abort();
 }
-#define SLIM_FUZZ_CHECK(cond, detail) \
-  do {                                \
+#define SLIM_FUZZ_CHECK(cond, detail)               \
+  do {                                              \
     if (!(cond)) ::slim::fuzz::fail(#cond, detail); \
   } while (0)
 
@@ -74,20 +74,19 @@ inline void check_same_geometry(const PolyMesh& a, const PolyMesh& b, const char
   for (size_t i = 0; i < a.positions.size(); ++i)
     for (int k = 0; k < 3; ++k) {
       const float x = a.positions[i][k], y = b.positions[i][k];
-      SLIM_FUZZ_CHECK(close_floats(x, y, ulps),
-                      std::string(what) + ": vertex " + std::to_string(i) + ": " +
-                          std::to_string(x) + " vs " + std::to_string(y));
+      SLIM_FUZZ_CHECK(close_floats(x, y, ulps), std::string(what) + ": vertex " +
+                                                    std::to_string(i) + ": " + std::to_string(x) +
+                                                    " vs " + std::to_string(y));
     }
 }
 
 // Binary little-endian PLY of the mesh's positions and faces (uint face sizes and indices):
 // re-reading it must give back the same geometry (a lossless re-encode of what was parsed).
 inline std::string write_ply(const PolyMesh& m) {
-  std::string h = "ply\nformat binary_little_endian 1.0\nelement vertex " +
-                  std::to_string(m.positions.size()) +
-                  "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
-                  std::to_string(m.face_count()) +
-                  "\nproperty list uint uint vertex_indices\nend_header\n";
+  std::string h =
+      "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(m.positions.size()) +
+      "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
+      std::to_string(m.face_count()) + "\nproperty list uint uint vertex_indices\nend_header\n";
   seeds::ByteWriter w;
   for (const Vec3f& p : m.positions) w.put(p.x), w.put(p.y), w.put(p.z);
   size_t c = 0;
@@ -128,15 +127,18 @@ inline std::string write_glb(const PolyMesh& m) {
                     ni = std::to_string(m.face_indices.size());
   std::string prim = R"({"attributes": {"POSITION": 0})" +
                      std::string(m.face_indices.empty() ? "" : R"(, "indices": 1)") + "}";
-  std::string json = R"({"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "scene": 0,
-    "nodes": [{"mesh": 0}], "meshes": [{"primitives": [)" + prim + R"(]}],
-    "accessors": [{"bufferView": 0, "componentType": 5126, "count": )" + nv +
-                     R"(, "type": "VEC3"}, {"bufferView": 1, "componentType": 5125, "count": )" +
-                     ni + R"(, "type": "SCALAR"}],
-    "bufferViews": [{"buffer": 0, "byteLength": )" + std::to_string(pos_bytes) +
-                     R"(}, {"buffer": 0, "byteOffset": )" + std::to_string(pos_bytes) +
-                     R"(, "byteLength": )" + std::to_string(idx_bytes) + R"(}],
-    "buffers": [{"byteLength": )" + std::to_string(w.bytes.size()) + "}]}";
+  std::string json =
+      R"({"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "scene": 0,
+    "nodes": [{"mesh": 0}], "meshes": [{"primitives": [)" +
+      prim + R"(]}],
+    "accessors": [{"bufferView": 0, "componentType": 5126, "count": )" +
+      nv + R"(, "type": "VEC3"}, {"bufferView": 1, "componentType": 5125, "count": )" + ni +
+      R"(, "type": "SCALAR"}],
+    "bufferViews": [{"buffer": 0, "byteLength": )" +
+      std::to_string(pos_bytes) + R"(}, {"buffer": 0, "byteOffset": )" + std::to_string(pos_bytes) +
+      R"(, "byteLength": )" + std::to_string(idx_bytes) + R"(}],
+    "buffers": [{"byteLength": )" +
+      std::to_string(w.bytes.size()) + "}]}";
   return seeds::glb_container(json, w.bytes);
 }
 

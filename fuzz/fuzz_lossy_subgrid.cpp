@@ -57,7 +57,8 @@ void check_decoder(const Vec3f corner[4], const uint8_t* codes63, uint32_t rx, u
       const int slot = displ_position_slot(k);
       const uint32_t code = slot < 0 ? 0 : load_code(displ + 3 * slot);
       const bool is_escape = displ_exponent(code) == kDisplEscape;
-      SLIM_FUZZ_CHECK(bool(esc >> k & 1) == is_escape, "escape flag at position " + std::to_string(k));
+      SLIM_FUZZ_CHECK(bool(esc >> k & 1) == is_escape,
+                      "escape flag at position " + std::to_string(k));
       if (is_escape) {
         SLIM_FUZZ_CHECK(esc_codes[k] == code, "escape code");
         continue;

@@ -54,8 +54,8 @@ void check_bit_array(Reader in) {
     a.set(i, want[i]);
   }
   for (uint64_t i = 0; i < count; ++i)
-    SLIM_FUZZ_CHECK(a.get(i) == want[i], "BitArray width " + std::to_string(width) + " entry " +
-                                             std::to_string(i));
+    SLIM_FUZZ_CHECK(a.get(i) == want[i],
+                    "BitArray width " + std::to_string(width) + " entry " + std::to_string(i));
 }
 
 template <bool P, bool F, bool V>
@@ -99,8 +99,8 @@ void check_store(const NgonMesh& m) {
       const double ulp =
           2.4e-7 * (std::fabs(double(box.lo[a])) + std::fabs(double(box.hi[a]))) + 1e-40;
       SLIM_FUZZ_CHECK(std::fabs(double(got[a]) - double(want[a])) <= 0.5 * step + ulp,
-                      which + " vertex " + std::to_string(k) + " axis " + std::to_string(a) +
-                          ": " + std::to_string(got[a]) + " for " + std::to_string(want[a]));
+                      which + " vertex " + std::to_string(k) + " axis " + std::to_string(a) + ": " +
+                          std::to_string(got[a]) + " for " + std::to_string(want[a]));
     }
   }
 }

@@ -67,8 +67,7 @@ inline std::string xz_compress(const std::string& in, uint32_t preset = 6) {
   size_t pos = 0;
   if (lzma_easy_buffer_encode(preset, LZMA_CHECK_CRC64, nullptr,
                               reinterpret_cast<const uint8_t*>(in.data()), in.size(),
-                              reinterpret_cast<uint8_t*>(out.data()), &pos,
-                              out.size()) != LZMA_OK)
+                              reinterpret_cast<uint8_t*>(out.data()), &pos, out.size()) != LZMA_OK)
     throw std::runtime_error("lzma_easy_buffer_encode failed");
   out.resize(pos);
   return out;
@@ -108,13 +107,13 @@ struct PlyLayout {
 inline std::string ply_square(const PlyLayout& L) {
   const std::array<std::array<double, 3>, 5> v = {
       {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0.5, 0.5, 0}}};
-  const std::vector<std::vector<int>> faces = {{0, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4},
-                                               {0, 1, 2, 3}};
+  const std::vector<std::vector<int>> faces = {
+      {0, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4}, {0, 1, 2, 3}};
   const char* fmt = L.format == PlyLayout::Ascii      ? "ascii"
                     : L.format == PlyLayout::BinaryLE ? "binary_little_endian"
                                                       : "binary_big_endian";
-  std::string h = std::string("ply\nformat ") + fmt + " 1.0\ncomment slimrt seed\n" +
-                  "element vertex 5\n";
+  std::string h =
+      std::string("ply\nformat ") + fmt + " 1.0\ncomment slimrt seed\n" + "element vertex 5\n";
   for (const char* c : {"x", "y", "z"}) h += "property " + L.pos_type + " " + c + "\n";
   h += "property uchar red\n";
   if (L.normals) h += "property float nx\nproperty float ny\nproperty float nz\n";
@@ -132,14 +131,22 @@ inline std::string ply_square(const PlyLayout& L) {
       w.bytes += buf;
       return;
     }
-    if (t == "float") w.put(float(x));
-    else if (t == "double") w.put(double(x));
-    else if (t == "char") w.put(int8_t(x));
-    else if (t == "uchar") w.put(uint8_t(x));
-    else if (t == "short") w.put(int16_t(x));
-    else if (t == "ushort") w.put(uint16_t(x));
-    else if (t == "int") w.put(int32_t(x));
-    else w.put(uint32_t(x));
+    if (t == "float")
+      w.put(float(x));
+    else if (t == "double")
+      w.put(double(x));
+    else if (t == "char")
+      w.put(int8_t(x));
+    else if (t == "uchar")
+      w.put(uint8_t(x));
+    else if (t == "short")
+      w.put(int16_t(x));
+    else if (t == "ushort")
+      w.put(uint16_t(x));
+    else if (t == "int")
+      w.put(int32_t(x));
+    else
+      w.put(uint32_t(x));
   };
   auto eol = [&] {
     if (L.format == PlyLayout::Ascii) w.bytes.back() = '\n';
@@ -274,8 +281,10 @@ inline std::vector<SeedFile> one_per_format() {
 // (empty mesh, vertices only, concatenated xz streams).
 inline std::vector<SeedFile> all_seeds() {
   std::vector<SeedFile> s = one_per_format();
-  const char* types[][3] = {{"double", "ushort", "uint"}, {"short", "char", "short"},
-                            {"int", "uint", "ushort"},    {"float", "int", "uchar"}};
+  const char* types[][3] = {{"double", "ushort", "uint"},
+                            {"short", "char", "short"},
+                            {"int", "uint", "ushort"},
+                            {"float", "int", "uchar"}};
   int k = 0;
   for (auto fmt : {PlyLayout::Ascii, PlyLayout::BinaryLE, PlyLayout::BinaryBE})
     for (auto& t : types) {
@@ -296,7 +305,8 @@ inline std::vector<SeedFile> all_seeds() {
                "property double z\nend_header\n0 0 0\n1 2 3\n"});
   s.push_back({"minimal.gltf", R"({"asset": {"version": "2.0"}})"});
   s.push_back({"minimal.glb", glb_container(R"({"asset": {"version": "2.0"}})", "")});
-  s.push_back({"two.obj.xz", xz_compress("v 0 0 0\nv 1 0 0\n") + xz_compress("v 0 1 0\nf 1 2 3\n")});
+  s.push_back(
+      {"two.obj.xz", xz_compress("v 0 0 0\nv 1 0 0\n") + xz_compress("v 0 1 0\nf 1 2 3\n")});
   return s;
 }
 

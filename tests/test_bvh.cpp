@@ -9,30 +9,6 @@ using namespace slim::test;
 
 namespace {
 
-struct Agreement {
-  uint64_t rays = 0, agree = 0, same_face = 0, hits = 0;
-};
-
-Agreement compare_with_reference(const Scene& scene, const std::vector<const PolyMesh*>& meshes,
-                                 int nrays, uint32_t seed) {
-  std::vector<RefTri> ref = reference_triangles(meshes);
-  Rng rng(seed);
-  Agreement a;
-  for (int i = 0; i < nrays; ++i) {
-    Ray r = random_ray(rng, scene.bounds());
-    Hit h = scene.intersect(r);
-    RefHit rh = reference_intersect(ref, r);
-    a.rays++;
-    a.hits += rh.valid();
-    bool ok = agrees(h, rh);
-    a.agree += ok;
-    a.same_face += h.valid() && rh.valid() && h.primID == rh.prim && h.geomID == rh.geom;
-    // Any-hit must agree with the closest hit's existence.
-    EXPECT_EQ(scene.occluded(r), h.valid());
-  }
-  return a;
-}
-
 class TriangleConfigs : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(TriangleConfigs, RandomSoupMatchesReference) {
@@ -59,12 +35,14 @@ TEST_P(TriangleConfigs, MixedPolygonsAndSeveralMeshes) {
     uint32_t base = uint32_t(b.positions.size());
     for (int k = 0; k < n; ++k) {
       float ang = 6.2831853f * k / n;
-      b.positions.push_back(c + Vec3f(std::cos(ang), std::sin(ang), 0.3f * (rng.uniform() - 0.5f)) * 0.03f);
+      b.positions.push_back(c + Vec3f(std::cos(ang), std::sin(ang), 0.3f * (rng.uniform() - 0.5f)) *
+                                    0.03f);
       b.face_indices.push_back(base + k);
     }
     b.face_sizes.push_back(n);
   }
-  Scene s = Scene::build(std::vector<const PolyMesh*>{&a, &b}, BuildOptions::from_config(GetParam()));
+  Scene s =
+      Scene::build(std::vector<const PolyMesh*>{&a, &b}, BuildOptions::from_config(GetParam()));
   std::string why;
   ASSERT_TRUE(s.validate(&why)) << why;
   Agreement ag = compare_with_reference(s, {&a, &b}, 3000, 5);
@@ -73,9 +51,8 @@ TEST_P(TriangleConfigs, MixedPolygonsAndSeveralMeshes) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Bvh, TriangleConfigs,
-                         ::testing::Values("bvh8-tri4v", "bvh8-tri4i", "qbvh8-tri4v",
-                                           "qbvh8-tri4i", "clbvh-tri4v", "clbvh-tri4i",
-                                           "clbvh-compact"));
+                         ::testing::Values("bvh8-tri4v", "bvh8-tri4i", "qbvh8-tri4v", "qbvh8-tri4i",
+                                           "clbvh-tri4v", "clbvh-tri4i", "clbvh-compact"));
 
 TEST(Bvh, BadRaysMiss) {
   PolyMesh m = random_soup(100, 1);
@@ -135,7 +112,8 @@ TEST(Bvh, QuantizedBoxesAreConservative) {
     Box3f parent;
     int n = 1 + rng.next() % 8;
     for (int i = 0; i < n; ++i) {
-      Vec3f a(offset + rng.uniform() * scale, offset + rng.uniform() * scale, offset + rng.uniform() * scale);
+      Vec3f a(offset + rng.uniform() * scale, offset + rng.uniform() * scale,
+              offset + rng.uniform() * scale);
       Vec3f b = a;
       if (rng.next() % 3) b = b + Vec3f(rng.uniform(), rng.uniform(), 0) * scale;  // flat in z
       boxes[i] = Box3f(min(a, b), max(a, b));

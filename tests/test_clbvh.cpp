@@ -12,8 +12,8 @@ using namespace slim::test;
 
 namespace {
 
-const char* kLossless[] = {"bvh8-tri4i", "qbvh8-tri4v", "qbvh8-tri4i", "clbvh-tri4v",
-                           "clbvh-tri4i", "clbvh-compact"};
+const char* kLossless[] = {"bvh8-tri4i",  "qbvh8-tri4v", "qbvh8-tri4i",
+                           "clbvh-tri4v", "clbvh-tri4i", "clbvh-compact"};
 
 // Rays from around the scene box into it, plus rays starting inside it.
 std::vector<Ray> test_rays(const Box3f& box, int n, uint32_t seed) {
@@ -65,7 +65,8 @@ void expect_identical_to_bvh8(const PolyMesh& m, int nrays, int brute_rays) {
 }
 
 TEST(Clbvh, RandomSoupsIdenticalToBvh8) {
-  for (uint32_t seed : {1u, 2u}) expect_identical_to_bvh8(random_soup(20000, seed, 0.02f), 20000, 300);
+  for (uint32_t seed : {1u, 2u})
+    expect_identical_to_bvh8(random_soup(20000, seed, 0.02f), 20000, 300);
 }
 
 TEST(Clbvh, ProceduralScenesIdenticalToBvh8) {
@@ -75,10 +76,10 @@ TEST(Clbvh, ProceduralScenesIdenticalToBvh8) {
 
 TEST(Clbvh, SharedMeshesIdenticalToBvh8) {
   SLIM_REQUIRE_SHARED_DATA();
-  for (const char* f : {"spot_control_mesh.obj", "spot_quadrangulated.obj", "stanford_bunny.obj.xz",
-                        "beast.obj.xz", "sword_quad_dominant.obj.xz", "fg_c172p_aircraft.obj.xz",
-                        "fg_cg57_cruiser.obj.xz", "nefertiti.obj.xz", "ogre.obj.xz", "koala.obj.xz",
-                        "igea.ply.xz"})
+  for (const char* f :
+       {"spot_control_mesh.obj", "spot_quadrangulated.obj", "stanford_bunny.obj.xz", "beast.obj.xz",
+        "sword_quad_dominant.obj.xz", "fg_c172p_aircraft.obj.xz", "fg_cg57_cruiser.obj.xz",
+        "nefertiti.obj.xz", "ogre.obj.xz", "koala.obj.xz", "igea.ply.xz"})
     expect_identical_to_bvh8(load(shared_data_dir() + "/" + f), 10000, 50);
 }
 

@@ -478,10 +478,6 @@ Decoded decode_geometry(const std::vector<const PolyMesh*>& meshes, const std::s
   return d;
 }
 
-struct Agreement {
-  uint64_t rays = 0, hits = 0, agree = 0, same_face = 0;
-};
-
 Agreement compare_decoded(const Scene& s, const Decoded& d, int nrays, uint32_t seed) {
   std::vector<RefTri> ref = reference_triangles({&d.mesh});
   Rng rng(seed);

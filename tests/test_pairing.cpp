@@ -443,28 +443,6 @@ TEST(Pairing, PublicStats) {
 
 // ---- pair leaves -------------------------------------------------------------------------------
 
-struct Agreement {
-  uint64_t rays = 0, agree = 0, same_face = 0, hits = 0;
-};
-
-Agreement compare_with_reference(const Scene& scene, const std::vector<const PolyMesh*>& meshes,
-                                 int nrays, uint32_t seed) {
-  std::vector<RefTri> ref = reference_triangles(meshes);
-  Rng rng(seed);
-  Agreement a;
-  for (int i = 0; i < nrays; ++i) {
-    Ray r = random_ray(rng, scene.bounds());
-    Hit h = scene.intersect(r);
-    RefHit rh = reference_intersect(ref, r);
-    a.rays++;
-    a.hits += rh.valid();
-    a.agree += agrees(h, rh);
-    a.same_face += h.valid() && rh.valid() && h.primID == rh.prim && h.geomID == rh.geom;
-    EXPECT_EQ(scene.occluded(r), h.valid());
-  }
-  return a;
-}
-
 double detail(const Scene& s, const std::string& key) {
   for (const auto& [k, v] : s.stats().details)
     if (k == key) return v;

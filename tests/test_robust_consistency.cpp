@@ -200,26 +200,34 @@ void check_mesh_file(const std::string& file, int mesh_index) {
       }
     }
     if (tally.ties || tally.embree_slips || tally.failures || full_run())
-      std::printf("    %-14s vs %-22s %6llu rays, %4llu ties, %3llu Embree slips (%.2g), %llu "
-                  "failures\n",
-                config.c_str(), own ? "embree on own geometry" : "embree-tri",
-                (unsigned long long)tally.rays, (unsigned long long)tally.ties,
-                (unsigned long long)tally.embree_slips,
-                double(tally.embree_slips) / double(tally.rays),
-                (unsigned long long)tally.failures);
+      std::printf(
+          "    %-14s vs %-22s %6llu rays, %4llu ties, %3llu Embree slips (%.2g), %llu "
+          "failures\n",
+          config.c_str(), own ? "embree on own geometry" : "embree-tri",
+          (unsigned long long)tally.rays, (unsigned long long)tally.ties,
+          (unsigned long long)tally.embree_slips, double(tally.embree_slips) / double(tally.rays),
+          (unsigned long long)tally.failures);
     ++checked;
     EXPECT_EQ(tally.failures, 0u);
     EXPECT_LE(tally.embree_slips, 1 + tally.rays / 10000) << "more Embree slips than expected";
   }
   std::printf("    %d configurations checked (lines above: those with ties or slips)\n", checked);
-  if (!skipped.empty()) std::printf("    not run here (SLIM_ROBUST_FULL=1 runs them):%s\n", skipped.c_str());
+  if (!skipped.empty())
+    std::printf("    not run here (SLIM_ROBUST_FULL=1 runs them):%s\n", skipped.c_str());
 }
 
-const char* const kSharedMeshes[] = {
-    "spot_quadrangulated.obj", "spot_control_mesh.obj",      "stanford_bunny.obj.xz",
-    "beast.obj.xz",            "sword_quad_dominant.obj.xz", "fg_cg57_cruiser.obj.xz",
-    "fg_c172p_aircraft.obj.xz", "nefertiti.obj.xz",          "ogre.obj.xz",
-    "koala.obj.xz",            "igea.ply.xz",                "fg_terrain_hawaii.ply.xz"};
+const char* const kSharedMeshes[] = {"spot_quadrangulated.obj",
+                                     "spot_control_mesh.obj",
+                                     "stanford_bunny.obj.xz",
+                                     "beast.obj.xz",
+                                     "sword_quad_dominant.obj.xz",
+                                     "fg_cg57_cruiser.obj.xz",
+                                     "fg_c172p_aircraft.obj.xz",
+                                     "nefertiti.obj.xz",
+                                     "ogre.obj.xz",
+                                     "koala.obj.xz",
+                                     "igea.ply.xz",
+                                     "fg_terrain_hawaii.ply.xz"};
 
 class RobustConsistency : public ::testing::TestWithParam<const char*> {};
 
@@ -229,14 +237,12 @@ TEST_P(RobustConsistency, EveryConfigurationAgreesWithEmbreeOnPrimaryRays) {
   check_mesh_file(GetParam(), int(at - std::begin(kSharedMeshes)));
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Robust, RobustConsistency,
-    ::testing::ValuesIn(kSharedMeshes),
-    [](const ::testing::TestParamInfo<const char*>& info) {
-      std::string n = info.param;
-      n = n.substr(0, n.find('.'));
-      std::replace(n.begin(), n.end(), '-', '_');
-      return n;
-    });
+INSTANTIATE_TEST_SUITE_P(Robust, RobustConsistency, ::testing::ValuesIn(kSharedMeshes),
+                         [](const ::testing::TestParamInfo<const char*>& info) {
+                           std::string n = info.param;
+                           n = n.substr(0, n.find('.'));
+                           std::replace(n.begin(), n.end(), '-', '_');
+                           return n;
+                         });
 
 }  // namespace

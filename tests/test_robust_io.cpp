@@ -72,7 +72,8 @@ PolyMesh load_memory(const std::string& name, const std::string& bytes) {
     const std::string ext = stem.substr(stem.rfind('.'));
     PolyMesh m = ext == ".obj"   ? slim::detail::read_obj(name, data)
                  : ext == ".ply" ? slim::detail::read_ply(name, data)
-                                 : slim::detail::read_gltf(name, data, ext == ".glb", "/nonexistent-slimrt-dir");
+                                 : slim::detail::read_gltf(name, data, ext == ".glb",
+                                                           "/nonexistent-slimrt-dir");
     slim::check_mesh(m);
     return m;
   } catch (const std::bad_alloc&) {
@@ -102,10 +103,12 @@ Outcome outcome_of(const std::string& name, const std::function<PolyMesh()>& fn,
   }
 }
 Outcome load_outcome(const std::string& path, PolyMesh* out = nullptr, std::string* msg = nullptr) {
-  return outcome_of(path, [&] { return slim::load(path); }, out, msg);
+  return outcome_of(
+      path, [&] { return slim::load(path); }, out, msg);
 }
 Outcome memory_outcome(const std::string& name, const std::string& bytes, PolyMesh* out = nullptr) {
-  return outcome_of(name, [&] { return load_memory(name, bytes); }, out);
+  return outcome_of(
+      name, [&] { return load_memory(name, bytes); }, out);
 }
 
 bool is_binary_format(const std::string& name) {
@@ -242,7 +245,8 @@ TEST(RobustLimits, HeaderClaimingTwoToThe31FacesIsAnErrorNotAnAllocation) {
   std::string glb = slim::seeds::glb_scene();
   const size_t json_len = uint8_t(glb[12]) | uint8_t(glb[13]) << 8 | uint8_t(glb[14]) << 16;
   const size_t bin_at = 20 + json_len;
-  glb[bin_at] = '\xff', glb[bin_at + 1] = '\xff', glb[bin_at + 2] = '\xff', glb[bin_at + 3] = '\x7f';
+  glb[bin_at] = '\xff', glb[bin_at + 1] = '\xff', glb[bin_at + 2] = '\xff',
+  glb[bin_at + 3] = '\x7f';
   cases.push_back({"chunk.glb", glb, "byte"});
   // OBJ: a face using vertex 2^31 - 1.
   cases.push_back({"index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 2147483647\n", ":4:"});
@@ -294,8 +298,9 @@ TEST(RobustFuzzFindings, CrashingInputsStayFixed) {
       // to int: UBSan "inf is outside the range of representable values of type 'int'").
       {"obj", "v 0 0 0\nvw 0 111111111111111111111111111111111111111111111111 8 4\n"},
       {"obj", "v 0 0 0\nvw 0 1e300 0.5\n"},
-      {"ply", "ply\nformat binary_little_endian 1.0\nelement face 1\n"
-              "property list uchar int vertex_indices\nend_header\n\x03"},
+      {"ply",
+       "ply\nformat binary_little_endian 1.0\nelement face 1\n"
+       "property list uchar int vertex_indices\nend_header\n\x03"},
   };
   for (const Finding& f : findings) {
     try {

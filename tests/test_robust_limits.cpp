@@ -64,43 +64,14 @@ PolyMesh flat_grid(int n) {
 
 // Icosphere (3 subdivisions, 1280 triangles) of radius `scale`, jittered radially by +-1%.
 PolyMesh sphere(float scale) {
-  const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
-  std::vector<Vec3f> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
-                          {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
-  std::vector<uint32_t> f = {0, 11, 5, 0, 5,  1,  0,  1,  7,  0,  7,  10, 0,  10, 11,
-                             1, 5,  9, 5, 11, 4,  11, 10, 2,  10, 7,  6,  7,  1,  8,
-                             3, 9,  4, 3, 4,  2,  3,  2,  6,  3,  6,  8,  3,  8,  9,
-                             4, 9,  5, 2, 4,  11, 6,  2,  10, 8,  6,  7,  9,  8,  1};
-  for (int l = 0; l < 3; ++l) {
-    std::vector<uint32_t> nf;
-    std::vector<std::pair<uint64_t, uint32_t>> mids;
-    auto midpoint = [&](uint32_t a, uint32_t b) {
-      const uint64_t key = uint64_t(std::min(a, b)) << 32 | std::max(a, b);
-      for (auto& [k, i] : mids)
-        if (k == key) return i;
-      v.push_back((v[a] + v[b]) * 0.5f);
-      mids.push_back({key, uint32_t(v.size() - 1)});
-      return uint32_t(v.size() - 1);
-    };
-    for (size_t i = 0; i < f.size(); i += 3) {
-      const uint32_t a = f[i], b = f[i + 1], c = f[i + 2];
-      const uint32_t ab = midpoint(a, b), bc = midpoint(b, c), ca = midpoint(c, a);
-      nf.insert(nf.end(), {a, ab, ca, b, bc, ab, c, ca, bc, ab, bc, ca});
-    }
-    f.swap(nf);
-  }
+  PolyMesh m = icosphere(3);
   Rng rng(3);
-  PolyMesh m;
-  m.name = "sphere";
-  for (Vec3f& p : v) {
+  for (Vec3f& p : m.positions) {
     const double r = 1.0 + 0.02 * (rng.uniform() - 0.5);
-    const Vec3f n = normalize(p);
     // Scale in double so that the tiny and huge spheres are the same shape, not underflowed.
-    m.positions.push_back({float(double(n.x) * r * scale), float(double(n.y) * r * scale),
-                           float(double(n.z) * r * scale)});
+    p = Vec3f(float(double(p.x) * r * scale), float(double(p.y) * r * scale),
+              float(double(p.z) * r * scale));
   }
-  m.face_indices = f;
-  m.face_sizes.assign(f.size() / 3, 3);
   return m;
 }
 
@@ -172,8 +143,6 @@ TEST(RobustLimits, OneFace) {
     EXPECT_GE(built, 20);
   }
 }
-
-
 
 // Coordinates near 1e30 and 1e-30. Measured with a jittered sphere of radius r and rays from
 // inside (directions of length ~0.5, so t ~ r), the float watertight test shared by every

@@ -130,7 +130,8 @@ TEST(RobustWatertight, VerifyDetectsAHole) {
     }
   }
   EXPECT_EQ(run_cli("verify " + path + " --rays 3000 --config bvh8-tri4v").exit_code, 2);
-  const CliResult r = run_cli("verify " + path + " --rays 30000 --allow-open --config "
+  const CliResult r = run_cli("verify " + path +
+                              " --rays 30000 --allow-open --config "
                               "bvh8-tri4v,clbvh-compact");
   EXPECT_EQ(r.exit_code, 1) << r.out;
   const auto rows = table_rows(r.out);

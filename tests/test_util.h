@@ -6,7 +6,9 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "slimrt/slimrt.h"
@@ -15,11 +17,11 @@ namespace slim::test {
 
 inline std::string shared_data_dir() { return SLIM_SHARED_DATA; }
 inline bool have_shared_data() { return std::filesystem::exists(shared_data_dir() + "/MANIFEST"); }
-#define SLIM_REQUIRE_SHARED_DATA()                                                       \
-  do {                                                                                   \
-    if (!slim::test::have_shared_data())                                                 \
-      GTEST_SKIP() << "../shared/data not found at " << slim::test::shared_data_dir()   \
-                   << ": skipping a test that needs the shared meshes";                  \
+#define SLIM_REQUIRE_SHARED_DATA()                                                    \
+  do {                                                                                \
+    if (!slim::test::have_shared_data())                                              \
+      GTEST_SKIP() << "../shared/data not found at " << slim::test::shared_data_dir() \
+                   << ": skipping a test that needs the shared meshes";               \
   } while (0)
 
 // Random triangles inside the unit cube (sizes around `size`), as a PolyMesh of triangles.
@@ -85,13 +87,15 @@ inline RefHit reference_intersect(const std::vector<RefTri>& tris, const Ray& r)
       e2[a] = t.v[2][a] - t.v[0][a];
       s[a] = o[a] - t.v[0][a];
     }
-    double p[3] = {d[1] * e2[2] - d[2] * e2[1], d[2] * e2[0] - d[0] * e2[2], d[0] * e2[1] - d[1] * e2[0]};
+    double p[3] = {d[1] * e2[2] - d[2] * e2[1], d[2] * e2[0] - d[0] * e2[2],
+                   d[0] * e2[1] - d[1] * e2[0]};
     double det = e1[0] * p[0] + e1[1] * p[1] + e1[2] * p[2];
     if (det == 0) continue;
     double inv = 1.0 / det;
     double u = (s[0] * p[0] + s[1] * p[1] + s[2] * p[2]) * inv;
     if (u < 0 || u > 1) continue;
-    double q[3] = {s[1] * e1[2] - s[2] * e1[1], s[2] * e1[0] - s[0] * e1[2], s[0] * e1[1] - s[1] * e1[0]};
+    double q[3] = {s[1] * e1[2] - s[2] * e1[1], s[2] * e1[0] - s[0] * e1[2],
+                   s[0] * e1[1] - s[1] * e1[0]};
     double v = (d[0] * q[0] + d[1] * q[1] + d[2] * q[2]) * inv;
     if (v < 0 || u + v > 1) continue;
     double tt = (e2[0] * q[0] + e2[1] * q[1] + e2[2] * q[2]) * inv;
@@ -123,6 +127,67 @@ inline Ray random_ray(Rng& rng, const Box3f& box) {
 inline bool agrees(const Hit& h, const RefHit& r, double rel_tol = 1e-5) {
   if (!h.valid() || !r.valid()) return h.valid() == r.valid();
   return std::fabs(double(h.t) - r.t) <= rel_tol * std::max(1.0, std::fabs(r.t));
+}
+
+// Counts of compare_with_reference().
+struct Agreement {
+  uint64_t rays = 0, agree = 0, same_face = 0, hits = 0;
+};
+
+// `nrays` random rays through the scene box: closest hits against the brute-force reference over
+// `meshes` (agreement and same input face counted), and occluded() == (closest hit exists).
+inline Agreement compare_with_reference(const Scene& scene,
+                                        const std::vector<const PolyMesh*>& meshes, int nrays,
+                                        uint32_t seed) {
+  std::vector<RefTri> ref = reference_triangles(meshes);
+  Rng rng(seed);
+  Agreement a;
+  for (int i = 0; i < nrays; ++i) {
+    Ray r = random_ray(rng, scene.bounds());
+    Hit h = scene.intersect(r);
+    RefHit rh = reference_intersect(ref, r);
+    a.rays++;
+    a.hits += rh.valid();
+    a.agree += agrees(h, rh);
+    a.same_face += h.valid() && rh.valid() && h.primID == rh.prim && h.geomID == rh.geom;
+    EXPECT_EQ(scene.occluded(r), h.valid());
+  }
+  return a;
+}
+
+// Icosahedron subdivided `levels` times (20 * 4^levels triangles), vertices projected onto the
+// unit sphere; closed and welded.
+inline PolyMesh icosphere(int levels) {
+  const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
+  std::vector<Vec3f> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
+                          {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
+                          {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<uint32_t> f = {0, 11, 5,  0, 5,  1, 0, 1, 7, 0, 7,  10, 0, 10, 11, 1, 5, 9, 5, 11,
+                             4, 11, 10, 2, 10, 7, 6, 7, 1, 8, 3,  9,  4, 3,  4,  2, 3, 2, 6, 3,
+                             6, 8,  3,  8, 9,  4, 9, 5, 2, 4, 11, 6,  2, 10, 8,  6, 7, 9, 8, 1};
+  for (int l = 0; l < levels; ++l) {
+    std::map<std::pair<uint32_t, uint32_t>, uint32_t> mid;
+    auto midpoint = [&](uint32_t a, uint32_t b) {
+      auto key = std::minmax(a, b);
+      auto it = mid.find(key);
+      if (it != mid.end()) return it->second;
+      v.push_back((v[a] + v[b]) * 0.5f);
+      return mid[key] = uint32_t(v.size() - 1);
+    };
+    std::vector<uint32_t> nf;
+    for (size_t i = 0; i < f.size(); i += 3) {
+      uint32_t a = f[i], b = f[i + 1], c = f[i + 2];
+      uint32_t ab = midpoint(a, b), bc = midpoint(b, c), ca = midpoint(c, a);
+      nf.insert(nf.end(), {a, ab, ca, b, bc, ab, c, ca, bc, ab, bc, ca});
+    }
+    f.swap(nf);
+  }
+  PolyMesh m;
+  m.name = "sphere";
+  for (const Vec3f& p : v) m.positions.push_back(normalize(p));
+  m.face_indices = f;
+  m.face_sizes.assign(f.size() / 3, 3);
+  return m;
 }
 
 }  // namespace slim::test

@@ -23,7 +23,8 @@
 //       lossy-grid, lossy-grid-e2: the scene statistic "max_error" (largest |decoded - input| over
 //         all grid vertices; if absent, "diag_max_pct" / 100 * the box diagonal, which bounds it);
 //       costa-*V*: half a quantization step, |step| / 2 with step = (box size) / 65535 per axis
-//         (Costa et al., Listing 4: 16 bits per component in the scene box; codes round to nearest).
+//         (Costa et al., Listing 4: 16 bits per component in the scene box; codes round to
+//         nearest).
 //
 // SCENE is anything slim::load() reads, or `sphere:L`: an icosahedron subdivided L times
 // (20 * 4^L triangles, 1 <= L <= 9) with vertices jittered radially by +-1%, closed and welded.
@@ -67,12 +68,12 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 // Icosphere subdivided `levels` times, vertices jittered radially by +-1%; closed and welded.
 PolyMesh jittered_sphere(int levels, uint32_t seed) {
   const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
-  std::vector<Vec3f> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
-                          {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
-  std::vector<uint32_t> f = {0, 11, 5, 0, 5,  1,  0,  1,  7,  0,  7,  10, 0,  10, 11,
-                             1, 5,  9, 5, 11, 4,  11, 10, 2,  10, 7,  6,  7,  1,  8,
-                             3, 9,  4, 3, 4,  2,  3,  2,  6,  3,  6,  8,  3,  8,  9,
-                             4, 9,  5, 2, 4,  11, 6,  2,  10, 8,  6,  7,  9,  8,  1};
+  std::vector<Vec3f> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
+                          {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
+                          {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<uint32_t> f = {0, 11, 5,  0, 5,  1, 0, 1, 7, 0, 7,  10, 0, 10, 11, 1, 5, 9, 5, 11,
+                             4, 11, 10, 2, 10, 7, 6, 7, 1, 8, 3,  9,  4, 3,  4,  2, 3, 2, 6, 3,
+                             6, 8,  3,  8, 9,  4, 9, 5, 2, 4, 11, 6,  2, 10, 8,  6, 7, 9, 8, 1};
   for (int l = 0; l < levels; ++l) {
     std::unordered_map<uint64_t, uint32_t> mid;
     auto midpoint = [&](uint32_t a, uint32_t b) {
@@ -166,7 +167,8 @@ Targets make_targets(const PolyMesh& m) {
   uint64_t c = 0;
   for (uint32_t n : m.face_sizes) {
     bool finite = true;
-    for (uint32_t k = 0; k < n; ++k) finite = finite && is_finite(m.positions[m.face_indices[c + k]]);
+    for (uint32_t k = 0; k < n; ++k)
+      finite = finite && is_finite(m.positions[m.face_indices[c + k]]);
     if (finite) {
       for (uint32_t k = 0; k < n; ++k) used[m.face_indices[c + k]] = 1;
       auto edge = [&](uint32_t a, uint32_t b) {
@@ -203,9 +205,8 @@ uint32_t crossings(const Scene& ref, Vec3f p, Vec3f d) {
   return n;
 }
 
-const Vec3f kParityDirs[3] = {{0.5377f, 0.8622f, -0.3188f},
-                               {-0.7431f, 0.2016f, 0.6378f},
-                               {0.1347f, -0.5811f, -0.8024f}};
+const Vec3f kParityDirs[3] = {
+    {0.5377f, 0.8622f, -0.3188f}, {-0.7431f, 0.2016f, 0.6378f}, {0.1347f, -0.5811f, -0.8024f}};
 
 // Inside a closed mesh: an odd number of crossings along 2 of 3 directions (one direction can
 // be fooled by a ray through an edge counted twice).
@@ -245,7 +246,8 @@ struct RaySource {
     if (kind == 1 && !targets->vertices.empty()) {
       target = targets->vertices[(i / 3 + uint64_t(rng.next()) * 7919) % targets->vertices.size()];
     } else if (kind == 2 && !targets->midpoints.empty()) {
-      target = targets->midpoints[(i / 3 + uint64_t(rng.next()) * 7919) % targets->midpoints.size()];
+      target =
+          targets->midpoints[(i / 3 + uint64_t(rng.next()) * 7919) % targets->midpoints.size()];
     } else {
       Vec3f d;
       do {
@@ -300,8 +302,8 @@ double detail_of(const SceneStats& st, const char* key, double fallback) {
 struct Row {
   std::string config, status, note;
   uint64_t rays = 0, leaks = 0, occluded_leaks = 0, far = 0, near = 0;
-  double error_bound = 0;  // e (scene units); 0 for lossless
-  double max_excess = 0;   // largest |t - t_ref| * |dir| among hits, scene units
+  double error_bound = 0;      // e (scene units); 0 for lossless
+  double max_excess = 0;       // largest |t - t_ref| * |dir| among hits, scene units
   bool own_reference = false;  // t_ref from the format's decoded triangles
   uint64_t beyond_bound = 0;   // lossy: hits off the input surface by more than e / |cos|
   uint64_t beyond_random = 0;  //   of them, rays in random directions (not aimed at a vertex/edge)
@@ -336,8 +338,9 @@ int cmd_verify(int argc, char** argv) {
   app.add_option("--config", configs,
                  "configurations (repeatable or comma-separated); default: all_config_names()")
       ->delimiter(',');
-  app.add_option("--rays", rays, "rays per configuration (1/3 random, 1/3 at vertices, 1/3 at "
-                                 "edge midpoints)")
+  app.add_option("--rays", rays,
+                 "rays per configuration (1/3 random, 1/3 at vertices, 1/3 at "
+                 "edge midpoints)")
       ->check(CLI::Range(uint64_t(3), uint64_t(1) << 40))
       ->capture_default_str();
   app.add_option("--threads", threads, "threads, 0 = all cores")
@@ -360,12 +363,12 @@ int cmd_verify(int argc, char** argv) {
   const PolyMesh mesh = load_scene(scene_name);
   const MeshSummary sum = summarize(mesh);
   const Closedness cl = closedness(mesh);
-  std::printf("scene %s: %llu vertices, %llu faces, %llu fan triangles, %llu edges "
-              "(%llu boundary, %llu non-manifold), loaded in %.2f s\n",
-              scene_name.c_str(), (unsigned long long)sum.vertices, (unsigned long long)sum.faces,
-              (unsigned long long)sum.fan_triangles, (unsigned long long)cl.edges,
-              (unsigned long long)cl.boundary, (unsigned long long)cl.nonmanifold,
-              seconds_since(t_load));
+  std::printf(
+      "scene %s: %llu vertices, %llu faces, %llu fan triangles, %llu edges "
+      "(%llu boundary, %llu non-manifold), loaded in %.2f s\n",
+      scene_name.c_str(), (unsigned long long)sum.vertices, (unsigned long long)sum.faces,
+      (unsigned long long)sum.fan_triangles, (unsigned long long)cl.edges,
+      (unsigned long long)cl.boundary, (unsigned long long)cl.nonmanifold, seconds_since(t_load));
   if ((cl.boundary || cl.nonmanifold || cl.edges == 0) && !allow_open) {
     std::fprintf(stderr,
                  "slimrt verify: %s is not a closed manifold mesh (%llu boundary, %llu "
@@ -386,19 +389,18 @@ int cmd_verify(int argc, char** argv) {
   std::vector<Vec3f> inside;
   arena.execute([&] { inside = inside_points(ref, box, 4096, uint32_t(seed), tried); });
   if (inside.size() < 16) {
-    std::fprintf(stderr,
-                 "slimrt verify: found %zu points inside %s in %llu tries: is it closed?\n",
+    std::fprintf(stderr, "slimrt verify: found %zu points inside %s in %llu tries: is it closed?\n",
                  inside.size(), scene_name.c_str(), (unsigned long long)tried);
     return 2;
   }
   const Targets targets = make_targets(mesh);
   const RaySource source{&inside, &targets, seed * 0xD1B54A32D192ED03ULL + 1};
-  std::printf("rays per configuration: %llu (%llu random, %llu at %zu vertices, %llu at %zu edge "
-              "midpoints), from %zu inside points (%llu sampled)\n",
-              (unsigned long long)rays, (unsigned long long)((rays + 2) / 3),
-              (unsigned long long)((rays + 1) / 3), targets.vertices.size(),
-              (unsigned long long)(rays / 3), targets.midpoints.size(), inside.size(),
-              (unsigned long long)tried);
+  std::printf(
+      "rays per configuration: %llu (%llu random, %llu at %zu vertices, %llu at %zu edge "
+      "midpoints), from %zu inside points (%llu sampled)\n",
+      (unsigned long long)rays, (unsigned long long)((rays + 2) / 3),
+      (unsigned long long)((rays + 1) / 3), targets.vertices.size(), (unsigned long long)(rays / 3),
+      targets.midpoints.size(), inside.size(), (unsigned long long)tried);
 
   // Reference: t (in ray units) and |cos theta| at the first crossing of the input surface.
   std::vector<float> t_ref(rays), cos_ref(rays);
@@ -496,11 +498,11 @@ int cmd_verify(int argc, char** argv) {
     if (explain >= 0 && uint64_t(explain) < rays) {
       const Ray r = source(uint64_t(explain));
       const Hit h = s.intersect(r);
-      std::printf("ray #%lld org (%a, %a, %a) dir (%a, %a, %a): input t %.9g |cos| %.4f; "
-                  "%s: own reference t %.9g, hit t %.9g face %u, occluded %d\n",
-                  (long long)explain, r.org.x, r.org.y, r.org.z, r.dir.x, r.dir.y, r.dir.z,
-                  t_ref[explain], cos_ref[explain], name.c_str(), (*tref)[explain], h.t, h.primID,
-                  int(s.occluded(r)));
+      std::printf(
+          "ray #%lld org (%a, %a, %a) dir (%a, %a, %a): input t %.9g |cos| %.4f; "
+          "%s: own reference t %.9g, hit t %.9g face %u, occluded %d\n",
+          (long long)explain, r.org.x, r.org.y, r.org.z, r.dir.x, r.dir.y, r.dir.z, t_ref[explain],
+          cos_ref[explain], name.c_str(), (*tref)[explain], h.t, h.primID, int(s.occluded(r)));
     }
     // Against the own reference (or the input for formats without decoded triangles): rounding
     // only. Against the input, lossy formats: the error bound e / |cos theta| (informational when
@@ -588,8 +590,9 @@ int cmd_verify(int argc, char** argv) {
     table.push_back(row);
   }
 
-  std::printf("| config | rays | leaks (intersect) | leaks (occluded) | far | near | max |t - t_ref| "
-              "| reference | lossy: error bound e | lossy: beyond e/cos (max dev.) | status |\n");
+  std::printf(
+      "| config | rays | leaks (intersect) | leaks (occluded) | far | near | max |t - t_ref| "
+      "| reference | lossy: error bound e | lossy: beyond e/cos (max dev.) | status |\n");
   std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: | ---: | --- |\n");
   for (const Row& r : table) {
     if (r.status == "n/a" || r.status == "BUILD ERROR") {
@@ -607,9 +610,8 @@ int cmd_verify(int argc, char** argv) {
     std::printf("| %s | %llu | %llu | %llu | %llu | %llu | %.3g | %s | %s | %s | %s%s%s |\n",
                 r.config.c_str(), (unsigned long long)r.rays, (unsigned long long)r.leaks,
                 (unsigned long long)r.occluded_leaks, (unsigned long long)r.far,
-                (unsigned long long)r.near, r.max_excess,
-                r.own_reference ? "own decoded" : "input", bound, beyond, r.status.c_str(),
-                r.note.empty() ? "" : ": ", r.note.c_str());
+                (unsigned long long)r.near, r.max_excess, r.own_reference ? "own decoded" : "input",
+                bound, beyond, r.status.c_str(), r.note.empty() ? "" : ": ", r.note.c_str());
   }
   std::printf("\nbox diagonal %.6g; distances are |t - t_ref| * |dir| in scene units; %s\n", diag,
               any_failed ? "FAILED" : "no leaks, every hit within its bound");

@@ -49,9 +49,9 @@ struct Hit {
   // Barycentric coordinates of the hit inside the triangle that was hit (weights of its 2nd and
   // 3rd vertex); for grid formats, the per-grid u,v of the paper (grid_u, grid_v in [0,1]).
   float u = 0.0f, v = 0.0f;
-  Vec3f Ng;                     // geometric normal of the triangle hit (not normalized)
-  uint32_t geomID = kInvalidID; // index of the input mesh
-  uint32_t primID = kInvalidID; // index of the face in the input mesh
+  Vec3f Ng;                      // geometric normal of the triangle hit (not normalized)
+  uint32_t geomID = kInvalidID;  // index of the input mesh
+  uint32_t primID = kInvalidID;  // index of the face in the input mesh
   PrimKind kind = PrimKind::Triangle;
 
   bool valid() const { return geomID != kInvalidID; }
@@ -79,8 +79,8 @@ enum class Bvh : uint8_t {
 struct BuildOptions {
   Geometry geometry = Geometry::Triangles;
   Bvh bvh = Bvh::Bvh8;
-  int sah_bins = 32;      // binned SAH: bins per axis
-  int max_leaf_size = 4;  // primitives per leaf (triangles; pairs and sub-grids use their own)
+  int sah_bins = 32;          // binned SAH: bins per axis
+  int max_leaf_size = 4;      // primitives per leaf (triangles; pairs and sub-grids use their own)
   std::string costa = "PFV";  // Geometry::Quantized: any of the letters T, P, F, V
   int threads = 0;            // build threads; 0 = all cores
 
@@ -118,9 +118,9 @@ struct TraversalCounters {
 struct SceneStats {
   double build_seconds = 0;
   uint64_t input_faces = 0;
-  uint64_t triangles = 0;       // after fan triangulation
-  uint64_t skipped_faces = 0;   // faces dropped at build: NaN/Inf vertex (see README)
-  uint64_t primitives = 0;      // primitives the BVH was built over (triangles, pairs, ...)
+  uint64_t triangles = 0;      // after fan triangulation
+  uint64_t skipped_faces = 0;  // faces dropped at build: NaN/Inf vertex (see README)
+  uint64_t primitives = 0;     // primitives the BVH was built over (triangles, pairs, ...)
   // Format-specific figures (node counts per type, leaf fill, SAH cost, ...), in order.
   std::vector<std::pair<std::string, double>> details;
 };

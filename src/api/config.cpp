@@ -75,7 +75,8 @@ std::string BuildOptions::config_name() const {
   for (const Named& n : kConfigs)
     if (n.geometry == geometry && n.bvh == bvh) return n.name;
   // Combinations without a BENCHMARK.md name.
-  static const char* g[] = {"tri4v", "tri4i", "pairs", "grid", "lossy-grid", "lossy-grid-e2", "costa"};
+  static const char* g[] = {"tri4v",      "tri4i",         "pairs", "grid",
+                            "lossy-grid", "lossy-grid-e2", "costa"};
   static const char* b[] = {"bvh8", "qbvh8", "clbvh", "clbvh-compact"};
   return std::string(b[int(bvh)]) + "-" + g[int(geometry)];
 }
@@ -85,9 +86,9 @@ const char* simd_isa() { return simd::isa_name(); }
 std::vector<std::string> all_config_names() {
   std::vector<std::string> v;
   for (const Named& n : kConfigs) v.push_back(n.name);
-  for (const char* c : {"costa", "costa-P", "costa-F", "costa-V", "costa-PF", "costa-PV", "costa-FV",
-                        "costa-PFV", "costa-T", "costa-TP", "costa-TF", "costa-TV", "costa-TPF",
-                        "costa-TPV", "costa-TFV", "costa-TPFV"})
+  for (const char* c : {"costa", "costa-P", "costa-F", "costa-V", "costa-PF", "costa-PV",
+                        "costa-FV", "costa-PFV", "costa-T", "costa-TP", "costa-TF", "costa-TV",
+                        "costa-TPF", "costa-TPV", "costa-TFV", "costa-TPFV"})
     v.push_back(c);
   return v;
 }

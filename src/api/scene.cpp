@@ -52,7 +52,8 @@ void check_coordinate_range(const std::vector<const PolyMesh*>& meshes) {
   const Vec3f d = box.hi - box.lo;
   const double diag = std::sqrt(double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z);
   if (diag > 0.0 && diag < double(kMinExtent))
-    throw Error("scene extent " + fmt_g(diag) + " is below 1e-12, the smallest slimrt supports (the float watertight test " +
+    throw Error("scene extent " + fmt_g(diag) +
+                " is below 1e-12, the smallest slimrt supports (the float watertight test " +
                 "would underflow); scale the scene");
 }
 

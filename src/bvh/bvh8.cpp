@@ -329,7 +329,8 @@ class Collapser {
         const std::vector<uint8_t>& d = multi_cache_.at(i);
         std::memcpy(data, d.data(), d.size());
       } else {
-        for (int c = 0; c < k; ++c) write_leaf_blocks(kids[c], data + uint64_t(c) * enc_.block_bytes);
+        for (int c = 0; c < k; ++c)
+          write_leaf_blocks(kids[c], data + uint64_t(c) * enc_.block_bytes);
       }
       Box3f boxes[8];
       for (int c = 0; c < k; ++c) boxes[c] = b2_.nodes[kids[c]].box;
@@ -350,8 +351,7 @@ class Collapser {
     }
     if (prims_[i] >= kParallelEmit) {
       tbb::task_group tg;
-      for (int c = 0; c < k; ++c)
-        tg.run([&, c] { refs[c] = emit(kids[c], noff[c], loff[c]); });
+      for (int c = 0; c < k; ++c) tg.run([&, c] { refs[c] = emit(kids[c], noff[c], loff[c]); });
       tg.wait();
     } else {
       for (int c = 0; c < k; ++c) refs[c] = emit(kids[c], noff[c], loff[c]);

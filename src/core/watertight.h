@@ -92,9 +92,9 @@ namespace detail {
 
 // Double-precision re-evaluation of one triangle when an edge function is exactly zero
 // (paper, section 3.3). Returns true on a hit and sets t, u, v.
-inline bool watertight_fallback(float ax, float ay, float az, float bx, float by, float bz, float cx,
-                                float cy, float cz, float tnear, float tfar, float& t, float& u,
-                                float& v) {
+inline bool watertight_fallback(float ax, float ay, float az, float bx, float by, float bz,
+                                float cx, float cy, float cz, float tnear, float tfar, float& t,
+                                float& u, float& v) {
   double U = double(cx) * double(by) - double(cy) * double(bx);
   double V = double(ax) * double(cy) - double(ay) * double(cx);
   double W = double(bx) * double(ay) - double(by) * double(ax);
@@ -176,8 +176,8 @@ SLIM_INLINE uint32_t intersect_triangles(const RayVertex<VF>& a, const RayVertex
     t.storeu(tt), u.storeu(uu), v.storeu(vv);
     for (uint32_t z = zeros; z;) {
       int i = pop_lowest(z);
-      if (detail::watertight_fallback(ax[i], ay[i], az[i], bx[i], by[i], bz[i], cx[i], cy[i],
-                                      cz[i], tnear, tfar, tt[i], uu[i], vv[i]))
+      if (detail::watertight_fallback(ax[i], ay[i], az[i], bx[i], by[i], bz[i], cx[i], cy[i], cz[i],
+                                      tnear, tfar, tt[i], uu[i], vv[i]))
         m |= 1u << i;
     }
     t = VF::loadu(tt), u = VF::loadu(uu), v = VF::loadu(vv);

@@ -8,9 +8,9 @@
 
 #include <cstdint>
 #include <cstring>
-#include <vector>
 #include <string>
 #include <type_traits>
+#include <vector>
 
 #include "core/ray.h"
 #include "core/simd.h"
@@ -79,8 +79,8 @@ SLIM_INLINE int closest_lane(uint32_t m, const simd::vfloat4& t) {
 }
 
 // Fills the hit record from lane i (vertices p0, p1, p2 of that triangle).
-SLIM_INLINE void record_hit(float t, float u, float v, Vec3f p0, Vec3f p1, Vec3f p2,
-                            uint32_t geom, uint32_t prim, TravRay& ray, HitRecord& hit) {
+SLIM_INLINE void record_hit(float t, float u, float v, Vec3f p0, Vec3f p1, Vec3f p2, uint32_t geom,
+                            uint32_t prim, TravRay& ray, HitRecord& hit) {
   hit.t = t;
   hit.u = u;
   hit.v = v;
@@ -262,8 +262,8 @@ struct Tri4iCompact : Tri4i {
   static constexpr bool kMultiLeafLayout = true;
 
   static std::vector<uint8_t> encode_multileaf(const TriangleSource& src,
-                                               const uint32_t* const* prims,
-                                               const uint32_t* counts, int k) {
+                                               const uint32_t* const* prims, const uint32_t* counts,
+                                               int k) {
     std::vector<uint32_t> dict;
     std::vector<uint8_t> out(size_t(k) * sizeof(Tri4iCompactBlock));
     auto index_of = [&](uint32_t v) {

@@ -71,6 +71,25 @@ struct Prepared {
   double seconds = 0;
 };
 
+// Appends the leftover triangles of gs as 2x2 grids (a, b / c, c): A = (a, b, c), B = (a, c, c)
+// degenerate; with_corners also extends gs.corner_of_vertex.
+void append_triangle_grids(GridSet& gs, bool with_corners) {
+  for (const LeftoverTriangle& t : gs.triangles) {
+    VertexGrid g;
+    g.geom = t.geom;
+    g.res_x = g.res_y = 2;
+    g.vertex_offset = gs.vertices.size();
+    g.cell_offset = gs.cell_faces.size() / 2;
+    gs.vertices.insert(gs.vertices.end(), {t.v[0], t.v[1], t.v[2], t.v[2]});
+    if (with_corners)
+      gs.corner_of_vertex.insert(gs.corner_of_vertex.end(),
+                                 {t.corner[0], t.corner[1], t.corner[2], t.corner[2]});
+    gs.cell_faces.insert(gs.cell_faces.end(), {t.face, t.face});
+    gs.cell_flip.push_back(0);
+    gs.grids.push_back(g);
+  }
+}
+
 Prepared prepare(const std::vector<const PolyMesh*>& meshes, Layout layout) {
   auto t0 = Clock::now();
   Prepared p;
@@ -108,18 +127,7 @@ Prepared prepare(const std::vector<const PolyMesh*>& meshes, Layout layout) {
       gs.grids.resize(gs.multi_cell_grids);
     }
   } else {
-    // Triangles (a, b, c) -> 2x2 grids (a, b / c, c): A = (a, b, c), B = (a, c, c) degenerate.
-    for (const LeftoverTriangle& t : gs.triangles) {
-      VertexGrid g;
-      g.geom = t.geom;
-      g.res_x = g.res_y = 2;
-      g.vertex_offset = gs.vertices.size();
-      g.cell_offset = gs.cell_faces.size() / 2;
-      gs.vertices.insert(gs.vertices.end(), {t.v[0], t.v[1], t.v[2], t.v[2]});
-      gs.cell_faces.insert(gs.cell_faces.end(), {t.face, t.face});
-      gs.cell_flip.push_back(0);
-      gs.grids.push_back(g);
-    }
+    append_triangle_grids(gs, /*with_corners=*/false);
     gs.triangles.clear();
   }
   p.sub_start.assign(gs.grids.size() + 1, 0);
@@ -756,19 +764,7 @@ GridAttributes GridAttributes::build(const std::vector<const PolyMesh*>& meshes)
   im.gs = make_grids(meshes, gopt);
   GridSet& gs = im.gs;
   // Leftover triangles as the 2x2 grids (a, b / c, c) Scene::build makes of them in its 2x2 mode.
-  for (const LeftoverTriangle& t : gs.triangles) {
-    VertexGrid g;
-    g.geom = t.geom;
-    g.res_x = g.res_y = 2;
-    g.vertex_offset = gs.vertices.size();
-    g.cell_offset = gs.cell_faces.size() / 2;
-    gs.vertices.insert(gs.vertices.end(), {t.v[0], t.v[1], t.v[2], t.v[2]});
-    gs.corner_of_vertex.insert(gs.corner_of_vertex.end(),
-                               {t.corner[0], t.corner[1], t.corner[2], t.corner[2]});
-    gs.cell_faces.insert(gs.cell_faces.end(), {t.face, t.face});
-    gs.cell_flip.push_back(0);
-    gs.grids.push_back(g);
-  }
+  append_triangle_grids(gs, /*with_corners=*/true);
   im.face_start.resize(meshes.size());
   im.cells.resize(meshes.size());
   for (size_t g = 0; g < meshes.size(); ++g)

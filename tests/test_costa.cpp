@@ -2,11 +2,13 @@
 // the store under every combination of T, P, F, V, the leaves against the brute-force reference
 // on the decoded geometry, sizes (Tables 1 and 3), PSNR of V renders, and a decode
 // micro-benchmark (disabled by default).
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <map>
 #include <random>
+#include <tuple>
 
 #include "mesh/tessellate.h"
 #include "prim/costa_leaf.h"
@@ -728,12 +730,72 @@ TEST(CostaSizes, RegularAndCombinations) {
   EXPECT_EQ(s.primitives, s.triangles + s.quads + s.fans + s.strips);
 }
 
+TEST(CostaSizes, StoreOrderShrinksResidualsAndFlagBit) {
+  // Unwelded mixed primitives in random order: the running primitive size is a random walk in
+  // input order; the store's leaf order keeps it near the prediction, and the renumbered
+  // vertices let the flagged first entries of fans and strips fit the plain index width.
+  PolyMesh m = mixed_mesh(20000, 11);
+  CostaSizes s = costa_sizes(m);
+  EXPECT_LT(s.combos.at("P"), s.input_order_combos.at("P"));
+  EXPECT_LE(s.prim_residual_bits, 6u);
+  EXPECT_EQ(s.face_bits, bits_for(s.vertices - 1)) << "the flag bit should fit";
+  EXPECT_LT(s.combos.at("F"), s.input_order_combos.at("F"));
+  // Orders change nothing the letters do not pack.
+  EXPECT_EQ(s.combos.at(""), s.input_order_combos.at(""));
+  EXPECT_EQ(s.combos.at("V"), s.input_order_combos.at("V"));
+  EXPECT_EQ(s.combos.at("T"), s.input_order_combos.at("T"));
+  // And the scene keeps the same widths (it orders over the quantized positions).
+  BuildOptions o = BuildOptions::from_config("costa-PFV");
+  Scene scene = Scene::build(m, o);
+  double bits = -1, face_bits = -1;
+  for (const auto& [k, v] : scene.stats().details) {
+    if (k == "prim_residual_bits") bits = v;
+    if (k == "face_bits") face_bits = v;
+  }
+  EXPECT_LE(bits, 6.0);
+  EXPECT_EQ(face_bits, double(s.face_bits));
+}
+
+TEST(CostaStore, RenumberVerticesKeepsEveryPrimitive) {
+  PolyMesh m = mixed_mesh(3000, 5);
+  NgonMesh a = load_ngon_mesh({&m});
+  NgonMesh b = a;
+  renumber_vertices(b);
+  ASSERT_EQ(a.vertices.size(), b.vertices.size());
+  ASSERT_EQ(a.prim_offsets, b.prim_offsets);
+  uint32_t flagged = 0;
+  std::vector<uint32_t> ta, tb;
+  for (size_t i = 0; i < a.prim_count(); ++i) {
+    const uint32_t o = a.prim_offsets[i], n = a.prim_size(i);
+    if (n >= kFanStripFlagMin) {
+      ++flagged;
+      EXPECT_EQ(a.faces[o] & 1, b.faces[o] & 1) << "fan/strip flag of primitive " << i;
+      EXPECT_LT(b.faces[o] >> 1, flagged) << "flagged vertices come first";
+    }
+    ta.clear(), tb.clear();
+    primitive_triangles(a, i, ta);
+    primitive_triangles(b, i, tb);
+    ASSERT_EQ(ta.size(), tb.size());
+    for (size_t k = 0; k < ta.size(); ++k)
+      ASSERT_EQ(a.vertices[ta[k]], b.vertices[tb[k]]) << "primitive " << i << " corner " << k;
+  }
+  EXPECT_GT(flagged, 0u);
+  // A permutation: the same positions, each once.
+  auto key = [](const Vec3f& p) { return std::tuple(p.x, p.y, p.z); };
+  std::vector<std::tuple<float, float, float>> pa, pb;
+  for (const Vec3f& p : a.vertices) pa.push_back(key(p));
+  for (const Vec3f& p : b.vertices) pb.push_back(key(p));
+  std::sort(pa.begin(), pa.end());
+  std::sort(pb.begin(), pb.end());
+  EXPECT_EQ(pa, pb);
+}
+
 TEST(CostaSizes, TableThreeOnSharedData) {
-  // Targets: PFV <= 50% of the regular size, and below gzip -9 on the quad-dominant meshes. The
-  // FlightGear models miss both: their vertex array is larger than the face array (parts are not
-  // welded) and gzip finds what the paper's techniques cannot (runs of consecutive face indices,
-  // repeated coordinate values; the paper says the same of BULLDOZER, LAMBORGHINI and SPONZA,
-  // section 5). Asserted here: the paper's own range (36-56%) everywhere, the targets elsewhere.
+  // Targets: PFV <= 50% of the regular size (asserted on the store as a scene keeps it), and
+  // below gzip -9 on the quad-dominant meshes. fg_cg57_cruiser misses the second (1.19x): its
+  // vertex array is larger than its face array (parts are not welded), and gzip finds what the
+  // paper's techniques cannot (runs of consecutive face indices, repeated coordinate values; the
+  // paper says the same of BULLDOZER, LAMBORGHINI and SPONZA, section 5).
   SLIM_REQUIRE_SHARED_DATA();
   std::printf("[ costa    ] %-26s %10s %10s %10s %10s %7s %s\n", "mesh", "regular", "triang.",
               "gzip-9", "PFV", "PFV/reg", "PFV/gzip");
@@ -747,13 +809,11 @@ TEST(CostaSizes, TableThreeOnSharedData) {
                 (unsigned long long)s.regular_bytes, (unsigned long long)s.triangulated_bytes,
                 (unsigned long long)s.gzip_bytes, (unsigned long long)pfv,
                 100.0 * double(pfv) / double(s.regular_bytes), double(pfv) / double(s.gzip_bytes));
-    const bool flightgear = name.rfind("fg_c", 0) == 0;
-    EXPECT_LE(double(pfv), 0.56 * double(s.regular_bytes)) << f;
-    if (!flightgear) {
-      EXPECT_LE(pfv * 2, s.regular_bytes) << f << ": PFV above 50% of the regular size";
-      if (quad_dominant(f)) {
-        EXPECT_LT(pfv, s.gzip_bytes) << f << ": PFV not smaller than gzip -9";
-      }
+    EXPECT_LE(pfv * 2, s.regular_bytes) << f << ": PFV above 50% of the regular size";
+    // In input order (the paper's layout) the paper's own range, 36-56%.
+    EXPECT_LE(double(s.input_order_combos.at("PFV")), 0.56 * double(s.regular_bytes)) << f;
+    if (quad_dominant(f) && name != "fg_cg57_cruiser.obj.xz") {
+      EXPECT_LT(pfv, s.gzip_bytes) << f << ": PFV not smaller than gzip -9";
     }
     EXPECT_EQ(s.input_faces, m.face_count());
     // Each letter shrinks the store, T aside (it adds primitives).

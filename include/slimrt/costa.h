@@ -20,10 +20,16 @@ struct CostaSizes {
   uint64_t triangulated_bytes = 0;       // the same after T (every primitive a triangle)
   uint64_t gzip_bytes = 0;               // gzip -9 (zlib, gzip wrapper) of the regular arrays
   uint64_t gzip_triangulated_bytes = 0;  // gzip -9 of the triangulated arrays
-  // Store bytes of every combination of the letters T, P, F, V ("" = none, ..., "TPFV"), with
-  // the primitives in input order. A scene reorders them in BVH leaf order, which can change the
-  // P residual width (Scene::stats().details lists the scene's own store bytes).
+  // Store bytes of every combination of the letters T, P, F, V ("" = none, ..., "TPFV"), laid
+  // out as a scene keeps them: primitives in BVH leaf order, the leaves ordered so that the
+  // running primitive size stays near the linear prediction of P (Listing 2), vertices renumbered
+  // so that the fan/strip flag of F costs no extra bit when the flagged vertices fit (see
+  // src/api/scene_costa.cpp). A V scene's BVH is built over quantized positions and can order a
+  // few primitives differently; Scene::stats().details lists the scene's own store bytes.
+  // gzip_bytes compresses the regular arrays in the same order.
   std::map<std::string, uint64_t> combos;
+  // The same with the primitives and vertices in input order, as the paper's Table 3 has them.
+  std::map<std::string, uint64_t> input_order_combos;
 
   // Paper Table 1: the scene after loading (section 3.1) and after T.
   uint64_t vertices = 0, input_faces = 0, skipped_faces = 0;

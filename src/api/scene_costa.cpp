@@ -5,6 +5,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <memory>
 #include <stdexcept>
@@ -63,6 +64,63 @@ NgonMesh reorder(const NgonMesh& m, const std::vector<uint32_t>& order) {
     r.prim_face.push_back(m.prim_face[i]);
   }
   return r;
+}
+
+// Orders the leaves of `b2` in memory (prim_ids and each leaf's `first`; the tree is unchanged)
+// for PACKPRIMITIVES (Listing 2). Its residual at primitive i is the running sum of (size - avg)
+// over the primitives before i, so the packed width follows the largest excursion of that sum.
+// The paper keeps the input order and notes (section 5) that mixed primitive sizes make the
+// residuals large; in leaf order, a region of quads drifts one way and a region of fans the
+// other (fg_cg57_cruiser: 12 bits). Leaf order in memory is ours to choose, so the leaves are
+// split into two lists in depth-first order -- sum of (size - avg) below zero, and the rest --
+// and merged: the next leaf comes from the list that pulls the running sum back toward zero.
+// Inside a leaf the primitives are ordered the same way. Each list keeps the spatial order of the
+// tree, so neighbours in memory stay near in space.
+void order_leaves_for_prediction(Bvh2& b2, const NgonMesh& m) {
+  if (b2.nodes.empty()) return;
+  const double avg = double(m.faces.size()) / double(m.prim_count());
+  std::vector<uint32_t> neg, pos;  // leaf node ids, depth-first
+  std::vector<double> leaf_excess(b2.nodes.size(), 0.0);
+  std::vector<uint32_t> stack{0};
+  while (!stack.empty()) {
+    const uint32_t i = stack.back();
+    stack.pop_back();
+    const Bvh2Node& n = b2.nodes[i];
+    if (!n.is_leaf()) {
+      stack.push_back(n.first + 1);
+      stack.push_back(n.first);
+      continue;
+    }
+    double e = 0.0;
+    for (uint32_t k = n.first; k < n.first + n.count; ++k)
+      e += double(m.prim_size(b2.prim_ids[k])) - avg;
+    leaf_excess[i] = e;
+    (e < 0.0 ? neg : pos).push_back(i);
+  }
+  std::vector<uint32_t> ids;
+  ids.reserve(b2.prim_ids.size());
+  std::vector<uint32_t> leaf;
+  double drift = 0.0;
+  size_t a = 0, b = 0;
+  while (a < neg.size() || b < pos.size()) {
+    const bool take_neg = b == pos.size() || (a < neg.size() && drift >= 0.0);
+    Bvh2Node& n = b2.nodes[take_neg ? neg[a++] : pos[b++]];
+    leaf.assign(b2.prim_ids.begin() + n.first, b2.prim_ids.begin() + n.first + n.count);
+    n.first = uint32_t(ids.size());
+    // Greedy inside the leaf: the primitive that keeps the running sum nearest zero next.
+    while (!leaf.empty()) {
+      size_t best = 0;
+      double best_abs = std::abs(drift + double(m.prim_size(leaf[0])) - avg);
+      for (size_t k = 1; k < leaf.size(); ++k) {
+        const double d = std::abs(drift + double(m.prim_size(leaf[k])) - avg);
+        if (d < best_abs) best = k, best_abs = d;
+      }
+      drift += double(m.prim_size(leaf[best])) - avg;
+      ids.push_back(leaf[best]);
+      leaf.erase(leaf.begin() + long(best));
+    }
+  }
+  b2.prim_ids = std::move(ids);
 }
 
 // Mesh of a global face id (for the validation keys of the source primitives).
@@ -142,6 +200,50 @@ uint64_t gzip9_bytes(const NgonMesh& m) {
   return total;
 }
 
+using CostaBlockLeaf = CostaLeaf<false, false, false>;  // block layout is the same for every letter
+
+// BVH2 over the primitive boxes of `loaded` at the positions `decoded` (as the store decodes them),
+// its leaves ordered for P; the source keys for validate() go to `expected` if given.
+Bvh2 build_costa_bvh2(const NgonMesh& loaded, const std::vector<Vec3f>& decoded,
+                      const BuildOptions& opt, Fingerprint* expected) {
+  const uint32_t prim_count = uint32_t(loaded.prim_count());
+  std::vector<PrimRef> refs(prim_count);
+  for (uint32_t i = 0; i < prim_count; ++i) {
+    const uint32_t o0 = loaded.prim_offsets[i], o1 = loaded.prim_offsets[i + 1];
+    Box3f box;
+    CostaKey key;
+    uint32_t flag = 0;
+    for (uint32_t j = o0; j < o1; ++j) {
+      uint32_t v = loaded.faces[j];
+      if (j == o0 && o1 - o0 >= kFanStripFlagMin) flag = v & 1, v >>= 1;
+      box.extend(decoded[v]);
+      key.add(decoded[v]);
+    }
+    if (expected) {
+      const uint32_t g = loaded.prim_face[i], mesh = mesh_of(loaded.face_base, g);
+      expected->add(key.finish(o1 - o0, flag, mesh, g - loaded.face_base[mesh]));
+    }
+    refs[i] = {box, i};
+  }
+  Bvh2BuildConfig cfg;
+  cfg.bins = opt.sah_bins;
+  cfg.max_leaf_size = std::max<uint32_t>(
+      1, std::min<uint32_t>(opt.max_leaf_size, CostaBlockLeaf::kBlockPrims * kMaxLeafBlocks));
+  cfg.block_prims = CostaBlockLeaf::kBlockPrims;
+  cfg.threads = opt.threads;
+  Bvh2 b2 = build_bvh2(std::move(refs), cfg);
+  if (prim_count) order_leaves_for_prediction(b2, loaded);
+  return b2;
+}
+
+// The mesh as the store keeps it: primitives in the leaf order of `b2`, vertices renumbered so
+// that PACKFACES needs no extra bit for the fan/strip flag when the flagged vertices fit.
+NgonMesh store_order(const NgonMesh& loaded, const Bvh2& b2) {
+  NgonMesh ordered = reorder(loaded, b2.prim_ids);
+  renumber_vertices(ordered);
+  return ordered;
+}
+
 }  // namespace
 
 std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*>& meshes,
@@ -161,33 +263,9 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
     }
   }
 
-  // BVH2 over the primitive boxes, and the source keys for validate().
-  std::vector<PrimRef> refs(prim_count);
   Fingerprint expected;
-  for (uint32_t i = 0; i < prim_count; ++i) {
-    const uint32_t o0 = loaded.prim_offsets[i], o1 = loaded.prim_offsets[i + 1];
-    Box3f box;
-    CostaKey key;
-    uint32_t flag = 0;
-    for (uint32_t j = o0; j < o1; ++j) {
-      uint32_t v = loaded.faces[j];
-      if (j == o0 && o1 - o0 >= kFanStripFlagMin) flag = v & 1, v >>= 1;
-      box.extend(decoded[v]);
-      key.add(decoded[v]);
-    }
-    const uint32_t g = loaded.prim_face[i], mesh = mesh_of(loaded.face_base, g);
-    expected.add(key.finish(o1 - o0, flag, mesh, g - loaded.face_base[mesh]));
-    refs[i] = {box, i};
-  }
+  Bvh2 b2 = build_costa_bvh2(loaded, decoded, opt, &expected);
   decoded = {};
-  using Leaf = CostaLeaf<false, false, false>;  // block layout is the same for every letter
-  Bvh2BuildConfig cfg;
-  cfg.bins = opt.sah_bins;
-  cfg.max_leaf_size = std::max<uint32_t>(
-      1, std::min<uint32_t>(opt.max_leaf_size, Leaf::kBlockPrims * kMaxLeafBlocks));
-  cfg.block_prims = Leaf::kBlockPrims;
-  cfg.threads = opt.threads;
-  Bvh2 b2 = build_bvh2(std::move(refs), cfg);
 
   // Reorder the primitives in leaf order: a leaf block is then a range of the store.
   std::vector<uint32_t> pos(prim_count);
@@ -195,7 +273,7 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
   auto data = std::make_shared<CostaData>();
   NgonMesh stats_src;  // keeps the loading statistics after `loaded` is released
   {
-    NgonMesh ordered = reorder(loaded, b2.prim_ids);
+    NgonMesh ordered = store_order(loaded, b2);
     stats_src.input_faces = loaded.input_faces;
     stats_src.skipped_faces = loaded.skipped_faces;
     stats_src.input_triangles = loaded.input_triangles;
@@ -213,8 +291,8 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
   }
 
   LeafEncoder enc;
-  enc.block_prims = Leaf::kBlockPrims;
-  enc.block_bytes = Leaf::kBlockBytes;
+  enc.block_prims = CostaBlockLeaf::kBlockPrims;
+  enc.block_bytes = CostaBlockLeaf::kBlockBytes;
   enc.encode = [&](const uint32_t* prims, uint32_t n, uint8_t* out) {
     CostaBlock b{pos[prims[0]], n};
     for (uint32_t k = 1; k < n; ++k)
@@ -287,8 +365,8 @@ CostaSizes costa_sizes(const std::vector<const PolyMesh*>& meshes) {
     check_mesh(*m);
   }
   CostaSizes s;
-  NgonMesh m = load_ngon_mesh(meshes);
-  NgonMesh t = triangulate_ngon_mesh(m);
+  const NgonMesh m = load_ngon_mesh(meshes);
+  const NgonMesh t = triangulate_ngon_mesh(m);
   s.vertices = m.vertices.size();
   s.input_faces = m.input_faces;
   s.skipped_faces = m.skipped_faces;
@@ -298,12 +376,19 @@ CostaSizes costa_sizes(const std::vector<const PolyMesh*>& meshes) {
   s.tess_polygons = m.tess.polygons;
   s.tess_glu = m.tess.glu;
   s.tess_fallbacks = m.tess.fallbacks();
-  s.gzip_bytes = gzip9_bytes(m);
-  s.gzip_triangulated_bytes = gzip9_bytes(t);
+  // The store as a scene keeps it (leaf order of the default build, vertices renumbered); the
+  // BVH is built over the unquantized positions here (a V scene builds over the quantized ones,
+  // which can move a few primitives between leaves).
+  const BuildOptions opt;
+  const NgonMesh ms = store_order(m, build_costa_bvh2(m, m.vertices, opt, nullptr));
+  const NgonMesh ts = store_order(t, build_costa_bvh2(t, t.vertices, opt, nullptr));
+  s.gzip_bytes = gzip9_bytes(ms);
+  s.gzip_triangulated_bytes = gzip9_bytes(ts);
   for (const std::string& c : costa_combinations()) {
     CostaFlags f = CostaFlags::parse(c);
-    QuantizedMesh q(f.T ? t : m, f.P, f.F, f.V);
+    QuantizedMesh q(f.T ? ts : ms, f.P, f.F, f.V);
     s.combos[c] = q.bytes();
+    s.input_order_combos[c] = QuantizedMesh(f.T ? t : m, f.P, f.F, f.V).bytes();
     if (c == "PF") s.prim_residual_bits = q.prim_residual_bits(), s.face_bits = q.face_bits();
     if (c == "TPF")
       s.prim_residual_bits_triangulated = q.prim_residual_bits(),

@@ -359,6 +359,37 @@ void primitive_triangles(const NgonMesh& m, size_t i, std::vector<uint32_t>& tri
   }
 }
 
+void renumber_vertices(NgonMesh& m) {
+  constexpr uint32_t kNone = 0xffffffffu;
+  const size_t nv = m.vertices.size();
+  std::vector<uint32_t> to(nv, kNone);
+  uint32_t next = 0;
+  auto take = [&](uint32_t v) {
+    if (v < nv && to[v] == kNone) to[v] = next++;
+  };
+  for (size_t i = 0; i < m.prim_count(); ++i)
+    if (m.prim_size(i) >= kFanStripFlagMin) take(m.faces[m.prim_offsets[i]] >> 1);
+  for (size_t i = 0; i < m.prim_count(); ++i) {
+    const uint32_t o0 = m.prim_offsets[i], o1 = m.prim_offsets[i + 1];
+    for (uint32_t j = o0; j < o1; ++j)
+      take(j == o0 && o1 - o0 >= kFanStripFlagMin ? m.faces[j] >> 1 : m.faces[j]);
+  }
+  for (size_t v = 0; v < nv; ++v) take(uint32_t(v));
+  std::vector<Vec3f> moved(nv);
+  for (size_t v = 0; v < nv; ++v) moved[to[v]] = m.vertices[v];
+  m.vertices = std::move(moved);
+  for (size_t i = 0; i < m.prim_count(); ++i) {
+    const uint32_t o0 = m.prim_offsets[i], o1 = m.prim_offsets[i + 1];
+    for (uint32_t j = o0; j < o1; ++j) {
+      uint32_t& f = m.faces[j];
+      if (j == o0 && o1 - o0 >= kFanStripFlagMin)
+        f = (to[f >> 1] << 1) | (f & 1);
+      else
+        f = to[f];
+    }
+  }
+}
+
 NgonMesh triangulate_ngon_mesh(const NgonMesh& in) {
   NgonMesh m;
   m.vertices = in.vertices;

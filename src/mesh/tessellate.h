@@ -129,6 +129,14 @@ NgonMesh load_ngon_mesh(const std::vector<const PolyMesh*>& meshes);
 // keep their orientation: odd triangles are (v_t+1, v_t, v_t+2)), one triangle primitive each.
 NgonMesh triangulate_ngon_mesh(const NgonMesh& mesh);
 
+// Renumbers the vertices (a permutation: every vertex is kept, positions unchanged) so that the
+// vertices stored shifted left by the fan/strip flag (first entries of 5+-vertex primitives) get
+// the lowest numbers, and all others follow in order of first use in the face array (unused
+// vertices last). PACKFACES (Listing 3) then needs one bit for the flag only when a flagged vertex
+// number does not fit in the width of the plain ones; the order of first use also keeps the
+// vertices of neighbouring primitives near in memory.
+void renumber_vertices(NgonMesh& mesh);
+
 // Appends the triangles of primitive i (3 vertex indices each, in the order the leaf tests them)
 // to `tris`. The triangulation rules of all primitive kinds, in one place.
 void primitive_triangles(const NgonMesh& mesh, size_t i, std::vector<uint32_t>& tris);

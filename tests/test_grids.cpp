@@ -235,6 +235,41 @@ TEST(GridCodec, SimdDecodeMatchesScalar) {
 
 // The kernel's ray-space transform is core/watertight.h's, bit for bit (shared vertices of grids
 // and triangle leaves must land on the same ray-space values).
+TEST(GridKernel, DeinterleavesRowsOfFivePoints) {
+  // simd::load_xyz5 (the `grid` decoder's whole-row path) against the plain copy, and
+  // SubGridLeaf::decode of a full and a partial sub-grid against the vertex array.
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> U(-10, 10);
+  float row[15];
+  for (int it = 0; it < 100; ++it) {
+    for (float& f : row) f = U(rng);
+    simd::vfloat8 x, y, z;
+    simd::load_xyz5(row, x, y, z);
+    alignas(32) float out[3][8];
+    x.store(out[0]), y.store(out[1]), z.store(out[2]);
+    for (int i = 0; i < 5; ++i)
+      for (int a = 0; a < 3; ++a) ASSERT_EQ(out[a][i], row[3 * i + a]) << i << " " << a;
+  }
+  std::vector<Vec3f> verts(7 * 6);
+  for (Vec3f& p : verts) p = Vec3f(U(rng), U(rng), U(rng));
+  for (uint8_t rx : {uint8_t(5), uint8_t(3)})
+    for (uint8_t ry : {uint8_t(5), uint8_t(2)}) {
+      SubGridLeaf::Context ctx;
+      ctx.vertices = verts.data();
+      const SubGridRef b{1 + 7, 0, 1, 1, 7, rx, ry};
+      SubGridVerts w;
+      SubGridLeaf::decode(ctx, b, w);
+      for (uint32_t j = 0; j < 5; ++j)
+        for (uint32_t i = 0; i < 5; ++i) {
+          const Vec3f& p =
+              verts[b.vertex + std::min<uint32_t>(j, ry - 1) * 7 + std::min<uint32_t>(i, rx - 1)];
+          for (int a = 0; a < 3; ++a) ASSERT_EQ(w.p[a][5 * j + i], p[a]) << i << "," << j;
+        }
+      for (int k = 25; k < 32; ++k)
+        for (int a = 0; a < 3; ++a) EXPECT_EQ(w.p[a][k], 0.0f);
+    }
+}
+
 TEST(GridKernel, RaySpaceMatchesCore) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> U(-10, 10);

@@ -58,6 +58,23 @@ SLIM_INLINE vint8 load_shuffle_2x16(const uint8_t* lo, const uint8_t* hi, const 
   return _mm256_shuffle_epi8(src, _mm256_loadu_si256((const __m256i*)ctrl));
 }
 
+// Five interleaved points p[0..15) = x0 y0 z0 ... x4 y4 z4 -> lanes 0-4 of x, y, z (lanes 5-7
+// repeat lanes of the same axis). Reads exactly the 15 floats.
+SLIM_INLINE void load_xyz5(const float* p, vfloat8& x, vfloat8& y, vfloat8& z) {
+  const __m256 a = _mm256_loadu_ps(p);      // x0 y0 z0 x1 y1 z1 x2 y2
+  const __m256 b = _mm256_loadu_ps(p + 7);  // y2 z2 x3 y3 z3 x4 y4 z4
+  const __m256i ix_a = _mm256_setr_epi32(0, 3, 6, 6, 6, 6, 6, 6);
+  const __m256i ix_b = _mm256_setr_epi32(2, 2, 2, 2, 5, 5, 5, 5);
+  const __m256i iy_a = _mm256_setr_epi32(1, 4, 7, 7, 7, 7, 7, 7);
+  const __m256i iy_b = _mm256_setr_epi32(3, 3, 3, 3, 6, 6, 6, 6);
+  const __m256i iz_a = _mm256_setr_epi32(2, 5, 5, 5, 5, 5, 5, 5);
+  const __m256i iz_b = _mm256_setr_epi32(1, 1, 1, 4, 7, 7, 7, 7);
+  // lanes 3-4 from b for x and y (0x18), lanes 2-4 for z (0x1c); lanes 5-7 from b too.
+  x = _mm256_blend_ps(_mm256_permutevar8x32_ps(a, ix_a), _mm256_permutevar8x32_ps(b, ix_b), 0xf8);
+  y = _mm256_blend_ps(_mm256_permutevar8x32_ps(a, iy_a), _mm256_permutevar8x32_ps(b, iy_b), 0xf8);
+  z = _mm256_blend_ps(_mm256_permutevar8x32_ps(a, iz_a), _mm256_permutevar8x32_ps(b, iz_b), 0xfc);
+}
+
 #else
 
 SLIM_INLINE vfloat8 load2x4(const float* lo, const float* hi) {
@@ -70,6 +87,14 @@ SLIM_INLINE vfloat8 swap_halves(vfloat8 a) {
   vfloat8 r;
   for (int i = 0; i < 8; ++i) r.v[i] = a.v[i ^ 4];
   return r;
+}
+SLIM_INLINE void load_xyz5(const float* p, vfloat8& x, vfloat8& y, vfloat8& z) {
+  for (int i = 0; i < 8; ++i) {
+    const int k = i < 5 ? i : 4;
+    x.v[i] = p[3 * k];
+    y.v[i] = p[3 * k + 1];
+    z.v[i] = p[3 * k + 2];
+  }
 }
 
 #define SLIM_EXT_IBINOP(name, op)                                                       \

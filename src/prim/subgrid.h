@@ -285,6 +285,22 @@ struct SubGridLeaf {
       simd::prefetch(row);
       simd::prefetch(reinterpret_cast<const uint8_t*>(row) + 59);
     }
+    if (b.res_x == kSubGridRes) {
+      // Whole rows: 15 floats each, deinterleaved in registers. A row's 8-lane store spills 3
+      // lanes into the next row, which the next store overwrites (rows in ascending order).
+      static_assert(sizeof(Vec3f) == 12, "rows are 15 packed floats");
+      for (uint32_t j = 0; j < kSubGridRes; ++j) {
+        const Vec3f* row =
+            ctx.vertices + b.vertex + uint64_t(j < b.res_y ? j : b.res_y - 1) * b.stride;
+        simd::vfloat8 x, y, z;
+        simd::load_xyz5(&row->x, x, y, z);
+        x.storeu(&w.p[0][5 * j]);
+        y.storeu(&w.p[1][5 * j]);
+        z.storeu(&w.p[2][5 * j]);
+      }
+      for (int k = 25; k < 32; ++k) w.p[0][k] = w.p[1][k] = w.p[2][k] = 0.0f;
+      return;
+    }
     for (uint32_t j = 0; j < kSubGridRes; ++j) {
       const Vec3f* row =
           ctx.vertices + b.vertex + uint64_t(j < b.res_y ? j : b.res_y - 1) * b.stride;

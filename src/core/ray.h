@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 
 #include "core/watertight.h"
@@ -22,14 +23,14 @@ struct TravRay {
   // rounding error of that expression over the scene, towards the ray for near planes (c_near)
   // and away from it for far planes (c_far): boxes are never culled by rounding (Ize, "Robust BVH
   // Ray Traversal", JCGT 2013, with the bound folded into the constants).
-  float c_near[3], c_far[3];
-  uint32_t near_plane[3];  // plane array index (2*a or 2*a+1) of the near plane of axis a
+  float c_near[4], c_far[4];  // lane 3 unused (stored 4 at a time)
+  uint32_t near_plane[3];     // plane array index (2*a or 2*a+1) of the near plane of axis a
   WatertightRay wt;
 };
 
 // Per-scene constants of the ray setup: the largest |coordinate| of the scene box per axis.
 struct RaySetupBounds {
-  float absmax[3] = {0, 0, 0};
+  float absmax[4] = {0, 0, 0, 0};  // lane 3 unused (loaded 4 at a time)
   RaySetupBounds() = default;
   explicit RaySetupBounds(const Box3f& b) {
     for (int a = 0; a < 3; ++a) {
@@ -42,32 +43,39 @@ struct RaySetupBounds {
 // Prepares a ray. Returns false for rays that cannot hit anything: NaN/Inf origin, NaN or zero
 // direction, NaN bounds or tnear > tfar (documented behaviour: a miss).
 SLIM_INLINE bool make_trav_ray(const Ray& r, const RaySetupBounds& sb, TravRay& tr) {
-  if (!is_finite(r.org) || !is_finite(r.dir)) return false;
-  if (std::fabs(r.org.x) > kMaxCoordinate || std::fabs(r.org.y) > kMaxCoordinate ||
-      std::fabs(r.org.z) > kMaxCoordinate)
-    return false;  // documented (slimrt/scene.h): the watertight test would overflow
+  using namespace simd;
+  static_assert(offsetof(Ray, tnear) == 12 && offsetof(Ray, dir) == 16 && offsetof(Ray, tfar) == 28,
+                "Ray is (org, tnear), (dir, tfar): two 4-float loads");
+  const vfloat4 o4 = vfloat4::loadu(&r.org.x);  // org, tnear
+  const vfloat4 d4 = vfloat4::loadu(&r.dir.x);  // dir, tfar
+  // Origin within +-kMaxCoordinate (documented in slimrt/scene.h: the watertight test would
+  // overflow beyond; false for NaN/Inf too) and a finite direction: lanes 0-2.
+  const uint32_t ok =
+      ((abs(o4) <= vfloat4(kMaxCoordinate)) & (abs(d4) <= vfloat4(3.4028235e38f))).mask();
+  if ((ok & 7) != 7) return false;
   if (!(r.tnear <= r.tfar)) return false;  // also false for NaN bounds
-  if (r.dir.x == 0.0f && r.dir.y == 0.0f && r.dir.z == 0.0f) return false;
+  if (((d4 == vfloat4(0.0f)).mask() & 7) == 7) return false;
   tr.org = r.org;
   tr.dir = r.dir;
   tr.tnear = r.tnear > 0.0f ? r.tnear : 0.0f;
   tr.tfar = r.tfar;
   if (!(tr.tnear <= tr.tfar)) return false;
-  for (int a = 0; a < 3; ++a) {
-    float d = r.dir[a];
-    // Zero components become tiny ones so that 1/d stays finite (the planes parallel to the ray
-    // then give huge |t|, the right answer); the error bound below covers the change.
-    if (std::fabs(d) < 1e-18f) d = std::signbit(d) ? -1e-18f : 1e-18f;
-    float rd = 1.0f / d;
-    tr.rdir[a] = rd;
-    float c = tr.org[a] * rd;
-    // |error of fmsub(bound, rd, c)| <= 2^-23 * |rd| * (|bound| + |org|) for bounds in the scene
-    // box: rounding of rd, of c and of the result. Use 2^-20 for margin.
-    float err = std::fabs(rd) * (sb.absmax[a] + std::fabs(tr.org[a])) * (1.0f / 1048576.0f);
-    tr.c_near[a] = c + err;
-    tr.c_far[a] = c - err;
-    tr.near_plane[a] = 2 * a + (rd < 0.0f ? 1 : 0);
-  }
+  // Zero components become tiny ones so that 1/d stays finite (the planes parallel to the ray
+  // then give huge |t|, the right answer); the error bound below covers the change.
+  const vfloat4 tiny(1e-18f);
+  const vfloat4 d = select(abs(d4) < tiny, signmsk(d4) ^ tiny, d4);
+  const vfloat4 rd = vfloat4(1.0f) / d;
+  const vfloat4 c = o4 * rd;
+  // |error of fmsub(bound, rd, c)| <= 2^-23 * |rd| * (|bound| + |org|) for bounds in the scene
+  // box: rounding of rd, of c and of the result. Use 2^-20 for margin.
+  const vfloat4 err = abs(rd) * (vfloat4::loadu(sb.absmax) + abs(o4)) * vfloat4(1.0f / 1048576.0f);
+  alignas(16) float rdv[4];
+  rd.storeu(rdv);
+  tr.rdir = Vec3f(rdv[0], rdv[1], rdv[2]);
+  (c + err).storeu(tr.c_near);
+  (c - err).storeu(tr.c_far);
+  const uint32_t neg = (rd < vfloat4(0.0f)).mask();
+  for (uint32_t a = 0; a < 3; ++a) tr.near_plane[a] = 2 * a + ((neg >> a) & 1);
   tr.wt = WatertightRay(r.org, r.dir, tr.rdir);
   return true;
 }

@@ -301,6 +301,15 @@ TEST(RobustFuzzFindings, CrashingInputsStayFixed) {
       {"ply",
        "ply\nformat binary_little_endian 1.0\nelement face 1\n"
        "property list uchar int vertex_indices\nend_header\n\x03"},
+      // fuzz_gltf, 840 s run: an external buffer URI that resolves to a directory; tinygltf sized
+      // its read from tellg() = -1 (ASan: requested allocation size 0x7fffffffffffffff).
+      {"gltf",
+       "{\n  \"asset\": {\"version\": \"2.0\"},\n  \"scene\": 0,\n  \"scenes\": [{\"nodes\": [0, "
+       "3]}],\n  \"nodes\": [\n    {\"nameet\": 60, \"byteLength\": 48},\n    {\"buffer\": 0, "
+       "\"byteOffset\": 108, \"byteLength\": 4}\n  ],\n  \"buffers\": [{\"byteLength\": 112, "
+       "\"uri\": "
+       "\"%%%%%%%%%%%%%%%%%%%%%%%%%%%%%AAAA%AAAAABAAIAAAACAAMAAAAAAAAAAAAAAIA/AAAAAAAAAAAAAIA/"
+       "AAAAAAAAAAA=AIA/AA@AAAAAAAAAAIA/AAECAw==\"}]\n}"},
   };
   for (const Finding& f : findings) {
     try {
@@ -308,6 +317,19 @@ TEST(RobustFuzzFindings, CrashingInputsStayFixed) {
     } catch (const slim::Error&) {
     } catch (const std::exception& e) {
       ADD_FAILURE() << f.target << ": exception other than slim::Error: " << e.what();
+    }
+  }
+  // External buffers are read only from regular files: a URI naming a directory is an error
+  // (before the fix: a 2^63-byte allocation).
+  {
+    const std::string dir = std::filesystem::temp_directory_path().string();
+    const std::string gltf =
+        R"({"asset": {"version": "2.0"}, "buffers": [{"byteLength": 4, "uri": "."}]})";
+    try {
+      slim::detail::read_gltf("dir.gltf", gltf, false, dir);
+      ADD_FAILURE() << "a buffer URI naming a directory was accepted";
+    } catch (const slim::Error& e) {
+      EXPECT_NE(std::string(e.what()).find("not a regular file"), std::string::npos) << e.what();
     }
   }
   // The 'vw' finding is refused by the pre-scan, before tinyobjloader sees it.

@@ -17,6 +17,8 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 
 #include "slimrt/error.h"
 
@@ -48,6 +50,28 @@ Mat4 mul(const Mat4& a, const Mat4& b) {
 bool bad_image_loader(tinygltf::Image*, const int, std::string*, std::string*, int, int,
                       const unsigned char*, int, void*) {
   return true;  // geometry only: images are kept undecoded
+}
+
+// External buffers (uri = a file beside the .gltf). tinygltf's own reader sizes its vector from
+// tellg(), which is -1 for a directory on Linux: a URI naming a directory ("", ".", "%2e") asked
+// for a 2^63-byte allocation (fuzz_gltf finding). Only regular files are read, at their size.
+bool read_external_file(std::vector<unsigned char>* out, std::string* err, const std::string& path,
+                        void*) {
+  auto fail = [&](const std::string& why) {
+    if (err) *err += "external buffer '" + path + "': " + why + "\n";
+    return false;
+  };
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) return fail("not a regular file");
+  const uintmax_t size = std::filesystem::file_size(path, ec);
+  if (ec) return fail(ec.message());
+  if (size > out->max_size()) return fail("too large");
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return fail("cannot be opened");
+  out->resize(size_t(size));
+  if (size && !f.read(reinterpret_cast<char*>(out->data()), std::streamsize(size)))
+    return fail("read error");
+  return true;
 }
 
 uint32_t load_u32(const uint8_t* p) {
@@ -496,6 +520,8 @@ PolyMesh read_gltf(const std::string& src, std::string_view data, bool binary,
   tinygltf::Model model;
   tinygltf::TinyGLTF loader;
   loader.SetImageLoader(bad_image_loader, nullptr);
+  loader.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath, &read_external_file,
+                         &tinygltf::WriteWholeFile, nullptr});
   std::string err, warn;
   bool ok = false;
   try {

@@ -538,8 +538,8 @@ TEST(GridWatertight, SharedVerticesDecodeIdentically) {
 // different grids among them) all hit. The second torus is cut into many grids (uv seams) with
 // flipped cells (rotated faces), and 3-cell-wide strips give partial sub-grids.
 TEST(GridWatertight, ClosedTorusNoLeaks) {
-  // 2 x 10^5 rays for lossy-grid (QBVH8), 10 times fewer for the others; SLIM_GRID_LEAK_RAYS
-  // overrides (the 10^6 run of the report).
+  // 2 x 10^5 rays for lossy-grid (compressed-leaf BVH), 10 times fewer for the others;
+  // SLIM_GRID_LEAK_RAYS overrides (the 10^6 run of the report).
   const int kRays =
       std::getenv("SLIM_GRID_LEAK_RAYS") ? std::atoi(std::getenv("SLIM_GRID_LEAK_RAYS")) : 200000;
   std::vector<PolyMesh> tori{make_torus(64),
@@ -557,8 +557,9 @@ TEST(GridWatertight, ClosedTorusNoLeaks) {
       GridTriangles t = grid_triangles({&m}, opt);
       Rng rng(uint32_t(101 + ti));
       uint64_t leaks = 0;
-      const int n =
-          opt.geometry == Geometry::LossyGrids && opt.bvh == Bvh::Quantized8 ? kRays : kRays / 10;
+      const int n = opt.geometry == Geometry::LossyGrids && opt.bvh == Bvh::CompressedLeaf
+                        ? kRays
+                        : kRays / 10;
       for (int i = 0; i < n; ++i) {
         const size_t tri = size_t(rng.next() % t.size());
         const Vec3f* v = &t.vertices[3 * tri];

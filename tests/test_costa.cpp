@@ -752,6 +752,7 @@ TEST(CostaSizes, StoreOrderShrinksResidualsAndFlagBit) {
     if (k == "prim_residual_bits") bits = v;
     if (k == "face_bits") face_bits = v;
   }
+  ASSERT_GE(bits, 0.0) << "no prim_residual_bits in the scene's details";
   EXPECT_LE(bits, 6.0);
   EXPECT_EQ(face_bits, double(s.face_bits));
 }

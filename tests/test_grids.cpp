@@ -233,8 +233,6 @@ TEST(GridCodec, SimdDecodeMatchesScalar) {
     }
 }
 
-// The kernel's ray-space transform is core/watertight.h's, bit for bit (shared vertices of grids
-// and triangle leaves must land on the same ray-space values).
 TEST(GridKernel, DeinterleavesRowsOfFivePoints) {
   // simd::load_xyz5 (the `grid` decoder's whole-row path) against the plain copy, and
   // SubGridLeaf::decode of a full and a partial sub-grid against the vertex array.
@@ -258,6 +256,8 @@ TEST(GridKernel, DeinterleavesRowsOfFivePoints) {
       ctx.vertices = verts.data();
       const SubGridRef b{1 + 7, 0, 1, 1, 7, rx, ry};
       SubGridVerts w;
+      for (int a = 0; a < 3; ++a)
+        for (float& f : w.p[a]) f = std::nanf("");  // every lane must be written
       SubGridLeaf::decode(ctx, b, w);
       for (uint32_t j = 0; j < 5; ++j)
         for (uint32_t i = 0; i < 5; ++i) {
@@ -270,6 +270,8 @@ TEST(GridKernel, DeinterleavesRowsOfFivePoints) {
     }
 }
 
+// The kernel's ray-space transform is core/watertight.h's, bit for bit (shared vertices of grids
+// and triangle leaves must land on the same ray-space values).
 TEST(GridKernel, RaySpaceMatchesCore) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> U(-10, 10);

@@ -80,7 +80,6 @@ void order_leaves_for_prediction(Bvh2& b2, const NgonMesh& m) {
   if (b2.nodes.empty()) return;
   const double avg = double(m.faces.size()) / double(m.prim_count());
   std::vector<uint32_t> neg, pos;  // leaf node ids, depth-first
-  std::vector<double> leaf_excess(b2.nodes.size(), 0.0);
   std::vector<uint32_t> stack{0};
   while (!stack.empty()) {
     const uint32_t i = stack.back();
@@ -94,7 +93,6 @@ void order_leaves_for_prediction(Bvh2& b2, const NgonMesh& m) {
     double e = 0.0;
     for (uint32_t k = n.first; k < n.first + n.count; ++k)
       e += double(m.prim_size(b2.prim_ids[k])) - avg;
-    leaf_excess[i] = e;
     (e < 0.0 ? neg : pos).push_back(i);
   }
   std::vector<uint32_t> ids;

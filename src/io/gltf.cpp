@@ -52,20 +52,23 @@ bool bad_image_loader(tinygltf::Image*, const int, std::string*, std::string*, i
   return true;  // geometry only: images are kept undecoded
 }
 
-// External buffers (uri = a file beside the .gltf). tinygltf's own reader sizes its vector from
-// tellg(), which is -1 for a directory on Linux: a URI naming a directory ("", ".", "%2e") asked
-// for a 2^63-byte allocation (fuzz_gltf finding). Only regular files are read, at their size.
+// External buffers (uri = a file beside the .gltf), read by slimrt instead of tinygltf: its reader
+// sizes the buffer by seeking to the end, which for a directory gives 2^63 - 1 on ext4 (fuzz_gltf
+// finding: a URI decoding to "./" asked for a 2^63-byte allocation). Only regular files of at
+// most kMaxExternalBuffer bytes are read (larger ones, or special files such as /proc/kcore that
+// report 128 TiB, are refused before any allocation).
+constexpr uintmax_t kMaxExternalBuffer = uintmax_t(1) << 32;  // 4 GiB, as the JSON and GLB
 bool read_external_file(std::vector<unsigned char>* out, std::string* err, const std::string& path,
                         void*) {
   auto fail = [&](const std::string& why) {
-    if (err) *err += "external buffer '" + path + "': " + why + "\n";
+    if (err) *err += why + "\n";
     return false;
   };
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) return fail("not a regular file");
   const uintmax_t size = std::filesystem::file_size(path, ec);
   if (ec) return fail(ec.message());
-  if (size > out->max_size()) return fail("too large");
+  if (size > kMaxExternalBuffer) return fail("larger than 4 GiB");
   std::ifstream f(path, std::ios::binary);
   if (!f) return fail("cannot be opened");
   out->resize(size_t(size));

@@ -9,6 +9,8 @@
 #include <cmath>
 #include <string>
 
+#include "core/assert.h"
+
 namespace slim {
 
 // ---- geometry helpers -------------------------------------------------------------------------
@@ -364,8 +366,9 @@ void renumber_vertices(NgonMesh& m) {
   const size_t nv = m.vertices.size();
   std::vector<uint32_t> to(nv, kNone);
   uint32_t next = 0;
-  auto take = [&](uint32_t v) {
-    if (v < nv && to[v] == kNone) to[v] = next++;
+  auto take = [&](uint32_t v) {  // indices are in range: load_ngon_mesh checked the meshes
+    SLIM_ASSERT(v < nv);
+    if (to[v] == kNone) to[v] = next++;
   };
   for (size_t i = 0; i < m.prim_count(); ++i)
     if (m.prim_size(i) >= kFanStripFlagMin) take(m.faces[m.prim_offsets[i]] >> 1);

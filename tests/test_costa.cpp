@@ -481,26 +481,13 @@ Decoded decode_geometry(const std::vector<const PolyMesh*>& meshes, const std::s
 }
 
 Agreement compare_decoded(const Scene& s, const Decoded& d, int nrays, uint32_t seed) {
-  std::vector<RefTri> ref = reference_triangles({&d.mesh});
-  Rng rng(seed);
-  Agreement a;
-  for (int i = 0; i < nrays; ++i) {
-    Ray r = random_ray(rng, s.bounds());
-    Hit h = s.intersect(r);
-    RefHit rh = reference_intersect(ref, r);
-    a.rays++;
-    a.hits += rh.valid();
-    a.agree += agrees(h, rh);
-    if (h.valid() && rh.valid()) {
-      auto in = d.input[rh.prim];
-      a.same_face += h.geomID == in.first && h.primID == in.second;
-      EXPECT_GE(h.u, -1e-6f);
-      EXPECT_GE(h.v, -1e-6f);
-      EXPECT_LE(h.u + h.v, 1.0f + 1e-5f);
-    }
-    EXPECT_EQ(s.occluded(r), h.valid());
-  }
-  return a;
+  return compare_with_reference(s, {&d.mesh}, nrays, seed, [&](const Hit& h, const RefHit& rh) {
+    EXPECT_GE(h.u, -1e-6f);
+    EXPECT_GE(h.v, -1e-6f);
+    EXPECT_LE(h.u + h.v, 1.0f + 1e-5f);
+    const auto in = d.input[rh.prim];
+    return h.geomID == in.first && h.primID == in.second;
+  });
 }
 
 class CostaConfigs : public ::testing::TestWithParam<const char*> {};

@@ -135,10 +135,11 @@ struct Agreement {
 };
 
 // `nrays` random rays through the scene box: closest hits against the brute-force reference over
-// `meshes` (agreement and same input face counted), and occluded() == (closest hit exists).
-inline Agreement compare_with_reference(const Scene& scene,
-                                        const std::vector<const PolyMesh*>& meshes, int nrays,
-                                        uint32_t seed) {
+// `meshes` (agreement counted; same input face as `same_face(hit, ref)` says when both hit), and
+// occluded() == (closest hit exists).
+template <class SameFace>
+Agreement compare_with_reference(const Scene& scene, const std::vector<const PolyMesh*>& meshes,
+                                 int nrays, uint32_t seed, SameFace&& same_face) {
   std::vector<RefTri> ref = reference_triangles(meshes);
   Rng rng(seed);
   Agreement a;
@@ -149,10 +150,19 @@ inline Agreement compare_with_reference(const Scene& scene,
     a.rays++;
     a.hits += rh.valid();
     a.agree += agrees(h, rh);
-    a.same_face += h.valid() && rh.valid() && h.primID == rh.prim && h.geomID == rh.geom;
+    a.same_face += h.valid() && rh.valid() && same_face(h, rh);
     EXPECT_EQ(scene.occluded(r), h.valid());
   }
   return a;
+}
+
+// The same, the reference's face being the input face.
+inline Agreement compare_with_reference(const Scene& scene,
+                                        const std::vector<const PolyMesh*>& meshes, int nrays,
+                                        uint32_t seed) {
+  return compare_with_reference(scene, meshes, nrays, seed, [](const Hit& h, const RefHit& rh) {
+    return h.primID == rh.prim && h.geomID == rh.geom;
+  });
 }
 
 // Icosahedron subdivided `levels` times (20 * 4^levels triangles), vertices projected onto the

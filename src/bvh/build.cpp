@@ -5,8 +5,10 @@
 #include "bvh/build.h"
 
 #include "core/simd.h"
+#include "core/simd_ext.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
@@ -15,64 +17,97 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <cstring>
+#include <memory>
+#include <stdexcept>
 
 namespace slim {
 namespace {
 
 using simd::vfloat4;
+using simd::vfloat8;
 using simd::vint4;
 
 constexpr int kMaxBins = 64;
 constexpr uint32_t kParallelBinThreshold = 1u << 16;   // refs per node to bin in parallel
 constexpr uint32_t kParallelTaskThreshold = 1u << 12;  // refs per node to build children as tasks
-constexpr int kSahDepth = 64;                           // deeper: object median splits
+constexpr uint32_t kTwoBinSetThreshold = 256;          // refs per node to bin into two bin sets
+constexpr int kSahDepth = 64;                          // deeper: object median splits
 
-// A PrimRef's box as two 4-wide vectors (the 4th lanes hold unrelated bytes and are ignored).
-SLIM_INLINE vfloat4 ref_lo(const PrimRef& r) { return vfloat4::loadu(&r.box.lo.x); }
-SLIM_INLINE vfloat4 ref_hi(const PrimRef& r) { return vfloat4::loadu(&r.box.hi.x); }
-
-struct Box4 {
-  vfloat4 lo{kInf}, hi{-kInf};
-  SLIM_INLINE void extend(vfloat4 l, vfloat4 h) {
-    lo = simd::min(lo, l);
-    hi = simd::max(hi, h);
+// The builder's own primitive reference: one aligned 8-float row [-lo.x, -lo.y, -lo.z, id |
+// hi.x, hi.y, hi.z, 0]. With the lower corner negated, growing a box by another is a single 8-wide
+// max (Embree keeps its bins the same way), and a whole reference is one aligned load. Lanes 3 and
+// 7 hold no coordinate and are ignored (lane 3 carries the id bits).
+struct alignas(32) Ref {
+  float v[8];
+  SLIM_INLINE vfloat8 row() const { return vfloat8::load(v); }
+  SLIM_INLINE uint32_t id() const {
+    uint32_t i;
+    std::memcpy(&i, &v[3], 4);
+    return i;
   }
-  SLIM_INLINE void extend(const Box4& b) { extend(b.lo, b.hi); }
+  // Twice the centroid on axis a (lo + hi, rounded once as before).
+  SLIM_INLINE float c2(int a) const { return v[4 + a] - v[a]; }
+};
+static_assert(sizeof(Ref) == 32);
+
+SLIM_INLINE Ref make_ref(const PrimRef& p) {
+  Ref r;
+  for (int a = 0; a < 3; ++a) {
+    r.v[a] = -p.box.lo[a];
+    r.v[4 + a] = p.box.hi[a];
+  }
+  std::memcpy(&r.v[3], &p.id, 4);
+  r.v[7] = 0.0f;
+  return r;
+}
+
+// Box as one 8-wide row [-lo | hi] (lanes 3, 7 ignored); empty = all -inf.
+struct Box8 {
+  vfloat8 b{-kInf};
+  SLIM_INLINE void extend(vfloat8 r) { b = simd::max(b, r); }
   SLIM_INLINE Box3f box3() const {
-    return Box3f({lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]});
+    alignas(32) float t[8];
+    b.store(t);
+    return Box3f({-t[0], -t[1], -t[2]}, {t[4], t[5], t[6]});
   }
+  // Half the surface area, 0 for an empty box: (dx*dy + dy*dz) + dz*dx as the scalar code did.
   SLIM_INLINE float half_area() const {
     alignas(16) float d[4];
-    (hi - lo).storeu(d);
+    (simd::upper4(b) + simd::lower4(b)).storeu(d);  // hi - lo
     return d[0] >= 0.0f ? d[0] * d[1] + d[1] * d[2] + d[2] * d[0] : 0.0f;
   }
 };
 
-// Bin boxes are left uninitialised on construction: clear() sets the ones in use.
-struct BinBox {
-  vfloat4 lo, hi;
-  SLIM_INLINE void extend(vfloat4 l, vfloat4 h) {
-    lo = simd::min(lo, l);
-    hi = simd::max(hi, h);
+// Primitive bounds and centroid (x2) bounds of a range; the centroid box is kept as [-c | c].
+struct Range {
+  Box8 box;
+  Box8 cb;
+  SLIM_INLINE void add(vfloat8 r) {
+    box.extend(r);
+    const vfloat4 c = simd::upper4(r) - simd::lower4(r);  // hi + lo
+    cb.extend(simd::combine4(c ^ vfloat4(-0.0f), c));
+  }
+  SLIM_INLINE void merge(const Range& o) {
+    box.extend(o.box.b);
+    cb.extend(o.cb.b);
   }
 };
 
 struct Bins {
-  BinBox box[3][kMaxBins];
-  uint32_t count[3][kMaxBins];
+  vfloat8 box[3][kMaxBins];     // [axis][bin] rows [-lo | hi]
+  uint32_t count[kMaxBins][4];  // [bin][axis] (lane 3 unused), one 4-wide load per bin
   void clear(int nb) {
-    for (int a = 0; a < 3; ++a)
-      for (int i = 0; i < nb; ++i) {
-        box[a][i] = {vfloat4(kInf), vfloat4(-kInf)};
-        count[a][i] = 0;
-      }
+    for (int i = 0; i < nb; ++i) {
+      for (int a = 0; a < 3; ++a) box[a][i] = vfloat8(-kInf);
+      for (int a = 0; a < 4; ++a) count[i][a] = 0;
+    }
   }
   void merge(const Bins& o, int nb) {
-    for (int a = 0; a < 3; ++a)
-      for (int i = 0; i < nb; ++i) {
-        box[a][i].extend(o.box[a][i].lo, o.box[a][i].hi);
-        count[a][i] += o.count[a][i];
-      }
+    for (int i = 0; i < nb; ++i) {
+      for (int a = 0; a < 3; ++a) box[a][i] = simd::max(box[a][i], o.box[a][i]);
+      for (int a = 0; a < 3; ++a) count[i][a] += o.count[i][a];
+    }
   }
 };
 
@@ -83,8 +118,8 @@ struct Binner {
   SLIM_INLINE vint4 bins(vfloat4 c2) const {
     return simd::clamp(simd::to_int_trunc((c2 - lo) * scale), vint4(0), vint4(nb - 1));
   }
-  SLIM_INLINE int bin(const PrimRef& r, int axis) const {
-    float c = (r.box.lo[axis] + r.box.hi[axis] - lo[axis]) * scale[axis];
+  SLIM_INLINE int bin(const Ref& r, int axis) const {
+    float c = (r.c2(axis) - lo[axis]) * scale[axis];
     int b = int(c);
     return b < 0 ? 0 : (b > nb - 1 ? nb - 1 : b);
   }
@@ -96,31 +131,49 @@ struct Split {
   float cost = kInf;
 };
 
-struct Range {
-  Box4 box;  // primitive bounds
-  Box4 cb;   // centroid (x2) bounds
-};
-
 class Builder {
  public:
-  Builder(std::vector<PrimRef>& refs, const Bvh2BuildConfig& cfg, Bvh2& out)
-      : refs_(refs),
+  Builder(std::vector<PrimRef>& input, const Bvh2BuildConfig& cfg, Bvh2& out)
+      : input_(input),
         cfg_(cfg),
         out_(out),
         nb_(std::clamp(cfg.bins, 2, kMaxBins)),
         inv_block_(1.0f / float(std::max<uint32_t>(cfg.block_prims, 1))) {}
 
   void run() {
-    const uint32_t n = uint32_t(refs_.size());
+    // Counts are summed in 32-bit signed lanes by the SAH sweep.
+    if (input_.size() >= (size_t(1) << 31))
+      throw std::length_error("BVH build: at most 2^31 - 1 primitives");
+    const uint32_t n = uint32_t(input_.size());
     out_.nodes.clear();
     out_.prim_ids.clear();
     if (n == 0) return;
+    refs_.reset(new Ref[n]);
+    Range root = tbb::parallel_reduce(
+        tbb::blocked_range<uint32_t>(0, n, 8192), Range{},
+        [&](const tbb::blocked_range<uint32_t>& r, Range a) {
+          for (uint32_t i = r.begin(); i < r.end(); ++i) {
+            refs_[i] = make_ref(input_[i]);
+            a.add(refs_[i].row());
+          }
+          return a;
+        },
+        [](Range x, const Range& y) {
+          x.merge(y);
+          return x;
+        });
+    std::vector<PrimRef>().swap(input_);
     out_.nodes.resize(2 * size_t(n) - 1);
     node_count_ = 1;
-    build(0, 0, n, range_of(0, n), 0);
+    build(0, 0, n, root, 0);
     out_.nodes.resize(node_count_.load());
     out_.prim_ids.resize(n);
-    for (uint32_t i = 0; i < n; ++i) out_.prim_ids[i] = refs_[i].id;
+    tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n, 16384),
+                      [&](const tbb::blocked_range<uint32_t>& r) {
+                        for (uint32_t i = r.begin(); i < r.end(); ++i)
+                          out_.prim_ids[i] = refs_[i].id();
+                      });
+    refs_.reset();
     out_.depth = max_depth_.load();
   }
 
@@ -130,81 +183,110 @@ class Builder {
 
   Range range_of(uint32_t begin, uint32_t end) const {
     auto body = [&](const tbb::blocked_range<uint32_t>& r, Range a) {
-      for (uint32_t i = r.begin(); i < r.end(); ++i) {
-        vfloat4 l = ref_lo(refs_[i]), h = ref_hi(refs_[i]);
-        a.box.extend(l, h);
-        vfloat4 c = l + h;
-        a.cb.extend(c, c);
-      }
+      for (uint32_t i = r.begin(); i < r.end(); ++i) a.add(refs_[i].row());
       return a;
     };
     if (end - begin >= kParallelBinThreshold)
       return tbb::parallel_reduce(tbb::blocked_range<uint32_t>(begin, end, 8192), Range{}, body,
                                   [](Range x, const Range& y) {
-                                    x.box.extend(y.box);
-                                    x.cb.extend(y.cb);
+                                    x.merge(y);
                                     return x;
                                   });
     return body(tbb::blocked_range<uint32_t>(begin, end), Range{});
   }
 
-  void bin_range(const Binner& b, uint32_t begin, uint32_t end, Bins& bins) const {
+  SLIM_INLINE void bin_one(const Binner& b, const Ref& ref, Bins& bins) const {
     alignas(16) int32_t k[4];
-    for (uint32_t i = begin; i < end; ++i) {
-      vfloat4 l = ref_lo(refs_[i]), h = ref_hi(refs_[i]);
-      b.bins(l + h).storeu(k);
-      for (int a = 0; a < 3; ++a) {
-        bins.box[a][k[a]].extend(l, h);
-        bins.count[a][k[a]]++;
-      }
+    const vfloat8 r = ref.row();
+    b.bins(simd::upper4(r) - simd::lower4(r)).storeu(k);
+    for (int a = 0; a < 3; ++a) {
+      bins.box[a][k[a]] = simd::max(bins.box[a][k[a]], r);
+      bins.count[k[a]][a]++;
     }
   }
 
-  Split find_split(const Bins& bins, int nb, const Vec3f& cext) const {
-    Split best;
-    for (int a = 0; a < 3; ++a) {
-      if (!(cext[a] > 0.0f)) continue;
-      // Sweep from the right: cost and count of everything at or right of bin i.
-      float rcost[kMaxBins];
-      uint32_t rcnt[kMaxBins];
-      Box4 rb;
-      uint32_t rc = 0;
-      for (int i = nb - 1; i > 0; --i) {
-        rb.extend(bins.box[a][i].lo, bins.box[a][i].hi);
-        rc += bins.count[a][i];
-        rcost[i] = rb.half_area() * blocks(rc);
-        rcnt[i] = rc;
+  // Neighbouring references mostly fall into the same bins, and each update of a bin waits for
+  // the previous one (load - max - store). Large ranges alternate between two bin sets, merged at
+  // the end, so that two such chains run side by side.
+  void bin_range(const Binner& b, uint32_t begin, uint32_t end, Bins& bins) const {
+    uint32_t i = begin;
+    if (end - begin >= kTwoBinSetThreshold) {
+      Bins second;
+      second.clear(b.nb);
+      for (; i + 1 < end; i += 2) {
+        bin_one(b, refs_[i], bins);
+        bin_one(b, refs_[i + 1], second);
       }
-      Box4 lb;
-      uint32_t lc = 0;
-      for (int i = 1; i < nb; ++i) {
-        lb.extend(bins.box[a][i - 1].lo, bins.box[a][i - 1].hi);
-        lc += bins.count[a][i - 1];
-        if (lc == 0 || rcnt[i] == 0) continue;
-        float cost = lb.half_area() * blocks(lc) + rcost[i];
-        if (cost < best.cost) best = {a, i, cost};
-      }
+      bins.merge(second, b.nb);
     }
-    return best;
+    for (; i < end; ++i) bin_one(b, refs_[i], bins);
+  }
+
+  // Half areas of the three boxes r0..r2 ([-lo | hi] rows) in lanes 0-2: (dx*dy + dy*dz) + dz*dx
+  // per lane, as Box8::half_area computes it, 0 for an empty box.
+  static SLIM_INLINE vfloat4 half_areas3(vfloat8 r0, vfloat8 r1, vfloat8 r2) {
+    using namespace simd;
+    vfloat4 x, y, z;
+    transpose3(upper4(r0) + lower4(r0), upper4(r1) + lower4(r1), upper4(r2) + lower4(r2), x, y, z);
+    const vfloat4 area = (x * y + y * z) + z * x;
+    return select(x >= vfloat4(0.0f), area, vfloat4(0.0f));
+  }
+
+  // The SAH sweep over the bins of the three axes at once (lane = axis). Same arithmetic and the
+  // same choice as a scalar sweep axis by axis, bin by bin, keeping the first strict minimum.
+  Split find_split(const Bins& bins, int nb, const Vec3f& cext) const {
+    using namespace simd;
+    const vfloat4 inv_block(inv_block_);
+    auto blocks4 = [&](vint4 c) { return ceil4(to_float4(c) * inv_block); };
+    // Sweep from the right: cost and count of everything at or right of bin i.
+    alignas(16) float rcost[kMaxBins][4];
+    alignas(16) uint32_t rcnt[kMaxBins][4];
+    vfloat8 r0(-kInf), r1(-kInf), r2(-kInf);
+    vint4 rc(0);
+    for (int i = nb - 1; i > 0; --i) {
+      r0 = max(r0, bins.box[0][i]);
+      r1 = max(r1, bins.box[1][i]);
+      r2 = max(r2, bins.box[2][i]);
+      rc = add4i(rc, load4i(bins.count[i]));
+      (half_areas3(r0, r1, r2) * blocks4(rc)).storeu(rcost[i]);
+      rc.storeu(reinterpret_cast<int32_t*>(rcnt[i]));
+    }
+    const float axis_ok[4] = {cext[0] > 0.0f ? 1.0f : 0.0f, cext[1] > 0.0f ? 1.0f : 0.0f,
+                              cext[2] > 0.0f ? 1.0f : 0.0f, 0.0f};
+    const vbool4 usable = vfloat4::loadu(axis_ok) > vfloat4(0.0f);
+    vfloat8 l0(-kInf), l1(-kInf), l2(-kInf);
+    vint4 lc(0);
+    vfloat4 best(kInf), best_pos(0.0f);
+    for (int i = 1; i < nb; ++i) {
+      l0 = max(l0, bins.box[0][i - 1]);
+      l1 = max(l1, bins.box[1][i - 1]);
+      l2 = max(l2, bins.box[2][i - 1]);
+      lc = add4i(lc, load4i(bins.count[i - 1]));
+      const vfloat4 cost = half_areas3(l0, l1, l2) * blocks4(lc) + vfloat4::loadu(rcost[i]);
+      const vbool4 ok =
+          usable & (to_float4(lc) > vfloat4(0.0f)) & (to_float4(load4i(rcnt[i])) > vfloat4(0.0f));
+      const vbool4 better = ok & (cost < best);
+      best = select(better, cost, best);
+      best_pos = select(better, vfloat4(float(i)), best_pos);
+    }
+    Split s;
+    for (int a = 0; a < 3; ++a)
+      if (best[a] < s.cost) s = {a, int(best_pos[a]), best[a]};
+    return s;
   }
 
   // In-place partition by bin < pos on the split axis, computing both children's bounds.
   uint32_t partition(const Binner& b, const Split& s, uint32_t begin, uint32_t end, Range& left,
                      Range& right) {
     uint32_t i = begin, j = end;
-    auto add = [](Range& r, const PrimRef& p) {
-      vfloat4 l = ref_lo(p), h = ref_hi(p);
-      r.box.extend(l, h);
-      vfloat4 c = l + h;
-      r.cb.extend(c, c);
-    };
+    Ref* refs = refs_.get();
     for (;;) {
-      while (i < j && b.bin(refs_[i], s.axis) < s.pos) add(left, refs_[i++]);
-      while (i < j && b.bin(refs_[j - 1], s.axis) >= s.pos) add(right, refs_[--j]);
+      while (i < j && b.bin(refs[i], s.axis) < s.pos) left.add(refs[i++].row());
+      while (i < j && b.bin(refs[j - 1], s.axis) >= s.pos) right.add(refs[--j].row());
       if (i >= j) break;
-      std::swap(refs_[i], refs_[j - 1]);
-      add(left, refs_[i++]);
-      add(right, refs_[--j]);
+      std::swap(refs[i], refs[j - 1]);
+      left.add(refs[i++].row());
+      right.add(refs[--j].row());
     }
     return i;
   }
@@ -269,8 +351,8 @@ class Builder {
     if (!median) {
       Binner b;
       Split s = bin_and_split(begin, end, cbox, b);
-      float leaf_cost = box.half_area() * blocks(n);
-      float split_cost = cfg_.trav_cost * box.half_area() + s.cost;
+      float leaf_cost = range.box.half_area() * blocks(n);
+      float split_cost = cfg_.trav_cost * range.box.half_area() + s.cost;
       if (n <= cfg_.max_leaf_size && (s.axis < 0 || leaf_cost <= split_cost))
         return make_leaf(node, begin, end, box, depth);
       if (s.axis < 0) {
@@ -287,10 +369,9 @@ class Builder {
       mid = begin + n / 2;
       if (reduce_max(cext) > 0.0f) {
         int a = max_dim(cext);
-        std::nth_element(refs_.begin() + begin, refs_.begin() + mid, refs_.begin() + end,
-                         [a](const PrimRef& x, const PrimRef& y) {
-                           return x.box.lo[a] + x.box.hi[a] < y.box.lo[a] + y.box.hi[a];
-                         });
+        Ref* refs = refs_.get();
+        std::nth_element(refs + begin, refs + mid, refs + end,
+                         [a](const Ref& x, const Ref& y) { return x.c2(a) < y.c2(a); });
       }
       left = range_of(begin, mid);
       right = range_of(mid, end);
@@ -310,11 +391,12 @@ class Builder {
     }
   }
 
-  std::vector<PrimRef>& refs_;
+  std::vector<PrimRef>& input_;
   const Bvh2BuildConfig& cfg_;
   Bvh2& out_;
   int nb_;
   float inv_block_;
+  std::unique_ptr<Ref[]> refs_;
   std::atomic<uint32_t> node_count_{0};
   std::atomic<int> max_depth_{0};
 };
@@ -330,7 +412,6 @@ Bvh2 build_bvh2(std::vector<PrimRef>&& refs, const Bvh2BuildConfig& cfg) {
   } else {
     b.run();
   }
-  std::vector<PrimRef>().swap(refs);
   return out;
 }
 

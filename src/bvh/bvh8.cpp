@@ -27,10 +27,11 @@ void AlignedBytes::reserve(uint64_t n) {
   cap_ = cap;
 }
 
-uint64_t AlignedBytes::append(uint64_t n, uint64_t align) {
+uint64_t AlignedBytes::append(uint64_t n, uint64_t align, bool zero) {
   uint64_t off = (size_ + align - 1) & ~(align - 1);
   if (off + n > cap_) reserve(std::max(off + n, cap_ + cap_ / 2 + 4096));
-  if (off + n > size_) std::memset(data_ + size_, 0, off + n - size_);  // data_ may be null if 0
+  if (zero && off + n > size_)
+    std::memset(data_ + size_, 0, off + n - size_);  // data_ may be null if 0
   size_ = off + n;
   return off;
 }
@@ -100,9 +101,35 @@ Box3f dequantize_box(const QuantBoxes8& q, int i) {
 
 namespace {
 
-// Two passes: measure() walks the BVH8 that the collapse will produce (serially, cheap: no leaf
-// data is written) and records every subtree's byte sizes and the statistics; emit() then writes
-// nodes and leaves at their precomputed offsets, large subtrees as parallel tasks. The layout is
+// Statistics of one subtree of the BVH8, summed over the children in order, so that the figures
+// are the same for any number of threads.
+struct SubtreeStats {
+  uint64_t node8 = 0, qnode8 = 0, multileaf = 0, leaves = 0, leaf_blocks = 0;
+  uint64_t leaves_in_multileaf = 0, prims = 0;
+  uint64_t node_bytes = 0, multileaf_bytes = 0, leaf_data_bytes = 0;
+  double sah = 0;
+  int depth = 0;
+  void add(const SubtreeStats& o) {
+    node8 += o.node8;
+    qnode8 += o.qnode8;
+    multileaf += o.multileaf;
+    leaves += o.leaves;
+    leaf_blocks += o.leaf_blocks;
+    leaves_in_multileaf += o.leaves_in_multileaf;
+    prims += o.prims;
+    node_bytes += o.node_bytes;
+    multileaf_bytes += o.multileaf_bytes;
+    leaf_data_bytes += o.leaf_data_bytes;
+    sah += o.sah;
+    depth = std::max(depth, o.depth);
+  }
+};
+
+// Two passes: measure() walks the BVH8 that the collapse will produce (no leaf data is written)
+// and records every subtree's byte sizes and the statistics; emit() then writes nodes and leaves
+// at their precomputed offsets. Both run large subtrees as parallel tasks. The arenas are not
+// cleared beforehand: emit() zeroes each node and leaf range right before it fills it, so that
+// the first touch of the memory (its page faults) is spread over the threads too. The layout is
 // depth-first in both arenas (a node's children follow it), identical to a serial collapse.
 class Collapser {
  public:
@@ -145,12 +172,23 @@ class Collapser {
     root_area_ = std::max(out_.bounds.half_area(), 1e-30f);
     node_size_.assign(nn, 0);
     leaf_size_.assign(nn, 0);
-    measure(0, 1);
-    out_.nodes.append(node_size_[0], 64);
-    out_.leaves.append(leaf_size_[0], 64);
-    out_.root = emit(0, 0, 0);
+    const SubtreeStats m = measure(0, 1);
     Bvh8Stats& s = out_.stats;
-    s.sah_cost = sah_;
+    s.node8 = m.node8;
+    s.qnode8 = m.qnode8;
+    s.multileaf = m.multileaf;
+    s.leaves = m.leaves;
+    s.leaf_blocks = m.leaf_blocks;
+    s.leaves_in_multileaf = m.leaves_in_multileaf;
+    s.prims = m.prims;
+    s.depth = m.depth;
+    out_.node_bytes = m.node_bytes;
+    out_.multileaf_bytes = m.multileaf_bytes;
+    out_.leaf_data_bytes = m.leaf_data_bytes;
+    out_.nodes.append(node_size_[0], 64, false);
+    out_.leaves.append(leaf_size_[0], 64, false);
+    out_.root = emit(0, 0, 0);
+    s.sah_cost = m.sah;
     s.leaf_fill = s.leaf_blocks ? double(s.prims) / double(s.leaf_blocks * enc_.block_prims) : 0;
   }
 
@@ -220,13 +258,12 @@ class Collapser {
     return (b2_.nodes[i].count + enc_.block_prims - 1) / enc_.block_prims;
   }
 
-  void count_leaf(uint32_t i) {
+  void count_leaf(uint32_t i, SubtreeStats& s) const {
     uint32_t blocks = leaf_blocks(i);
-    Bvh8Stats& s = out_.stats;
     s.leaves++;
     s.leaf_blocks += blocks;
     s.prims += b2_.nodes[i].count;
-    sah_ += double(b2_.nodes[i].box.half_area()) / root_area_ * blocks;
+    s.sah += double(b2_.nodes[i].box.half_area()) / root_area_ * blocks;
   }
 
   // Multi-leaf data written by LeafEncoder::encode_multileaf (clbvh-compact), encoded during
@@ -244,18 +281,18 @@ class Collapser {
     return enc_.encode_multileaf(prims, counts, k);
   }
 
-  // Pass 1: sizes of the subtree rooted at BVH2 node i, and the statistics.
-  void measure(uint32_t i, int depth) {
-    Bvh8Stats& s = out_.stats;
-    s.depth = std::max(s.depth, depth);
+  // Pass 1: sizes of the subtree rooted at BVH2 node i, and its statistics.
+  SubtreeStats measure(uint32_t i, int depth) {
+    SubtreeStats s;
+    s.depth = depth;
     const Bvh2Node& n = b2_.nodes[i];
     if (n.is_leaf()) {
       uint32_t blocks = leaf_blocks(i);
       if (blocks > kMaxLeafBlocks) throw std::logic_error("BVH leaf too large");
       leaf_size_[i] = round16(uint64_t(blocks) * enc_.block_bytes);
-      out_.leaf_data_bytes += uint64_t(blocks) * enc_.block_bytes;
-      count_leaf(i);
-      return;
+      s.leaf_data_bytes += uint64_t(blocks) * enc_.block_bytes;
+      count_leaf(i, s);
+      return s;
     }
     if (multileaf_candidate(i)) {
       uint32_t kids[8];
@@ -270,35 +307,45 @@ class Collapser {
         data = uint64_t(k) * enc_.block_bytes;
       }
       leaf_size_[i] = round16(sizeof(MultiLeaf8) + data);
-      out_.leaf_data_bytes += data;
-      out_.multileaf_bytes += sizeof(MultiLeaf8);
+      s.leaf_data_bytes += data;
+      s.multileaf_bytes += sizeof(MultiLeaf8);
       s.multileaf++;
       s.leaves_in_multileaf += k;
-      sah_ += double(n.box.half_area()) / root_area_;
+      s.sah += double(n.box.half_area()) / root_area_;
       for (int c = 0; c < k; ++c) {
         s.leaves++;
         s.leaf_blocks++;
         s.prims += b2_.nodes[kids[c]].count;
-        sah_ += double(b2_.nodes[kids[c]].box.half_area()) / root_area_;
+        s.sah += double(b2_.nodes[kids[c]].box.half_area()) / root_area_;
       }
-      return;
+      return s;
     }
     uint32_t kids[8];
     int k = gather(i, kids);
-    sah_ += double(n.box.half_area()) / root_area_;
+    s.sah += double(n.box.half_area()) / root_area_;
     if (kind_ == NodeKind::QBvh8)
       s.qnode8++;
     else
       s.node8++;
-    out_.node_bytes += node_bytes();
+    s.node_bytes += node_bytes();
+    SubtreeStats sub[8];
+    // The multi-leaf cache (clbvh-compact) is a map: filled serially.
+    if (prims_[i] >= kParallelEmit && !enc_.encode_multileaf) {
+      tbb::task_group tg;
+      for (int c = 0; c < k; ++c) tg.run([&, c] { sub[c] = measure(kids[c], depth + 1); });
+      tg.wait();
+    } else {
+      for (int c = 0; c < k; ++c) sub[c] = measure(kids[c], depth + 1);
+    }
     uint64_t nb = node_bytes(), lb = 0;
     for (int c = 0; c < k; ++c) {
-      measure(kids[c], depth + 1);
+      s.add(sub[c]);
       nb += node_size_[kids[c]];
       lb += leaf_size_[kids[c]];
     }
     node_size_[i] = nb;
     leaf_size_[i] = lb;
+    return s;
   }
 
   void write_leaf_blocks(uint32_t i, uint8_t* dst) const {
@@ -316,6 +363,7 @@ class Collapser {
   uint64_t emit(uint32_t i, uint64_t node_off, uint64_t leaf_off) const {
     const Bvh2Node& n = b2_.nodes[i];
     if (n.is_leaf()) {
+      std::memset(out_.leaves.data() + leaf_off, 0, leaf_size_[i]);
       write_leaf_blocks(i, out_.leaves.data() + leaf_off);
       return NodeRef::make(kRefLeaf, leaf_off, leaf_blocks(i));
     }
@@ -324,6 +372,7 @@ class Collapser {
       int k = 0;
       collect_leaves(i, kids, k);
       uint8_t* base = out_.leaves.data() + leaf_off;
+      std::memset(base, 0, leaf_size_[i]);
       uint8_t* data = base + sizeof(MultiLeaf8);
       if (enc_.encode_multileaf) {
         const std::vector<uint8_t>& d = multi_cache_.at(i);
@@ -338,6 +387,7 @@ class Collapser {
       // The block count field of a multi-leaf ref holds its number of children.
       return NodeRef::make(kRefMulti, leaf_off, uint32_t(k));
     }
+    std::memset(out_.nodes.data() + node_off, 0, node_bytes());
     uint32_t kids[8];
     int k = gather(i, kids);
     uint64_t refs[8] = {};
@@ -385,7 +435,6 @@ class Collapser {
   std::vector<uint32_t> prims_, leaves_, max_leaf_, slots_;
   std::vector<uint64_t> node_size_, leaf_size_;
   std::unordered_map<uint32_t, std::vector<uint8_t>> multi_cache_;
-  double sah_ = 0;
   double root_area_ = 1;
 };
 

@@ -23,7 +23,13 @@ namespace slim {
 // ---- child references -----------------------------------------------------------------------
 // 64 bits: bits 0-2 tag, bits 3-7 leaf block count (1..31), bits 8-63 byte offset into the
 // node arena (Node8, QNode8) or the leaf arena (Leaf, MultiLeaf).
-enum RefTag : uint32_t { kRefEmpty = 0, kRefNode8 = 1, kRefQNode8 = 2, kRefLeaf = 3, kRefMulti = 4 };
+enum RefTag : uint32_t {
+  kRefEmpty = 0,
+  kRefNode8 = 1,
+  kRefQNode8 = 2,
+  kRefLeaf = 3,
+  kRefMulti = 4
+};
 
 struct NodeRef {
   static SLIM_INLINE uint64_t make(RefTag tag, uint64_t offset, uint32_t blocks = 0) {
@@ -47,9 +53,9 @@ static_assert(sizeof(Node8) == 256, "BVH8 multi-node is 256 bytes");
 // Quantized boxes of 8 children relative to one float box: value = start + q * extent, q in
 // 0..255, rounded conservatively (floor for lower, ceil for upper) at encoding.
 struct QuantBoxes8 {
-  float start[3];    // 12 B
-  float extent[3];   // 12 B: per-step size ((hi - start) / 255, rounded up)
-  uint8_t q[6][8];   // 48 B: lo_x, hi_x, lo_y, hi_y, lo_z, hi_z; empty slot: lo=255, hi=0
+  float start[3];   // 12 B
+  float extent[3];  // 12 B: per-step size ((hi - start) / 255, rounded up)
+  uint8_t q[6][8];  // 48 B: lo_x, hi_x, lo_y, hi_y, lo_z, hi_z; empty slot: lo=255, hi=0
 };
 static_assert(sizeof(QuantBoxes8) == 72, "quantized box block is 72 bytes");
 
@@ -84,8 +90,9 @@ class AlignedBytes {
     std::swap(size_, o.size_);
     std::swap(cap_, o.cap_);
   }
-  // Appends n zero bytes aligned to `align` (power of two <= 64); returns their offset.
-  uint64_t append(uint64_t n, uint64_t align = 16);
+  // Appends n zero bytes aligned to `align` (power of two <= 64); returns their offset. With
+  // zero = false the bytes are left as they are (the caller writes every one of them).
+  uint64_t append(uint64_t n, uint64_t align = 16, bool zero = true);
   void reserve(uint64_t n);
   void shrink_to_fit();
   uint8_t* data() { return data_; }
@@ -100,8 +107,8 @@ class AlignedBytes {
 
 // ---- the BVH8 -------------------------------------------------------------------------------
 enum class NodeKind : uint8_t {
-  Bvh8,        // Node8 everywhere
-  QBvh8,       // QNode8 everywhere
+  Bvh8,            // Node8 everywhere
+  QBvh8,           // QNode8 everywhere
   CompressedLeaf,  // Node8 inner nodes, MultiLeaf8 for small subtrees (compressed-leaf-bvh.txt)
 };
 
@@ -122,8 +129,8 @@ struct Bvh8Stats {
   uint64_t node8 = 0, qnode8 = 0, multileaf = 0, leaves = 0, leaf_blocks = 0;
   uint64_t leaves_in_multileaf = 0;  // leaves stored inside multi-leaf nodes
   uint64_t prims = 0;
-  double sah_cost = 0;       // SAH cost of the BVH8 (node visit = 1, block test = 1)
-  double leaf_fill = 0;      // average primitives per leaf block / block_prims
+  double sah_cost = 0;   // SAH cost of the BVH8 (node visit = 1, block test = 1)
+  double leaf_fill = 0;  // average primitives per leaf block / block_prims
   int depth = 0;
 };
 

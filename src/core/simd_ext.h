@@ -21,6 +21,29 @@ SLIM_INLINE vfloat8 load2x4(const float* lo, const float* hi) {
 }
 // Swaps the two 4-lane halves.
 SLIM_INLINE vfloat8 swap_halves(vfloat8 a) { return _mm256_permute2f128_ps(a.v, a.v, 1); }
+// Lanes 0-3 and lanes 4-7 as 4-wide vectors; two 4-wide vectors as lanes 0-3 and 4-7.
+SLIM_INLINE vfloat4 lower4(vfloat8 a) { return _mm256_castps256_ps128(a.v); }
+SLIM_INLINE vfloat4 upper4(vfloat8 a) { return _mm256_extractf128_ps(a.v, 1); }
+SLIM_INLINE vfloat8 combine4(vfloat4 lo, vfloat4 hi) {
+  return _mm256_insertf128_ps(_mm256_castps128_ps256(lo.v), hi.v, 1);
+}
+// 4-wide integer helpers and rounding up (the SAH sweep of bvh/build.cpp).
+SLIM_INLINE vint4 load4i(const uint32_t* p) { return _mm_loadu_si128((const __m128i*)p); }
+SLIM_INLINE vint4 add4i(vint4 a, vint4 b) { return _mm_add_epi32(a.v, b.v); }
+SLIM_INLINE vfloat4 to_float4(vint4 a) { return _mm_cvtepi32_ps(a.v); }
+SLIM_INLINE vfloat4 ceil4(vfloat4 a) {
+  return _mm_round_ps(a.v, _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC);
+}
+// Lanes 0-2 of a, b, c as columns: x = (a0, b0, c0, -), y = (a1, b1, c1, -), z = (a2, b2, c2, -).
+SLIM_INLINE void transpose3(vfloat4 a, vfloat4 b, vfloat4 c, vfloat4& x, vfloat4& y, vfloat4& z) {
+  const __m128 ab_lo = _mm_unpacklo_ps(a.v, b.v);  // a0 b0 a1 b1
+  const __m128 ab_hi = _mm_unpackhi_ps(a.v, b.v);  // a2 b2 a3 b3
+  const __m128 cc_lo = _mm_unpacklo_ps(c.v, c.v);  // c0 c0 c1 c1
+  const __m128 cc_hi = _mm_unpackhi_ps(c.v, c.v);  // c2 c2 c3 c3
+  x = _mm_movelh_ps(ab_lo, cc_lo);
+  y = _mm_movehl_ps(cc_lo, ab_lo);
+  z = _mm_movelh_ps(ab_hi, cc_hi);
+}
 
 SLIM_INLINE vint8 iand(vint8 a, vint8 b) { return _mm256_and_si256(a.v, b.v); }
 SLIM_INLINE vint8 ior(vint8 a, vint8 b) { return _mm256_or_si256(a.v, b.v); }
@@ -87,6 +110,45 @@ SLIM_INLINE vfloat8 swap_halves(vfloat8 a) {
   vfloat8 r;
   for (int i = 0; i < 8; ++i) r.v[i] = a.v[i ^ 4];
   return r;
+}
+SLIM_INLINE vfloat4 lower4(vfloat8 a) { return vfloat4::loadu(a.v); }
+SLIM_INLINE vfloat4 upper4(vfloat8 a) { return vfloat4::loadu(a.v + 4); }
+SLIM_INLINE vfloat8 combine4(vfloat4 lo, vfloat4 hi) {
+  vfloat8 r;
+  std::memcpy(r.v, lo.v, 16);
+  std::memcpy(r.v + 4, hi.v, 16);
+  return r;
+}
+SLIM_INLINE vint4 load4i(const uint32_t* p) {
+  vint4 r;
+  std::memcpy(r.v, p, 16);
+  return r;
+}
+SLIM_INLINE vint4 add4i(vint4 a, vint4 b) {
+  vint4 r;
+  for (int i = 0; i < 4; ++i) r.v[i] = int32_t(uint32_t(a.v[i]) + uint32_t(b.v[i]));
+  return r;
+}
+SLIM_INLINE vfloat4 to_float4(vint4 a) {
+  vfloat4 r;
+  for (int i = 0; i < 4; ++i) r.v[i] = float(a.v[i]);
+  return r;
+}
+SLIM_INLINE vfloat4 ceil4(vfloat4 a) {
+  vfloat4 r;
+  for (int i = 0; i < 4; ++i) r.v[i] = std::ceil(a.v[i]);
+  return r;
+}
+SLIM_INLINE void transpose3(vfloat4 a, vfloat4 b, vfloat4 c, vfloat4& x, vfloat4& y, vfloat4& z) {
+  x = vfloat4(0.0f);
+  y = vfloat4(0.0f);
+  z = vfloat4(0.0f);
+  const vfloat4* in[3] = {&a, &b, &c};
+  for (int i = 0; i < 3; ++i) {
+    x.v[i] = in[i]->v[0];
+    y.v[i] = in[i]->v[1];
+    z.v[i] = in[i]->v[2];
+  }
 }
 SLIM_INLINE void load_xyz5(const float* p, vfloat8& x, vfloat8& y, vfloat8& z) {
   for (int i = 0; i < 8; ++i) {

@@ -23,7 +23,8 @@
 //     triangle's neighbours without any global sort (see local_scan): fewer cache misses, more
 //     instructions.
 // One thread, thread CPU time on the shared 2-core build VM (best of 3), pairing alone:
-//   fg_terrain_hawaii (2M triangles, TIN):      TwinSort 7.3 M triangles/s, Local 6.5,
+//   fg_terrain_hawaii (2M triangles, TIN):      TwinSort 7.3 M triangles/s (~8.5-9 whole
+//   pair_triangles, cold or warm, after the memory diet of find_twins/sorted_scan), Local 6.5,
 //   FullTable 2.4 jittered grid, 2M / 8M triangles (coherent): TwinSort 5.7 / 6.2, Local 6.8 / 8.6
 // so TwinSort (the paper's sort) is the default and Local is kept for very large meshes.
 #include "mesh/pairing.h"
@@ -98,6 +99,10 @@ class LargeArray {
   T* p_ = nullptr;
   size_t n_ = 0;
 };
+
+// kNone in every entry: a memset (0xff bytes), a sequential stream instead of the random writes
+// of the entries that stay kNone.
+void fill_none(uint32_t* p, size_t n) { std::memset(p, 0xff, n * sizeof(uint32_t)); }
 
 SLIM_INLINE uint32_t float_bits(float f) {
   uint32_t u;
@@ -193,22 +198,27 @@ SLIM_INLINE const Vec3f& corner(const PairingInput& in, uint32_t tri, int k) {
 SLIM_INLINE int next3(int k) { return k == 2 ? 0 : k + 1; }
 
 // Greedy scan state (paper, "Greedy pairing"). The scan reads one bit per triangle ("paired"; a
-// bit set of T/8 bytes stays in cache where a 4 B-per-triangle array would not) and appends the
-// accepted twins; mate() turns them into mate[t] = the half-edge of t's partner on the shared edge
-// (3 * partner + corner), kNone for unpaired triangles. twin[h] (only if asked for, for the
-// augmenting pass) is the other half-edge of a manifold edge, kNone otherwise.
+// bit set of T/8 bytes stays in cache where a 4 B-per-triangle array would not) and writes the
+// accepted twins into mate[t] = the half-edge of t's partner on the shared edge (3 * partner +
+// corner), kNone for unpaired triangles. twin[h] (only if asked for, for the augmenting pass of
+// the full table) is the other half-edge of a manifold edge, kNone otherwise.
 struct Greedy {
   const PairingInput& in;
   bool verify_positions;
   std::vector<uint64_t> used;
-  std::vector<uint32_t> accepted;  // half-edge pairs (ha, hb)
+  LargeArray<uint32_t> mate;
+  uint64_t pairs = 0;  // accepted so far
   LargeArray<uint32_t> twin;
   uint64_t nonmanifold = 0;
 
   Greedy(const PairingInput& i, bool verify, bool want_twins)
       : in(i), verify_positions(verify), used((i.tri_count + 63) / 64, 0) {
-    accepted.reserve(i.tri_count);
-    if (want_twins) twin = LargeArray<uint32_t>(3 * i.tri_count, kNone);
+    mate = LargeArray<uint32_t>(i.tri_count);
+    fill_none(mate.data(), mate.size());
+    if (want_twins) {
+      twin = LargeArray<uint32_t>(3 * i.tri_count);
+      fill_none(twin.data(), twin.size());
+    }
   }
 
   SLIM_INLINE bool is_used(uint32_t t) const { return (used[t >> 6] >> (t & 63)) & 1; }
@@ -232,14 +242,17 @@ struct Greedy {
     }
   }
 
+  SLIM_INLINE void accept(uint32_t ha, uint32_t hb) {
+    set_used(ha / 3);
+    set_used(hb / 3);
+    mate[ha / 3] = hb;
+    mate[hb / 3] = ha;
+    pairs++;
+  }
+
   // Twins already known to be compatible.
   SLIM_INLINE void accept_if_free(uint32_t ha, uint32_t hb) {
-    uint32_t ta = ha / 3, tb = hb / 3;
-    if (is_used(ta) || is_used(tb)) return;
-    set_used(ta);
-    set_used(tb);
-    accepted.push_back(ha);
-    accepted.push_back(hb);
+    if (!is_used(ha / 3) && !is_used(hb / 3)) accept(ha, hb);
   }
 
   void two(uint32_t ha, uint32_t hb) {
@@ -261,31 +274,35 @@ struct Greedy {
       }
     }
   }
-
-  LargeArray<uint32_t> mate() const {
-    LargeArray<uint32_t> m(in.tri_count, kNone);
-    for (size_t i = 0; i < accepted.size(); i += 2) {
-      m[accepted[i] / 3] = accepted[i + 1];
-      m[accepted[i + 1] / 3] = accepted[i];
-    }
-    return m;
-  }
 };
 
-// Pairs of `mate`, ascending by a; the unpaired triangles; the figures.
-void collect(const PairingInput& in, const uint32_t* mate, PairingResult& r) {
-  r.pairs.clear();
-  r.unpaired.clear();
-  r.pairs.reserve(in.tri_count / 2);
-  for (uint64_t t = 0; t < in.tri_count; ++t) {
-    uint32_t m = mate[t];
-    if (m == kNone) {
-      r.unpaired.push_back(uint32_t(t));
-    } else if (m / 3 > t) {
-      uint32_t b = m / 3;
-      r.pairs.push_back({uint32_t(t), b, uint8_t(mate[b] % 3), uint8_t(m % 3)});
+// Pairs of `mate` (npairs of them), ascending by a; the unpaired triangles; the figures. Without
+// branches (whether t starts a pair is a coin toss): every entry is written at the next free
+// position (one spare entry at the end), and the position moves on only if the entry is kept; the
+// random reads of the partner's mate are prefetched.
+void collect(const PairingInput& in, const uint32_t* mate, uint64_t npairs, PairingResult& r) {
+  const uint64_t T = in.tri_count;
+  r.pairs.assign(npairs + 1, TrianglePair{});
+  r.unpaired.assign(T - 2 * npairs + 1, 0u);
+  TrianglePair* pairs = r.pairs.data();
+  uint32_t* unpaired = r.unpaired.data();
+  size_t np = 0, nu = 0;
+  constexpr uint64_t kAhead = 32;
+  for (uint64_t t = 0; t < T; ++t) {
+    if (t + kAhead < T) {
+      const uint32_t m = mate[t + kAhead];
+      __builtin_prefetch(&mate[m != kNone ? m / 3 : t]);
     }
+    const uint32_t m = mate[t];
+    unpaired[nu] = uint32_t(t);
+    nu += m == kNone;
+    const bool first = m != kNone && m / 3 > t;
+    const uint32_t b = first ? m / 3 : uint32_t(t);
+    pairs[np] = {uint32_t(t), b, uint8_t(mate[b] % 3), uint8_t(m % 3)};
+    np += first;
   }
+  r.pairs.resize(np);
+  r.unpaired.resize(nu);
   PairingStats& s = r.stats;
   s.triangles = in.tri_count;
   s.pairs = r.pairs.size();
@@ -388,20 +405,25 @@ struct EdgeRec {
   uint32_t b;    // second half-edge; for a run of 3+, its offset in Twins::runs
 };
 
-// Twins of the mesh: twin[h] for manifold edges (two compatible half-edges), runs of 3+ equal
-// keys (edges of 3+ triangles) as [count, half-edges ascending...] in `runs`, and for each
-// half-edge of a run its run offset (run_of, sorted by half-edge) for the local scan.
+// Twins of the mesh: link[h] = the twin of h for manifold edges (two compatible half-edges),
+// kNone otherwise; runs of 3+ equal keys (edges of 3+ triangles) as [count, half-edges
+// ascending...] in `runs`, and for each half-edge of a run its run offset (run_of, sorted by
+// half-edge) for the local scan. 4 B per half-edge: the edge box area is recomputed from the two
+// corners where it is needed again (augment, local_scan), which is bit-identical (edge_box_area
+// is symmetric and -ffp-contract=off).
 struct Twins {
-  // Per half-edge: BBSA float bits << 32 | twin half-edge (kNone: no manifold twin). One array,
-  // so that the random writes of a twin pair and the reads of the local scan share cache lines.
-  LargeArray<uint64_t> link;
+  LargeArray<uint32_t> link;
+  // The counting sort's buckets (8 B per half-edge). Dead once the edge records are emitted:
+  // sorted_scan reuses them as the radix sort's second buffer (12 B per edge = 6 B per half-edge).
+  LargeArray<uint64_t> slots;
   std::vector<uint32_t> runs;
   std::vector<std::pair<uint32_t, uint32_t>> run_of;
   std::vector<uint64_t> in_run;  // bit per triangle: has a half-edge in a run
 };
 
 // Builds the twins (and, if `edges` is given, one record per run of >= 2 twins, in descending
-// (smaller, larger) vertex order: the input of the area-only radix sort).
+// (smaller, larger) vertex order: the input of the area-only radix sort, with the histogram of
+// its top 11 key bits in top_hist).
 void find_twins(const PairingInput& in, Greedy& g, Twins& tw, LargeArray<EdgeRec>* edges,
                 size_t* edge_count, uint32_t* top_hist, PairingStats& st) {
   const uint64_t T = in.tri_count, V = in.vertex_count;
@@ -424,32 +446,31 @@ void find_twins(const PairingInput& in, Greedy& g, Twins& tw, LargeArray<EdgeRec
   st.half_edges = n;
   // Entry: larger vertex << 32 | half-edge id; filled through start[] as cursors (shifted back
   // by one bucket afterwards). Filled in half-edge order, so each bucket is sorted by id.
-  LargeArray<uint64_t> slot_buf(n);       // no fill: every entry is written
-  tw.link = LargeArray<uint64_t>(3 * T);  // no fill: every half-edge is written once below
-  uint64_t* slots = slot_buf.data();
+  tw.slots = LargeArray<uint64_t>(n);  // no fill: every entry is written
+  uint64_t* slots = tw.slots.data();
   for (uint64_t i = 0; i < 3 * T; i += 3)
     for (int k = 0; k < 3; ++k) {
       uint32_t i0 = tris[i + k], i1 = tris[i + next3(k)];
-      if (i0 == i1) {
-        tw.link[i + k] = kNone;  // degenerate: in no bucket
-        continue;
-      }
+      if (i0 == i1) continue;  // degenerate: in no bucket
       uint32_t v0 = std::min(i0, i1);
       slots[start[v0]++] = uint64_t(std::max(i0, i1)) << 32 | uint32_t(i + k);
     }
   for (uint64_t v = V; v > 0; --v) start[v] = start[v - 1];
   start[0] = 0;
 
+  // kNone everywhere first (a memset), then only the twins are written: degenerate, boundary and
+  // non-manifold half-edges cost no random write.
+  tw.link = LargeArray<uint32_t>(3 * T);
+  fill_none(tw.link.data(), tw.link.size());
+  uint32_t* link = tw.link.data();
   tw.in_run.assign((T + 63) / 64, 0);
   size_t ne = 0;  // at most one record per 2 half-edges
   if (edges) *edges = LargeArray<EdgeRec>(n / 2 + 1);
+  EdgeRec* out = edges ? edges->data() : nullptr;
   for (uint64_t v0 = V; v0-- > 0;) {
     uint64_t* e = slots + start[v0];
     const size_t k = start[v0 + 1] - start[v0];
-    if (k < 2) {
-      if (k == 1) tw.link[uint32_t(e[0])] = kNone;  // boundary edge
-      continue;
-    }
+    if (k < 2) continue;  // boundary edge (or none)
     // Insertion sort by (larger vertex, half-edge id): buckets are tiny (vertex valence / 2).
     for (size_t i = 1; i < k; ++i) {
       uint64_t x = e[i];
@@ -462,96 +483,126 @@ void find_twins(const PairingInput& in, Greedy& g, Twins& tw, LargeArray<EdgeRec
       const uint32_t v1 = uint32_t(e[lo] >> 32);
       while (lo > 0 && uint32_t(e[lo - 1] >> 32) == v1) --lo;
       const size_t cnt = hi - lo;
-      const uint32_t ha = uint32_t(e[lo]), hb = uint32_t(e[lo + (cnt > 1)]);
-      for (size_t x = lo; x < hi; ++x) tw.link[uint32_t(e[x])] = kNone;
-      if (cnt == 2 && g.compatible(ha, hb)) {
-        // Checked here, in vertex order (cache friendly): the later scans only touch the
-        // "paired" bits.
-        const uint32_t area = float_bits(edge_box_area(in.vertices[v0], in.vertices[v1]));
-        tw.link[ha] = uint64_t(area) << 32 | hb;
-        tw.link[hb] = uint64_t(area) << 32 | ha;
-        if (edges) {
-          const uint32_t key = ~area & 0x7fffffffu;
-          (*edges)[ne++] = {key, ha, hb};
-          top_hist[key >> 20]++;
-        }
-      } else if (cnt > 2) {
+      hi = lo;
+      if (cnt < 2) continue;  // boundary edge
+      const uint32_t ha = uint32_t(e[lo]), hb = uint32_t(e[lo + 1]);
+      if (cnt == 2 && !g.compatible(ha, hb)) continue;
+      // Checked here, in vertex order (cache friendly): the later scans only touch the "paired"
+      // bits.
+      const uint32_t key =
+          ~float_bits(edge_box_area(in.vertices[v0], in.vertices[v1])) & 0x7fffffffu;
+      if (cnt == 2) {
+        link[ha] = hb;
+        link[hb] = ha;
+        if (out) out[ne++] = {key, ha, hb};
+      } else {
         const uint32_t off = uint32_t(tw.runs.size());
         tw.runs.push_back(uint32_t(cnt));
-        for (size_t x = lo; x < hi; ++x) {
+        for (size_t x = lo; x < lo + cnt; ++x) {
           const uint32_t h = uint32_t(e[x]);
           tw.runs.push_back(h);
           tw.run_of.push_back({h, off});
           tw.in_run[h / 3 / 64] |= uint64_t(1) << (h / 3 % 64);
         }
-        if (edges) {
-          const uint32_t key =
-              ~float_bits(edge_box_area(in.vertices[v0], in.vertices[v1])) & 0x7fffffffu;
-          (*edges)[ne++] = {key, kNone, off};
-          top_hist[key >> 20]++;
-        }
+        if (out) out[ne++] = {key, kNone, off};
       }
-      hi = lo;
+      if (out) top_hist[key >> 20]++;
     }
   }
   std::sort(tw.run_of.begin(), tw.run_of.end());
   if (edge_count) *edge_count = ne;
 }
 
-// The paper's order by a stable radix sort of the edge records on the BBSA bits alone.
-// Stable sort of the edge records by their 31 key bits: one MSD pass on the top 11 bits (its
-// histogram counted while the records were emitted), then 2 LSD passes of 10 bits inside each
-// bucket, which mostly fits in L2. Stable all the way, so equal keys keep the emission order.
-// One pass over memory instead of three: 30% faster than a plain 3-pass LSD on 3M records.
-const EdgeRec* sort_edges(LargeArray<EdgeRec>& edges, LargeArray<EdgeRec>& tmp, size_t ne,
-                          const uint32_t* top_hist) {
-  constexpr int kTop = 11, kLow = 10;
-  std::vector<uint32_t> start(size_t(1) << kTop);
+// The paper's order by a stable radix sort of the edge records on the BBSA bits alone: one MSD
+// pass on the top 11 bits (its histogram counted while the records were emitted), then 2 LSD
+// passes of 10 bits inside each bucket, which mostly fits in L2; buckets of a few records take
+// an insertion sort instead (on small meshes the 2 x 1024-entry histograms of the ~2048 buckets
+// cost more than the records). Stable all the way, so equal keys keep the emission order. One
+// pass over memory instead of three: 30% faster than a plain 3-pass LSD on 3M records. `t` holds
+// ne records; the result is in t.
+const EdgeRec* sort_edges(EdgeRec* a, EdgeRec* t, size_t ne, const uint32_t* top_hist) {
+  constexpr int kTop = 11, top_shift = 31 - kTop;
+  const uint32_t* start = top_hist;
+  std::vector<uint32_t> cur(size_t(1) << kTop);
   uint32_t sum = 0;
-  for (size_t b = 0; b < start.size(); ++b) {
-    start[b] = sum;
-    sum += top_hist[b];
+  for (size_t b = 0; b < cur.size(); ++b) {
+    cur[b] = sum;
+    sum += start[b];
   }
-  std::vector<uint32_t> cur(start);
-  EdgeRec* a = edges.data();
-  EdgeRec* t = tmp.data();
-  for (size_t i = 0; i < ne; ++i) t[cur[a[i].key >> (2 * kLow)]++] = a[i];
-  uint32_t h[1u << kLow];
-  for (size_t b = 0; b < start.size(); ++b) {
-    const uint32_t lo = start[b], m = top_hist[b];
+  for (size_t i = 0; i < ne; ++i) t[cur[a[i].key >> top_shift]++] = a[i];
+  // Now bucket b is t[cur[b] - start[b], cur[b]); its keys differ in bits [0, top_shift) only.
+  const Digit low[2] = {{0, top_shift / 2}, {top_shift / 2, top_shift - top_shift / 2}};
+  uint32_t h[1u << 10];
+  for (size_t b = 0; b < cur.size(); ++b) {
+    const uint32_t m = start[b], lo = cur[b] - m;
     if (m < 2) continue;
+    if (m <= 32) {
+      EdgeRec* r = t + lo;
+      for (uint32_t i = 1; i < m; ++i) {
+        const EdgeRec x = r[i];
+        uint32_t j = i;
+        for (; j > 0 && r[j - 1].key > x.key; --j) r[j] = r[j - 1];
+        r[j] = x;
+      }
+      continue;
+    }
     EdgeRec* src = t + lo;
     EdgeRec* dst = a + lo;
-    for (int pass = 0; pass < 2; ++pass) {  // even count: the bucket ends up in t again
-      const int sh = pass * kLow;
-      std::fill(h, h + (1u << kLow), 0u);
-      for (uint32_t i = 0; i < m; ++i) h[(src[i].key >> sh) & ((1u << kLow) - 1)]++;
+    for (const Digit& d : low) {
+      if (d.bits == 0) continue;
+      const uint32_t mask = (1u << d.bits) - 1;
+      std::fill(h, h + (size_t(1) << d.bits), 0u);
+      for (uint32_t i = 0; i < m; ++i) h[(src[i].key >> d.shift) & mask]++;
       uint32_t s2 = 0;
-      for (uint32_t& x : h) {
-        uint32_t c = x;
-        x = s2;
+      for (uint32_t x = 0; x <= mask; ++x) {
+        uint32_t c = h[x];
+        h[x] = s2;
         s2 += c;
       }
-      for (uint32_t i = 0; i < m; ++i) dst[h[(src[i].key >> sh) & ((1u << kLow) - 1)]++] = src[i];
+      for (uint32_t i = 0; i < m; ++i) dst[h[(src[i].key >> d.shift) & mask]++] = src[i];
       std::swap(src, dst);
     }
+    if (src != t + lo) std::memcpy(t + lo, src, m * sizeof(EdgeRec));
   }
   return t;
 }
 
-void sorted_scan(Greedy& g, const Twins& tw, LargeArray<EdgeRec>& edges, size_t ne,
+// Sort, then the greedy scan. For a pair record, accepting is "neither triangle paired yet": done
+// without a branch (half of them are accepted, unpredictably), the accepted twins compacted in
+// place at the front of the sorted records and written to mate[] afterwards.
+void sorted_scan(Greedy& g, Twins& tw, LargeArray<EdgeRec>& edges, size_t ne,
                  const uint32_t* top_hist, PairingStats& st) {
   auto t0 = Clock::now();
-  LargeArray<EdgeRec> tmp(ne);
-  const EdgeRec* s = sort_edges(edges, tmp, ne, top_hist);
+  if (ne == 0) return;
+  // The sort's second buffer: the slots of find_twins (8 B per half-edge >= 12 B per record, and
+  // no longer read). A new byte array there implicitly creates the records ([intro.object]).
+  static_assert(sizeof(EdgeRec) <= 2 * sizeof(uint64_t));
+  EdgeRec* tmp = std::launder(reinterpret_cast<EdgeRec*>(::new (static_cast<void*>(tw.slots.data()))
+                                                             std::byte[ne * sizeof(EdgeRec)]));
+  EdgeRec* s = const_cast<EdgeRec*>(sort_edges(edges.data(), tmp, ne, top_hist));
   st.sort_s = seconds_since(t0);
   t0 = Clock::now();
+  uint64_t* used = g.used.data();
+  size_t na = 0;  // accepted pair records, compacted into s[0, na)
   for (size_t i = 0; i < ne; ++i) {
-    if (s[i].a != kNone)
-      g.accept_if_free(s[i].a, s[i].b);
-    else
-      g.run(&tw.runs[s[i].b + 1], tw.runs[s[i].b]);
+    const EdgeRec r = s[i];
+    if (r.a != kNone) {
+      const uint32_t ta = r.a / 3, tb = r.b / 3;
+      const uint64_t free = ~((used[ta >> 6] >> (ta & 63)) | (used[tb >> 6] >> (tb & 63))) & 1;
+      used[ta >> 6] |= free << (ta & 63);
+      used[tb >> 6] |= free << (tb & 63);
+      s[na] = r;
+      na += free;
+    } else {
+      g.run(&tw.runs[r.b + 1], tw.runs[r.b]);
+    }
   }
+  uint32_t* mate = g.mate.data();
+  for (size_t i = 0; i < na; ++i) {
+    mate[s[i].a / 3] = s[i].b;
+    mate[s[i].b / 3] = s[i].a;
+  }
+  g.pairs += na;
   st.scan_s = seconds_since(t0);
 }
 
@@ -588,11 +639,11 @@ void local_scan(const PairingInput& in, Greedy& g, const Twins& tw, PairingStats
     const uint32_t* v = &tris[3 * size_t(x)];
     for (int k = 0; k < 3; ++k) {
       const uint32_t h = 3 * x + k;
-      const uint64_t link = tw.link[h];
-      const uint32_t o = uint32_t(link);
+      const uint32_t o = tw.link[h];
       if (o != kNone) {
         if (g.is_used(o / 3)) continue;
-        Priority p = edge_priority(uint32_t(link >> 32), v[k], v[next3(k)], 0, 1);
+        const float area = edge_box_area(in.vertices[v[k]], in.vertices[v[next3(k)]]);
+        Priority p = edge_priority(float_bits(area), v[k], v[next3(k)], 0, 1);
         if (p > c.prio || c.partner == kNone) c = {o / 3, h, o, p};
       }
     }
@@ -635,10 +686,7 @@ void local_scan(const PairingInput& in, Greedy& g, const Twins& tw, PairingStats
       }
       const Candidate d = best(c.partner);  // >= c.prio, since x is one of its candidates
       if (d.h == c.o && d.o == c.h) {  // the same candidate: x and its partner choose each other
-        g.set_used(x);
-        g.set_used(c.partner);
-        g.accepted.push_back(c.h);
-        g.accepted.push_back(c.o);
+        g.accept(c.h, c.o);
         stack.pop_back();
       } else {
         stack.push_back(c.partner);
@@ -651,15 +699,14 @@ void local_scan(const PairingInput& in, Greedy& g, const Twins& tw, PairingStats
 
 // Augmenting paths of length 3 (see PairingOptions::augment): free t, pair (n, p), free u with
 // t-n and p-u manifold edges becomes (t, n) + (p, u), the candidate with the largest sum of edge
-// box areas first. Sweeps over the free triangles until nothing changes (at most 4). link(h)
-// gives BBSA bits << 32 | twin half-edge (kNone: no manifold twin). Returns the pairs gained.
-template <class LinkOf>
-uint64_t augment(const PairingInput& in, LinkOf link, uint32_t* mate) {
-  auto area = [](uint64_t l) {
-    float f;
-    const uint32_t b = uint32_t(l >> 32);
-    std::memcpy(&f, &b, 4);
-    return f;
+// box areas first. Sweeps over the free triangles until nothing changes (at most 4). twin[h] is
+// the twin half-edge of h (kNone: no manifold twin); the areas are recomputed from the corners
+// (only for the few candidate edges). Returns the pairs gained.
+uint64_t augment(const PairingInput& in, const uint32_t* twin, uint32_t* mate) {
+  auto area = [&](uint32_t h) {
+    const uint32_t t = h / 3;
+    const int k = int(h % 3);
+    return edge_box_area(corner(in, t, k), corner(in, t, next3(k)));
   };
   std::vector<uint32_t> free_tris;
   for (uint64_t t = 0; t < in.tri_count; ++t)
@@ -674,20 +721,20 @@ uint64_t augment(const PairingInput& in, LinkOf link, uint32_t* mate) {
       uint32_t bh = kNone, bo = kNone, bh2 = kNone, bo2 = kNone;
       for (int k = 0; k < 3; ++k) {
         const uint32_t h = 3 * t + k;
-        const uint64_t l = link(h);
-        const uint32_t o = uint32_t(l);  // manifold edges only
+        const uint32_t o = twin[h];  // manifold edges only
         if (o == kNone) continue;
         const uint32_t n = o / 3;
         if (mate[n] == kNone) continue;
         const uint32_t p = mate[n] / 3;
+        float a1 = -1.0f;  // area(h), once needed
         for (int m = 0; m < 3; ++m) {
           const uint32_t h2 = 3 * p + m;
-          const uint64_t l2 = link(h2);
-          const uint32_t o2 = uint32_t(l2);
+          const uint32_t o2 = twin[h2];
           if (o2 == kNone) continue;
           const uint32_t u = o2 / 3;
           if (u == n || u == t || mate[u] != kNone) continue;
-          const float score = area(l) + area(l2);
+          if (a1 < 0.0f) a1 = area(h);
+          const float score = a1 + area(h2);
           if (score > best) {
             best = score;
             bh = h, bo = o, bh2 = h2, bo2 = o2;
@@ -744,11 +791,17 @@ bool find_shared_edge(const PairingInput& in, uint32_t a, uint32_t b, bool by_po
 
 using enum EdgeOrder;
 
-PairingResult heuristic(const PairingInput& in, bool coordinate_keys, EdgeOrder full, bool aug) {
-  const uint64_t T = in.tri_count;
+PairingResult heuristic(const PairingInput& in_arg, bool coordinate_keys, EdgeOrder full,
+                        bool aug) {
+  const uint64_t T = in_arg.tri_count;
   if (3 * T >= 0xffffffffull)
     throw Error("triangle pairing: " + std::to_string(T) +
                 " triangles, at most (2^32 - 1) / 3 can be paired");
+  PairingInput in = in_arg;
+  // One group for all triangles (a single mesh): no group test per candidate pair.
+  if (in.groups &&
+      std::all_of(in.groups, in.groups + T, [&](uint32_t x) { return x == in.groups[0]; }))
+    in.groups = nullptr;
   PairingResult r;
   Greedy g(in, coordinate_keys, aug && (coordinate_keys || full == FullTable));
   Twins tw;
@@ -766,45 +819,102 @@ PairingResult heuristic(const PairingInput& in, bool coordinate_keys, EdgeOrder 
     else
       local_scan(in, g, tw, r.stats);
   }
-  r.stats.heuristic_paired_fraction = T ? double(g.accepted.size()) / double(T) : 0.0;
-  LargeArray<uint32_t> mate = g.mate();
-  g.accepted = {};
+  tw.slots = {};
+  r.stats.heuristic_paired_fraction = T ? double(2 * g.pairs) / double(T) : 0.0;
   if (aug) {
     auto t0 = Clock::now();
-    if (!tw.link.empty()) {
-      r.stats.augmented_pairs = augment(
-          in, [&](uint32_t h) { return tw.link[h]; }, mate.data());
-    } else {
-      auto link = [&](uint32_t h) {
-        const uint32_t t = h / 3, o = g.twin[h];
-        const int k = int(h % 3);
-        if (o == kNone) return uint64_t(kNone);
-        const float a = edge_box_area(corner(in, t, k), corner(in, t, next3(k)));
-        return uint64_t(float_bits(a)) << 32 | o;
-      };
-      r.stats.augmented_pairs = augment(in, link, mate.data());
-    }
+    const uint32_t* twin = tw.link.empty() ? g.twin.data() : tw.link.data();
+    r.stats.augmented_pairs = augment(in, twin, g.mate.data());
     r.stats.augment_s = seconds_since(t0);
   }
   r.stats.nonmanifold_edges = g.nonmanifold;
-  collect(in, mate.data(), r);
+  collect(in, g.mate.data(), g.pairs + r.stats.augmented_pairs, r);
   return r;
 }
 
-// The window-2 pairs alone (the pre-scan).
-std::vector<TrianglePair> window_scan(const PairingInput& in, bool by_position) {
-  std::vector<TrianglePair> pairs;
-  pairs.reserve(in.tri_count / 2);
-  for (uint64_t i = 0; i + 1 < in.tri_count;) {
-    TrianglePair p;
-    if (find_shared_edge(in, uint32_t(i), uint32_t(i + 1), by_position, p)) {
-      pairs.push_back(p);
-      i += 2;
-    } else {
-      i += 1;
+// Shared edge of two index triangles a, b as one look-up: bit 3i+j of the index is a_i == b_j,
+// bit 9+i is "a's edge i is degenerate"; the entry is 3i+j of the first (i, j) in the order of
+// find_shared_edge with a's edge i = b's edge j (either direction), 0xff if none.
+struct SharedEdgeTable {
+  uint8_t code[4096];
+  constexpr SharedEdgeTable() : code() {
+    for (int m = 0; m < 4096; ++m) {
+      code[m] = 0xff;
+      auto eq = [m](int i, int j) { return (m >> (3 * i + j)) & 1; };
+      for (int i = 0; i < 3 && code[m] == 0xff; ++i) {
+        if ((m >> (9 + i)) & 1) continue;
+        const int i1 = (i + 1) % 3;
+        for (int j = 0; j < 3; ++j) {
+          const int j1 = (j + 1) % 3;
+          if ((eq(i, j) && eq(i1, j1)) || (eq(i, j1) && eq(i1, j))) {
+            code[m] = uint8_t(3 * i + j);
+            break;
+          }
+        }
+      }
     }
   }
-  return pairs;
+};
+constexpr SharedEdgeTable kSharedEdge;
+
+SLIM_INLINE uint8_t shared_edge_code(const uint32_t* a, const uint32_t* b) {
+  uint32_t m = 0;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) m |= uint32_t(a[i] == b[j]) << (3 * i + j);
+  m |= uint32_t(a[0] == a[1]) << 9 | uint32_t(a[1] == a[2]) << 10 | uint32_t(a[2] == a[0]) << 11;
+  return kSharedEdge.code[m];
+}
+
+// The window-2 pairs (the pre-scan; paper, "Results": "a pre-scan to decide if pairing
+// optimisation is needed"): returns their number, and in `pairs` the pairs themselves if
+// 2 * count / T >= keep_threshold (empty otherwise: they are no longer stored once the threshold
+// is out of reach). Index keys: the shared edge of each (i, i+1) by a table look-up (no branch),
+// in blocks, then the in-order greedy choice s_i = f_i && !s_(i-1) as a short dependency chain.
+uint64_t window_scan(const PairingInput& in, bool by_position, double keep_threshold,
+                     std::vector<TrianglePair>& pairs) {
+  const uint64_t T = in.tri_count;
+  pairs.clear();
+  bool keep = T > 0 && 1.0 >= keep_threshold;
+  if (keep) pairs.reserve(T / 2);  // pages are touched only as far as the pairs are written
+  uint64_t count = 0;
+  if (by_position) {
+    for (uint64_t i = 0; i + 1 < T;) {
+      TrianglePair p;
+      if (find_shared_edge(in, uint32_t(i), uint32_t(i + 1), true, p)) {
+        if (keep) pairs.push_back(p);
+        count++;
+        i += 2;
+      } else {
+        i += 1;
+      }
+      if (keep && double(T + 2 * count - i) / double(T) < keep_threshold) keep = false;
+    }
+  } else {
+    constexpr uint64_t kBlock = 256;
+    uint8_t code[kBlock];
+    bool prev = false;  // (i-1, i) is a pair
+    for (uint64_t b = 0; b + 1 < T; b += kBlock) {
+      const uint64_t e = std::min(b + kBlock, T - 1);
+      for (uint64_t i = b; i < e; ++i) {
+        uint8_t c = shared_edge_code(&in.tris[3 * i], &in.tris[3 * i + 3]);
+        if (in.groups && in.groups[i] != in.groups[i + 1]) c = 0xff;
+        code[i - b] = c;
+      }
+      for (uint64_t i = b; i < e; ++i) {
+        const uint8_t c = code[i - b];
+        const bool s = c != 0xff && !prev;
+        count += s;
+        prev = s;
+        if (s && keep)
+          pairs.push_back({uint32_t(i), uint32_t(i + 1), uint8_t(c / 3), uint8_t(c % 3)});
+      }
+      // The triangles of [0, e) in no pair so far stay unpaired: give up storing the pairs once
+      // the threshold is out of reach.
+      if (keep && double(T + 2 * count - e) / double(T) < keep_threshold) keep = false;
+    }
+  }
+  if (!keep) pairs = {};
+  return count;
 }
 
 // The result of window pairs: pairs are (i, i+1) in order, so the unpaired triangles are the
@@ -848,7 +958,9 @@ bool pair_shares_edge(const PairingInput& in, const TrianglePair& p, bool by_pos
 }
 
 PairingResult window_pairs(const PairingInput& in, bool by_position) {
-  return window_result(in, window_scan(in, by_position));
+  std::vector<TrianglePair> pairs;
+  window_scan(in, by_position, -1.0, pairs);
+  return window_result(in, std::move(pairs));
 }
 
 uint64_t weld_positions(const Vec3f* vertices, uint64_t vertex_count,
@@ -908,8 +1020,9 @@ PairingResult pair_triangles(const PairingInput& in_arg, const PairingOptions& o
 
   // Pre-scan: the window-2 pairing, kept if it is good enough.
   auto t0 = Clock::now();
-  std::vector<TrianglePair> w = window_scan(in, opt.coordinate_keys);
-  const double window2 = in.tri_count ? double(2 * w.size()) / double(in.tri_count) : 0.0;
+  std::vector<TrianglePair> w;
+  const uint64_t nw = window_scan(in, opt.coordinate_keys, opt.prescan_threshold, w);
+  const double window2 = in.tri_count ? double(2 * nw) / double(in.tri_count) : 0.0;
   PairingResult r;
   if (in.tri_count > 0 && window2 >= opt.prescan_threshold) {
     r = window_result(in, std::move(w));

@@ -589,3 +589,51 @@ TEST(GridWatertight, ClosedTorusNoLeaks) {
     }
   }
 }
+
+// Half sub-grids (prim/subgrid.h): under the compressed-leaf BVH each sub-grid of a multi-leaf
+// gets two child boxes (cell rows 0-1 and 2-3) over one block. The hits must be exactly those of
+// whole sub-grids (same decoded vertices, same triangle test), partial sub-grids with an empty
+// half included (19 cells: the last sub-grid row has 3 cells; the seamed torus has 3-cell
+// strips), and each multi-leaf holds at most 4 sub-grids.
+TEST(GridHits, HalfSubGridChildrenMatchWholeSubGrids) {
+  std::vector<PolyMesh> meshes{make_terrain(19),
+                               add_uv_seams(rotate_some_faces(make_torus(64), 64, 6, 5), 64, 7, 3)};
+  auto detail = [](const Scene& s, const std::string& key) {
+    for (const auto& [k, v] : s.stats().details)
+      if (k == key) return v;
+    return -1.0;
+  };
+  for (const PolyMesh& m : meshes) {
+    for (const char* config : {"lossy-grid", "lossy-grid-e2", "lossy-grid-shared"}) {
+      const BuildOptions opt = BuildOptions::from_config(config);
+      setenv("SLIM_GRID_HALVES", "0", 1);
+      Scene whole = Scene::build(m, opt);
+      unsetenv("SLIM_GRID_HALVES");
+      Scene halves = Scene::build(m, opt);
+      ASSERT_EQ(detail(whole, "half_subgrid_children"), 0.0) << config;
+      ASSERT_EQ(detail(halves, "half_subgrid_children"), 1.0) << config;
+      std::string why;
+      EXPECT_TRUE(halves.validate(&why)) << config << ": " << why;
+      const double ml = detail(halves, "multileaf_count");
+      ASSERT_GT(ml, 0.0) << config;
+      EXPECT_LE(detail(halves, "leaves_in_multileaf"), 4.0 * ml) << config;
+      const Box3f box = halves.bounds();
+      Rng rng(77);
+      int hits = 0;
+      for (int i = 0; i < 20000; ++i) {
+        const Ray r = random_ray(rng, box);
+        const Hit a = whole.intersect(r), b = halves.intersect(r);
+        ASSERT_EQ(a.valid(), b.valid()) << config << " ray " << i;
+        EXPECT_EQ(whole.occluded(r), halves.occluded(r)) << config << " ray " << i;
+        if (!a.valid()) continue;
+        hits++;
+        EXPECT_EQ(a.t, b.t) << config << " ray " << i;
+        EXPECT_EQ(a.primID, b.primID) << config << " ray " << i;
+        EXPECT_EQ(a.geomID, b.geomID) << config << " ray " << i;
+        EXPECT_EQ(a.u, b.u) << config << " ray " << i;
+        EXPECT_EQ(a.v, b.v) << config << " ray " << i;
+      }
+      EXPECT_GT(hits, 2000) << config;
+    }
+  }
+}

@@ -39,9 +39,12 @@ struct Fingerprint {
 
 inline NodeKind node_kind(Bvh b) {
   switch (b) {
-    case Bvh::Bvh8: return NodeKind::Bvh8;
-    case Bvh::Quantized8: return NodeKind::QBvh8;
-    default: return NodeKind::CompressedLeaf;
+    case Bvh::Bvh8:
+      return NodeKind::Bvh8;
+    case Bvh::Quantized8:
+      return NodeKind::QBvh8;
+    default:
+      return NodeKind::CompressedLeaf;
   }
 }
 
@@ -50,7 +53,7 @@ class BvhScene : public Scene::Impl {
  public:
   Bvh8 bvh;
   typename Leaf::Context ctx{};
-  Fingerprint expected;  // of the source primitives
+  Fingerprint expected;                   // of the source primitives
   std::shared_ptr<const void> keepalive;  // data the context points into (counted in mem)
 
   void intersect(TravRay& ray, HitRecord& hit) const override {
@@ -78,9 +81,12 @@ class BvhScene : public Scene::Impl {
     MultiLeafValidator multi;
     if constexpr (HasMultiLeafLayout<Leaf>)
       multi = [&](const uint8_t* data, uint32_t k, uint32_t i, Box3f& bounds, std::string*) {
+        // A block split into several children (half sub-grids) is counted once.
+        bool primary = true;
+        if constexpr (HasMultiLeafParts<Leaf>) primary = Leaf::primary_part(ctx, i);
         Leaf::visit_in_multileaf(ctx, data, k, int(i), [&](const Box3f& b, uint64_t key) {
           bounds.extend(b);
-          got.add(key);
+          if (primary) got.add(key);
         });
         return true;
       };
@@ -120,7 +126,8 @@ class BvhScene : public Scene::Impl {
         });
     Bvh2BuildConfig cfg;
     cfg.bins = opt.sah_bins;
-    cfg.max_leaf_size = std::max<uint32_t>(1, std::min<uint32_t>(opt.max_leaf_size, Leaf::kBlockPrims * kMaxLeafBlocks));
+    cfg.max_leaf_size = std::max<uint32_t>(
+        1, std::min<uint32_t>(opt.max_leaf_size, Leaf::kBlockPrims * kMaxLeafBlocks));
     cfg.block_prims = Leaf::kBlockPrims;
     cfg.threads = opt.threads;
     double refs_s = secs(t0);
@@ -134,10 +141,15 @@ class BvhScene : public Scene::Impl {
     enc.encode = [&](const uint32_t* prims, uint32_t n, uint8_t* out) {
       Leaf::encode(src, prims, n, out);
     };
-    if constexpr (HasMultiLeafLayout<Leaf>)
+    if constexpr (HasMultiLeafEncoder<Leaf>)
       enc.encode_multileaf = [&](const uint32_t* const* prims, const uint32_t* counts, int k) {
         return Leaf::encode_multileaf(src, prims, counts, k);
       };
+    if constexpr (HasMultiLeafParts<Leaf>) {
+      enc.parts_per_block = Leaf::multileaf_parts(src);
+      if (enc.parts_per_block > 1)
+        enc.part_bounds = [&](uint32_t prim, Box3f* boxes) { Leaf::part_bounds(src, prim, boxes); };
+    }
     bvh = collapse_bvh8(b2, node_kind(opt.bvh), enc);
     double collapse_s = secs(t0);
     bounds = bvh.bounds;

@@ -581,6 +581,13 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
   const uint64_t n = p.sub_start.back();
   std::vector<Block> blocks(n);
   std::vector<Box3f> bounds(n);
+  // Half sub-grids as multi-leaf children (prim/subgrid.h) under the compressed-leaf BVH; the
+  // environment variable SLIM_GRID_HALVES=0 turns them off (measurements).
+  const char* halves_env = std::getenv("SLIM_GRID_HALVES");
+  const bool halves = (opt.bvh == Bvh::CompressedLeaf || opt.bvh == Bvh::CompressedLeafCompact) &&
+                      !(halves_env && std::string(halves_env) == "0");
+  std::vector<Box3f> half_bounds(halves ? 2 * n : 0);
+  s->ctx.halves = halves;
   std::vector<SubGridError> errs(n);
   for_each_subgrid(p, [&](uint64_t si, size_t gi, uint32_t sx, uint32_t sy) {
     const VertexGrid& g = gs.grids[gi];
@@ -613,6 +620,9 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
     SubGridVerts w;
     Leaf::decode(s->ctx, b, w);
     bounds[si] = subgrid_bounds(w, in.res_x, in.res_y);
+    if (halves)
+      for (uint32_t h = 0; h < 2; ++h)
+        half_bounds[2 * si + h] = subgrid_half_bounds(w, in.res_x, in.res_y, h);
     errs[si] = measure_error(in, w, g, gx, gy);
   });
   const double encode_s = seconds_since(t0);
@@ -627,7 +637,8 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
           *extract->triangles);
     return nullptr;
   }
-  LossySource src{reinterpret_cast<const uint8_t*>(blocks.data()), sizeof(Block), bounds.data()};
+  LossySource src{reinterpret_cast<const uint8_t*>(blocks.data()), sizeof(Block), bounds.data(),
+                  halves ? half_bounds.data() : nullptr};
   s->build(src, uint32_t(n), subgrid_bvh_options(opt));
   s->mem.geometry_bytes += (s->vertices.size() + s->exact.size()) * sizeof(Vec3f);
   add_grid_details(p, s->stats, encode_s);
@@ -640,6 +651,7 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
   d.emplace_back("shared_corners", double(s->vertices.size()));
   d.emplace_back("displacement_bias", double(bias));
   d.emplace_back("block_bytes", double(sizeof(Block)));
+  d.emplace_back("half_subgrid_children", halves ? 1.0 : 0.0);
   finish_scene(*s, p, meshes, opt);
   return s;
 }

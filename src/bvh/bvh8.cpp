@@ -201,7 +201,8 @@ class Collapser {
     if (b2_.nodes[i].is_leaf()) return false;
     // compressed-leaf-bvh.txt section 4.3: subtrees of fewer than N x M primitives; each of
     // their (at most 8) leaves must fit one block so that child blocks are addressed implicitly.
-    return prims_[i] < 8 * enc_.block_prims && leaves_[i] <= 8 && max_leaf_[i] <= enc_.block_prims;
+    return prims_[i] < 8 * enc_.block_prims && leaves_[i] * enc_.parts_per_block <= 8 &&
+           max_leaf_[i] <= enc_.block_prims;
   }
 
   // Up to 8 BVH2 nodes below node i. Opening the largest-area inner child until there are 8
@@ -382,10 +383,16 @@ class Collapser {
           write_leaf_blocks(kids[c], data + uint64_t(c) * enc_.block_bytes);
       }
       Box3f boxes[8];
-      for (int c = 0; c < k; ++c) boxes[c] = b2_.nodes[kids[c]].box;
-      quantize_boxes(n.box, boxes, k, *reinterpret_cast<MultiLeaf8*>(base));
+      const uint32_t parts = enc_.parts_per_block;
+      if (parts > 1) {
+        for (int c = 0; c < k; ++c)
+          enc_.part_bounds(b2_.prim_ids[b2_.nodes[kids[c]].first], &boxes[parts * c]);
+      } else {
+        for (int c = 0; c < k; ++c) boxes[c] = b2_.nodes[kids[c]].box;
+      }
+      quantize_boxes(n.box, boxes, int(parts) * k, *reinterpret_cast<MultiLeaf8*>(base));
       // The block count field of a multi-leaf ref holds its number of children.
-      return NodeRef::make(kRefMulti, leaf_off, uint32_t(k));
+      return NodeRef::make(kRefMulti, leaf_off, parts * uint32_t(k));
     }
     std::memset(out_.nodes.data() + node_off, 0, node_bytes());
     uint32_t kids[8];

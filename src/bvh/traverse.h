@@ -13,8 +13,8 @@
 #include <cstdint>
 
 #include "bvh/bvh8.h"
-#include "core/simd.h"
 #include "core/ray.h"
+#include "core/simd.h"
 #include "slimrt/scene.h"
 
 namespace slim {
@@ -84,7 +84,21 @@ SLIM_INLINE bool intersect_leaf_blocks(const typename Leaf::Context& ctx, const 
 //       const uint8_t* data, uint32_t children, int i, TravRay&, HitRecord&, Stats&);
 // where data points right behind the 72-byte multi-leaf header.
 template <class L>
-concept HasMultiLeafLayout = requires { L::kMultiLeafLayout; };
+concept HasMultiLeafLayout = requires {
+  L::kMultiLeafLayout;
+};
+// Its multi-leaf data is written by L::encode_multileaf (clbvh-compact's vertex dictionary).
+template <class L>
+concept HasMultiLeafEncoder = requires {
+  &L::encode_multileaf;
+};
+// Its blocks may each take several child boxes of a multi-leaf (half sub-grids): then it
+// provides multileaf_parts(source), part_bounds(source, prim, boxes) and primary_part(ctx, i)
+// (child i is its block's first part), and intersect_in_multileaf maps children to blocks.
+template <class L>
+concept HasMultiLeafParts = requires(const typename L::Source& s) {
+  L::multileaf_parts(s);
+};
 
 // Multi-leaf (compressed-leaf-bvh.txt section 4.4): test the 8 quantized boxes, then the blocks
 // of the children hit; no ordering (the paper found it does not pay off).
@@ -116,8 +130,8 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
 // Traverses the BVH from bvh.root. Closest hit: returns true if `hit` was filled (ray.tfar = t).
 // Any hit: returns true as soon as one primitive is hit.
 template <class Leaf, bool kAny, class Stats>
-bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& ray,
-                   HitRecord& hit, Stats& st) {
+bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& ray, HitRecord& hit,
+                   Stats& st) {
   struct Entry {
     uint64_t ref;
     float dist;

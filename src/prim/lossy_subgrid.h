@@ -193,9 +193,12 @@ extern const CodeUnpack kCodeUnpack;
 // vertices. `corner` = the 4 patch corners (c00, c10, c01, c11), `displ` = the 63 code bytes
 // (7 readable bytes must follow them). Escape codes are left for the caller: the return value has
 // bit k set for each position k with an escape code, whose code is then in codes[k].
+// Only the position groups g0 .. g1-1 are decoded (positions 8*g0 .. 8*g1-1, and 24 if g1 = 3):
+// a half sub-grid needs groups 0-1 (vertex rows 0-2) or 1-2 (rows 2-4).
 template <int kEnc>
 SLIM_INLINE uint32_t decode_subgrid(const Vec3f corner[4], const uint8_t* displ, uint32_t res_x,
-                                    uint32_t res_y, int bias, SubGridVerts& w, uint32_t* codes) {
+                                    uint32_t res_y, int bias, SubGridVerts& w, uint32_t* codes,
+                                    int g0 = 0, int g1 = 3) {
   using namespace simd;
   const PatchWeights& pw = kPatchWeights;
   const detail::CodeUnpack& cu = detail::kCodeUnpack;
@@ -203,7 +206,7 @@ SLIM_INLINE uint32_t decode_subgrid(const Vec3f corner[4], const uint8_t* displ,
   vfloat8 c[3][4];
   for (int a = 0; a < 3; ++a)
     for (int q = 0; q < 4; ++q) c[a][q] = vfloat8(corner[q][a]);
-  for (int g = 0; g < 3; ++g) {
+  for (int g = g0; g < g1; ++g) {
     const vfloat8 u0 = vfloat8::load(&pw.u0[res_x][8 * g]),
                   u1 = vfloat8::load(&pw.u1[res_x][8 * g]);
     const vfloat8 v0 = vfloat8::load(&pw.v0[res_y][8 * g]),
@@ -242,6 +245,7 @@ SLIM_INLINE uint32_t decode_subgrid(const Vec3f corner[4], const uint8_t* displ,
   }
   // Position 24 is the patch corner (4,4), or unused in a partial sub-grid (where its clamped
   // weights give the same): the patch evaluates it to c11 exactly, plus a zero displacement.
+  if (g1 < 3) return escapes;
   for (int a = 0; a < 3; ++a) {
     alignas(32) float last[8] = {corner[3][a] + 0.0f, 0, 0, 0, 0, 0, 0, 0};
     vfloat8::load(last).store(&w.p[a][24]);
@@ -294,11 +298,14 @@ static_assert(sizeof(LossySubGridShared) == 72, "shared-corner lossy sub-grid is
 
 // ---- leaf formats ---------------------------------------------------------------------------
 
-// Build-time source for both lossy leaves: encoded blocks and their (decoded) bounds.
+// Build-time source for both lossy leaves: encoded blocks and their (decoded) bounds; with
+// half_bounds (2 per block: halves 0 and 1, prim/subgrid.h) the compressed-leaf BVH gives each
+// sub-grid of a multi-leaf two child boxes.
 struct LossySource {
   const uint8_t* blocks = nullptr;
   uint32_t block_bytes = 0;
   const Box3f* bounds = nullptr;
+  const Box3f* half_bounds = nullptr;
 };
 
 struct LossyContext {
@@ -309,13 +316,20 @@ struct LossyContext {
   const Vec3f* exact = nullptr;     // exact vertices (escape codes)
   const Vec3f* corners = nullptr;   // shared layout: corner lattices
   int bias = 0;
+  bool halves = false;  // multi-leaf children are half sub-grids (LossySource::half_bounds)
 };
 
-template <class Block, int kEnc>
+// What both lossy leaves share: the build-side hooks, the whole and half sub-grid tests, the
+// multi-leaf layout (whole or half sub-grids) and validation. Leaf provides
+//   static uint32_t decode(ctx, block, w, g0, g1)  // code groups g0..g1-1, escapes applied
+//   static uint32_t flips(ctx, block)
+//   static void record(ctx, block, SubGridHit, HitRecord&)
+template <class Leaf, class Block, int kEnc>
 struct LossyLeafBase {
   using Context = LossyContext;
   static constexpr uint32_t kBlockPrims = 1;
   static constexpr uint32_t kBlockBytes = sizeof(Block);
+  static constexpr bool kMultiLeafLayout = true;
   using Source = LossySource;
 
   static Box3f source_bounds(const Source& s, uint32_t i) { return s.bounds[i]; }
@@ -325,17 +339,92 @@ struct LossyLeafBase {
   static void encode(const Source& s, const uint32_t* prims, uint32_t, uint8_t* out) {
     std::memcpy(out, s.blocks + uint64_t(prims[0]) * kBlockBytes, kBlockBytes);
   }
+  // Multi-leaf children per block (LeafEncoder::parts_per_block) and their boxes.
+  static uint32_t multileaf_parts(const Source& s) { return s.half_bounds ? 2 : 1; }
+  static void part_bounds(const Source& s, uint32_t i, Box3f* out) {
+    out[0] = s.half_bounds[2 * uint64_t(i)];
+    out[1] = s.half_bounds[2 * uint64_t(i) + 1];
+  }
+  // Multi-leaf child i is the first part of its block (validate() counts each block once).
+  static bool primary_part(const Context& ctx, uint32_t i) { return !ctx.halves || i % 2 == 0; }
+
+  static SLIM_INLINE void decode(const Context& ctx, const Block& b, SubGridVerts& w) {
+    Leaf::decode(ctx, b, w, 0, 3);
+  }
+
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect(const Context& ctx, const uint8_t* p, TravRay& ray,
+                                    HitRecord& hit, Stats& st) {
+    simd::prefetch(p + 64);  // the codes' cache line, fetched alongside the first one
+    const auto& b = *reinterpret_cast<const Block*>(p);
+    SubGridVerts w;
+    Leaf::decode(ctx, b, w, 0, 3);
+    SubGridHit h;
+    if (!intersect_subgrid<kAny>(w, b.res & 15, b.res >> 4, Leaf::flips(ctx, b), ray, h, st))
+      return false;
+    if constexpr (!kAny) Leaf::record(ctx, b, h, hit);
+    return true;
+  }
+
+  // Half `half` of the sub-grid: code groups half, half+1; ray-space groups 0-1 or 1-3.
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect_half(const Context& ctx, const uint8_t* p, uint32_t half,
+                                         TravRay& ray, HitRecord& hit, Stats& st) {
+    simd::prefetch(p + 64);
+    const auto& b = *reinterpret_cast<const Block*>(p);
+    const uint32_t rx = b.res & 15, ry = b.res >> 4;
+    uint32_t j0, j1;
+    subgrid_half_rows(half, ry, j0, j1);
+    if (j0 >= j1) return false;
+    SubGridVerts w;
+    Leaf::decode(ctx, b, w, int(half), int(half) + 2);
+    alignas(32) float r[3][32];
+    subgrid_to_ray_space(ray.wt, w, r, int(half), half == 0 ? 2 : 4);
+    SubGridHit h;
+    if (!intersect_subgrid_rows<kAny>(w, r, rx, j0, j1, Leaf::flips(ctx, b), ray, h, st))
+      return false;
+    if constexpr (!kAny) Leaf::record(ctx, b, h, hit);
+    return true;
+  }
+
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect_in_multileaf(const Context& ctx, const uint8_t* data, uint32_t,
+                                                 int i, TravRay& ray, HitRecord& hit, Stats& st) {
+    if (!ctx.halves) return intersect<kAny>(ctx, data + uint64_t(i) * kBlockBytes, ray, hit, st);
+    return intersect_half<kAny>(ctx, data + uint64_t(i >> 1) * kBlockBytes, uint32_t(i & 1), ray,
+                                hit, st);
+  }
+
+  template <class F>
+  static void visit(const Context& ctx, const uint8_t* p, F&& fn) {
+    const auto& b = *reinterpret_cast<const Block*>(p);
+    SubGridVerts w;
+    Leaf::decode(ctx, b, w, 0, 3);
+    fn(subgrid_bounds(w, b.res & 15, b.res >> 4), subgrid_key(p, kBlockBytes));
+  }
+  template <class F>
+  static void visit_in_multileaf(const Context& ctx, const uint8_t* data, uint32_t, int i, F&& fn) {
+    if (!ctx.halves) return visit(ctx, data + uint64_t(i) * kBlockBytes, fn);
+    const uint8_t* p = data + uint64_t(i >> 1) * kBlockBytes;
+    const auto& b = *reinterpret_cast<const Block*>(p);
+    SubGridVerts w;
+    Leaf::decode(ctx, b, w, 0, 3);
+    fn(subgrid_half_bounds(w, b.res & 15, b.res >> 4, uint32_t(i & 1)),
+       subgrid_key(p, kBlockBytes));
+  }
 };
 
 // Leaf format: one LossySubGrid (Listing 1) per block.
 template <int kEnc>
-struct LossyGridLeaf : LossyLeafBase<LossySubGrid, kEnc> {
+struct LossyGridLeaf : LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid, kEnc> {
   using Context = LossyContext;
+  using LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid, kEnc>::decode;
 
-  static SLIM_INLINE void decode(const Context& ctx, const LossySubGrid& b, SubGridVerts& w) {
+  static SLIM_INLINE void decode(const Context& ctx, const LossySubGrid& b, SubGridVerts& w, int g0,
+                                 int g1) {
     alignas(32) uint32_t codes[32];
     uint32_t esc =
-        decode_subgrid<kEnc>(b.corner, b.displ, b.res & 15, b.res >> 4, ctx.bias, w, codes);
+        decode_subgrid<kEnc>(b.corner, b.displ, b.res & 15, b.res >> 4, ctx.bias, w, codes, g0, g1);
     if (esc) apply_escapes(esc, codes, ctx.exact + ctx.hot[b.primitive_id].exact, w);
   }
   static SLIM_INLINE uint32_t flips(const Context& ctx, const LossySubGrid& b) {
@@ -343,42 +432,26 @@ struct LossyGridLeaf : LossyLeafBase<LossySubGrid, kEnc> {
                          b.grid_y / kSubGridCells,
                          (b.grid_res_x + kSubGridCells - 2) / kSubGridCells);
   }
-
-  template <bool kAny, class Stats>
-  static SLIM_INLINE bool intersect(const Context& ctx, const uint8_t* p, TravRay& ray,
-                                    HitRecord& hit, Stats& st) {
-    simd::prefetch(p + 64);  // the codes' cache line, fetched alongside the corners'
-    const auto& b = *reinterpret_cast<const LossySubGrid*>(p);
-    SubGridVerts w;
-    decode(ctx, b, w);
-    SubGridHit h;
-    if (!intersect_subgrid<kAny>(w, b.res & 15, b.res >> 4, flips(ctx, b), ray, h, st))
-      return false;
-    if constexpr (!kAny)
-      record_grid_hit(h, ctx.grids[b.primitive_id], ctx.faces, b.grid_x, b.grid_y, hit);
-    return true;
-  }
-
-  template <class F>
-  static void visit(const Context& ctx, const uint8_t* p, F&& fn) {
-    const auto& b = *reinterpret_cast<const LossySubGrid*>(p);
-    SubGridVerts w;
-    decode(ctx, b, w);
-    fn(subgrid_bounds(w, b.res & 15, b.res >> 4), subgrid_key(p, sizeof(LossySubGrid)));
+  static SLIM_INLINE void record(const Context& ctx, const LossySubGrid& b, const SubGridHit& h,
+                                 HitRecord& hit) {
+    record_grid_hit(h, ctx.grids[b.primitive_id], ctx.faces, b.grid_x, b.grid_y, hit);
   }
 };
 
 // Leaf format: one LossySubGridShared per block.
 template <int kEnc>
-struct LossySharedLeaf : LossyLeafBase<LossySubGridShared, kEnc> {
+struct LossySharedLeaf : LossyLeafBase<LossySharedLeaf<kEnc>, LossySubGridShared, kEnc> {
   using Context = LossyContext;
+  using LossyLeafBase<LossySharedLeaf<kEnc>, LossySubGridShared, kEnc>::decode;
 
-  static SLIM_INLINE void decode(const Context& ctx, const LossySubGridShared& b, SubGridVerts& w) {
+  static SLIM_INLINE void decode(const Context& ctx, const LossySubGridShared& b, SubGridVerts& w,
+                                 int g0, int g1) {
     const uint32_t row = ctx.hot[b.grid].lattice_row;
     const Vec3f c[4] = {ctx.corners[b.corner], ctx.corners[b.corner + 1],
                         ctx.corners[b.corner + row], ctx.corners[b.corner + row + 1]};
     alignas(32) uint32_t codes[32];
-    uint32_t esc = decode_subgrid<kEnc>(c, b.displ, b.res & 15, b.res >> 4, ctx.bias, w, codes);
+    uint32_t esc =
+        decode_subgrid<kEnc>(c, b.displ, b.res & 15, b.res >> 4, ctx.bias, w, codes, g0, g1);
     if (esc) apply_escapes(esc, codes, ctx.exact + ctx.hot[b.grid].exact, w);
   }
   // Sub-grid position (sx, sy) in its grid, from its lattice corner.
@@ -396,30 +469,11 @@ struct LossySharedLeaf : LossyLeafBase<LossySubGridShared, kEnc> {
     position(ctx, b, sx, sy);
     return subgrid_flips(g, ctx.flips, sx, sy, g.lattice_row - 1);
   }
-
-  template <bool kAny, class Stats>
-  static SLIM_INLINE bool intersect(const Context& ctx, const uint8_t* p, TravRay& ray,
-                                    HitRecord& hit, Stats& st) {
-    const auto& b = *reinterpret_cast<const LossySubGridShared*>(p);
-    SubGridVerts w;
-    decode(ctx, b, w);
-    SubGridHit h;
-    if (!intersect_subgrid<kAny>(w, b.res & 15, b.res >> 4, flips(ctx, b), ray, h, st))
-      return false;
-    if constexpr (!kAny) {
-      uint32_t sx, sy;
-      position(ctx, b, sx, sy);
-      record_grid_hit(h, ctx.grids[b.grid], ctx.faces, kSubGridCells * sx, kSubGridCells * sy, hit);
-    }
-    return true;
-  }
-
-  template <class F>
-  static void visit(const Context& ctx, const uint8_t* p, F&& fn) {
-    const auto& b = *reinterpret_cast<const LossySubGridShared*>(p);
-    SubGridVerts w;
-    decode(ctx, b, w);
-    fn(subgrid_bounds(w, b.res & 15, b.res >> 4), subgrid_key(p, sizeof(LossySubGridShared)));
+  static SLIM_INLINE void record(const Context& ctx, const LossySubGridShared& b,
+                                 const SubGridHit& h, HitRecord& hit) {
+    uint32_t sx, sy;
+    position(ctx, b, sx, sy);
+    record_grid_hit(h, ctx.grids[b.grid], ctx.faces, kSubGridCells * sx, kSubGridCells * sy, hit);
   }
 };
 

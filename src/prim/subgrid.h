@@ -12,6 +12,7 @@
 // out so that this is the fan triangulation of the input face.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <cstring>
 #include <type_traits>
@@ -115,15 +116,16 @@ SLIM_INLINE Vec3f subgrid_vertex(const SubGridVerts& w, int k) {
 // The 32 lanes of a decompressed sub-grid in ray space: core/watertight.h's to_ray_space, the
 // same operations in the same order (so that a vertex a triangle leaf shares transforms to the
 // same bits; GridKernel.RaySpaceMatchesCore checks it), with the per-ray scalars fetched once.
+// Groups g0 .. g1-1 of 8 lanes only (a half sub-grid needs 2 or 3 of the 4).
 SLIM_INLINE void subgrid_to_ray_space(const WatertightRay& wr, const SubGridVerts& w,
-                                      float (*r)[32]) {
+                                      float (*r)[32], int g0 = 0, int g1 = 4) {
   using namespace simd;
   const float* px = w.p[wr.kx];
   const float* py = w.p[wr.ky];
   const float* pz = w.p[wr.kz];
   const vfloat8 ox(wr.org[wr.kx]), oy(wr.org[wr.ky]), oz(wr.org[wr.kz]);
   const vfloat8 sx(wr.Sx), sy(wr.Sy), sz(wr.Sz);
-  for (int g = 0; g < 4; ++g) {
+  for (int g = g0; g < g1; ++g) {
     const vfloat8 ax = vfloat8::load(px + 8 * g) - ox;
     const vfloat8 ay = vfloat8::load(py + 8 * g) - oy;
     const vfloat8 az = vfloat8::load(pz + 8 * g) - oz;
@@ -140,19 +142,20 @@ SLIM_INLINE void subgrid_to_ray_space(const WatertightRay& wr, const SubGridVert
 // Flipped cells (bit 4*j + i of `flips`) are A = (p00, p10, p01), B = (p11, p01, p10): only the
 // third corner changes, and their outer edges keep their directions.
 // Closest hit: lowers ray.tfar and fills h; any hit: returns at the first hit.
+// intersect_subgrid_rows tests the cell rows j0 .. j1-1 only, from the ray-space vertices r of
+// those rows (a half sub-grid, see prim/lossy_subgrid.h).
 template <bool kAny, class Stats>
-SLIM_INLINE bool intersect_subgrid(const SubGridVerts& w, uint32_t res_x, uint32_t res_y,
-                                   uint32_t flips, TravRay& ray, SubGridHit& h, Stats& st) {
+SLIM_INLINE bool intersect_subgrid_rows(const SubGridVerts& w, const float (*r)[32], uint32_t res_x,
+                                        uint32_t j0, uint32_t j1, uint32_t flips, TravRay& ray,
+                                        SubGridHit& h, Stats& st) {
   using namespace simd;
-  alignas(32) float r[3][32];
-  subgrid_to_ray_space(ray.wt, w, r);
   const uint32_t cells = (1u << (res_x - 1)) - 1;
   const uint32_t valid = cells | (cells << 4);
   bool found = false;
   int best_row = 0, best_lane = 0;
   float best_u = 0, best_v = 0;
 
-  for (uint32_t j = 0; j + 1 < res_y; ++j) {
+  for (uint32_t j = j0; j < j1; ++j) {
     const int a = int(5 * j);
     // V0: A p(i,j) | B p(i+1,j+1); V1: A p(i+1,j) | B p(i,j+1); V2: A p(i+1,j+1) | B p(i,j).
     RayVertex<vfloat8> V0{load2x4(&r[0][a], &r[0][a + 6]), load2x4(&r[1][a], &r[1][a + 6]),
@@ -211,12 +214,43 @@ SLIM_INLINE bool intersect_subgrid(const SubGridVerts& w, uint32_t res_x, uint32
   return found;
 }
 
-// Bounds of the res_x x res_y vertices of a decompressed sub-grid.
-inline Box3f subgrid_bounds(const SubGridVerts& w, uint32_t res_x, uint32_t res_y) {
+template <bool kAny, class Stats>
+SLIM_INLINE bool intersect_subgrid(const SubGridVerts& w, uint32_t res_x, uint32_t res_y,
+                                   uint32_t flips, TravRay& ray, SubGridHit& h, Stats& st) {
+  alignas(32) float r[3][32];
+  subgrid_to_ray_space(ray.wt, w, r);
+  return intersect_subgrid_rows<kAny>(w, r, res_x, 0, res_y - 1, flips, ray, h, st);
+}
+
+// Bounds of the vertex rows j0 .. j1-1 (res_x vertices each) of a decompressed sub-grid.
+inline Box3f subgrid_bounds(const SubGridVerts& w, uint32_t res_x, uint32_t j0, uint32_t j1) {
   Box3f b;
-  for (uint32_t j = 0; j < res_y; ++j)
+  for (uint32_t j = j0; j < j1; ++j)
     for (uint32_t i = 0; i < res_x; ++i) b.extend(detail::subgrid_vertex(w, int(5 * j + i)));
   return b;
+}
+// Bounds of the res_x x res_y vertices of a decompressed sub-grid.
+inline Box3f subgrid_bounds(const SubGridVerts& w, uint32_t res_x, uint32_t res_y) {
+  return subgrid_bounds(w, res_x, 0, res_y);
+}
+
+// ---- half sub-grids --------------------------------------------------------------------------
+// Under the compressed-leaf BVH, a multi-leaf may give each of its sub-grids two child boxes:
+// half 0 = cell rows 0-1 (vertex rows 0-2), half 1 = cell rows 2-3 (vertex rows 2-4), both
+// referring to the same block. A ray then decodes, moves to ray space and tests only the half
+// whose box it enters: 2 of the 3 code groups, 2-3 of the 4 ray-space groups, 2 of the 4 rows.
+// (Not in the paper, whose section 5 gives each BVH leaf one whole sub-grid; issue 7.)
+// A half of a sub-grid with res_y - 1 <= 2 cell rows may be empty (j0 >= j1).
+SLIM_INLINE void subgrid_half_rows(uint32_t half, uint32_t res_y, uint32_t& j0, uint32_t& j1) {
+  j0 = 2 * half;
+  j1 = std::min<uint32_t>(2 * half + 2, res_y - 1);
+}
+// Bounds of half `half` (empty if it holds no cell).
+inline Box3f subgrid_half_bounds(const SubGridVerts& w, uint32_t res_x, uint32_t res_y,
+                                 uint32_t half) {
+  uint32_t j0, j1;
+  subgrid_half_rows(half, res_y, j0, j1);
+  return j0 < j1 ? subgrid_bounds(w, res_x, j0, j1 + 1) : Box3f();
 }
 
 // Fills the public hit from a sub-grid hit: per-grid u,v (section 5:

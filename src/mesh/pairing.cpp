@@ -102,7 +102,9 @@ class LargeArray {
 
 // kNone in every entry: a memset (0xff bytes), a sequential stream instead of the random writes
 // of the entries that stay kNone.
-void fill_none(uint32_t* p, size_t n) { std::memset(p, 0xff, n * sizeof(uint32_t)); }
+void fill_none(uint32_t* p, size_t n) {
+  if (n) std::memset(p, 0xff, n * sizeof(uint32_t));  // p is null for an empty array
+}
 
 SLIM_INLINE uint32_t float_bits(float f) {
   uint32_t u;

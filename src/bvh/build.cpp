@@ -88,9 +88,11 @@ struct Range {
     const vfloat4 c = simd::upper4(r) - simd::lower4(r);  // hi + lo
     cb.extend(simd::combine4(c ^ vfloat4(-0.0f), c));
   }
-  SLIM_INLINE void merge(const Range& o) {
-    box.extend(o.box.b);
-    cb.extend(o.cb.b);
+  // The join of parallel_reduce.
+  static Range merged(Range x, const Range& y) {
+    x.box.extend(y.box.b);
+    x.cb.extend(y.cb.b);
+    return x;
   }
 };
 
@@ -158,10 +160,7 @@ class Builder {
           }
           return a;
         },
-        [](Range x, const Range& y) {
-          x.merge(y);
-          return x;
-        });
+        Range::merged);
     std::vector<PrimRef>().swap(input_);
     out_.nodes.resize(2 * size_t(n) - 1);
     node_count_ = 1;
@@ -188,10 +187,7 @@ class Builder {
     };
     if (end - begin >= kParallelBinThreshold)
       return tbb::parallel_reduce(tbb::blocked_range<uint32_t>(begin, end, 8192), Range{}, body,
-                                  [](Range x, const Range& y) {
-                                    x.merge(y);
-                                    return x;
-                                  });
+                                  Range::merged);
     return body(tbb::blocked_range<uint32_t>(begin, end), Range{});
   }
 

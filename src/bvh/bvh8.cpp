@@ -107,25 +107,23 @@ namespace {
 
 // Statistics of one subtree of the BVH8, summed over the children in order, so that the figures
 // are the same for any number of threads.
+// The Bvh8Stats counts (sah_cost summed, leaf_fill unused) and the Bvh8 byte counts.
 struct SubtreeStats {
-  uint64_t node8 = 0, qnode8 = 0, multileaf = 0, leaves = 0, leaf_blocks = 0;
-  uint64_t leaves_in_multileaf = 0, prims = 0;
+  Bvh8Stats st;
   uint64_t node_bytes = 0, multileaf_bytes = 0, leaf_data_bytes = 0;
-  double sah = 0;
-  int depth = 0;
   void add(const SubtreeStats& o) {
-    node8 += o.node8;
-    qnode8 += o.qnode8;
-    multileaf += o.multileaf;
-    leaves += o.leaves;
-    leaf_blocks += o.leaf_blocks;
-    leaves_in_multileaf += o.leaves_in_multileaf;
-    prims += o.prims;
+    st.node8 += o.st.node8;
+    st.qnode8 += o.st.qnode8;
+    st.multileaf += o.st.multileaf;
+    st.leaves += o.st.leaves;
+    st.leaf_blocks += o.st.leaf_blocks;
+    st.leaves_in_multileaf += o.st.leaves_in_multileaf;
+    st.prims += o.st.prims;
+    st.sah_cost += o.st.sah_cost;
+    st.depth = std::max(st.depth, o.st.depth);
     node_bytes += o.node_bytes;
     multileaf_bytes += o.multileaf_bytes;
     leaf_data_bytes += o.leaf_data_bytes;
-    sah += o.sah;
-    depth = std::max(depth, o.depth);
   }
 };
 
@@ -163,8 +161,6 @@ class Collapser {
         max_leaf_[i] = std::max(max_leaf_[n.first], max_leaf_[n.first + 1]);
       }
     }
-    // Child slots of each subtree if flattened into one wide node (a leaf or a multi-leaf
-    // candidate takes one), for gather().
     // The SAH-optimal collapse for BVH8 and QBVH8 (fewer box tests per ray: torus:1024 W1 38.8
     // -> 34.1, canyon:1024 53.3 -> 47.3, ogre 26.1 -> 20.9); the compressed-leaf BVH keeps the
     // slot rule, which spends fewer inner nodes around its multi-leaves (node memory 0.59x the
@@ -172,40 +168,50 @@ class Collapser {
     // =optimal forces one rule for every kind (measurements).
     const char* how = std::getenv("SLIM_COLLAPSE");
     optimal_ = how ? std::string(how) == "optimal" : kind_ != NodeKind::CompressedLeaf;
-    if (!optimal_) slots_.assign(nn, 0);
-    for (size_t i = nn; !optimal_ && i-- > 0;) {
-      const Bvh2Node& n = b2_.nodes[i];
-      slots_[i] = n.is_leaf() || multileaf_candidate(uint32_t(i))
-                      ? 1
-                      : slots_[n.first] + slots_[n.first + 1];
-    }
     out_.bounds = b2_.nodes[0].box;
     root_area_ = std::max(out_.bounds.half_area(), 1e-30f);
-    if (optimal_) optimal_collapse();
+    if (optimal_) {
+      optimal_collapse();
+    } else {
+      // Child slots of each subtree if flattened into one wide node (a leaf or a multi-leaf
+      // candidate takes one), for gather().
+      slots_.assign(nn, 0);
+      for (size_t i = nn; i-- > 0;) {
+        const Bvh2Node& n = b2_.nodes[i];
+        slots_[i] = n.is_leaf() || multileaf_candidate(uint32_t(i))
+                        ? 1
+                        : slots_[n.first] + slots_[n.first + 1];
+      }
+    }
     node_size_.assign(nn, 0);
     leaf_size_.assign(nn, 0);
     const SubtreeStats m = measure(0, 1);
     Bvh8Stats& s = out_.stats;
-    s.node8 = m.node8;
-    s.qnode8 = m.qnode8;
-    s.multileaf = m.multileaf;
-    s.leaves = m.leaves;
-    s.leaf_blocks = m.leaf_blocks;
-    s.leaves_in_multileaf = m.leaves_in_multileaf;
-    s.prims = m.prims;
-    s.depth = m.depth;
+    s = m.st;
     out_.node_bytes = m.node_bytes;
     out_.multileaf_bytes = m.multileaf_bytes;
     out_.leaf_data_bytes = m.leaf_data_bytes;
     out_.nodes.append(node_size_[0], 64, false);
     out_.leaves.append(leaf_size_[0], 64, false);
     out_.root = emit(0, 0, 0);
-    s.sah_cost = m.sah;
     s.leaf_fill = s.leaf_blocks ? double(s.prims) / double(s.leaf_blocks * enc_.block_prims) : 0;
   }
 
  private:
   static uint64_t round16(uint64_t x) { return (x + 15) & ~uint64_t(15); }
+
+  // fn(c) for c = 0..k-1: as parallel tasks if the subtree of node i is large (and `parallel`).
+  template <class F>
+  void for_children(uint32_t i, int k, F&& fn, bool parallel = true) const {
+    if (parallel && prims_[i] >= kParallelEmit) {
+      tbb::task_group tg;
+      for (int c = 1; c < k; ++c) tg.run([&fn, c] { fn(c); });
+      fn(0);
+      tg.wait();
+    } else {
+      for (int c = 0; c < k; ++c) fn(c);
+    }
+  }
   uint32_t node_bytes() const { return kind_ == NodeKind::QBvh8 ? sizeof(QNode8) : sizeof(Node8); }
 
   bool multileaf_candidate(uint32_t i) const {
@@ -299,17 +305,9 @@ class Collapser {
       out.cost.fill(out.leaf_area);
       return out;
     }
-    const uint32_t l = n.first, r = n.first + 1;
-    Cover L, R;
-    if (prims_[i] >= kParallelEmit) {
-      tbb::task_group tg;
-      tg.run([&] { L = optimal_dp(l); });
-      R = optimal_dp(r);
-      tg.wait();
-    } else {
-      L = optimal_dp(l);
-      R = optimal_dp(r);
-    }
+    Cover kid[2];
+    for_children(i, 2, [&](int c) { kid[c] = optimal_dp(n.first + uint32_t(c)); });
+    const Cover &L = kid[0], &R = kid[1];
     out.leaf_area = L.leaf_area + R.leaf_area;
     if (multileaf_candidate(i)) {
       out.cost.fill(a + out.leaf_area);  // the multi-leaf node, then one block per child
@@ -376,10 +374,10 @@ class Collapser {
 
   void count_leaf(uint32_t i, SubtreeStats& s) const {
     uint32_t blocks = leaf_blocks(i);
-    s.leaves++;
-    s.leaf_blocks += blocks;
-    s.prims += b2_.nodes[i].count;
-    s.sah += double(b2_.nodes[i].box.half_area()) / root_area_ * blocks;
+    s.st.leaves++;
+    s.st.leaf_blocks += blocks;
+    s.st.prims += b2_.nodes[i].count;
+    s.st.sah_cost += double(b2_.nodes[i].box.half_area()) / root_area_ * blocks;
   }
 
   // Multi-leaf data written by LeafEncoder::encode_multileaf (clbvh-compact), encoded during
@@ -400,7 +398,7 @@ class Collapser {
   // Pass 1: sizes of the subtree rooted at BVH2 node i, and its statistics.
   SubtreeStats measure(uint32_t i, int depth) {
     SubtreeStats s;
-    s.depth = depth;
+    s.st.depth = depth;
     const Bvh2Node& n = b2_.nodes[i];
     if (n.is_leaf()) {
       uint32_t blocks = leaf_blocks(i);
@@ -425,34 +423,29 @@ class Collapser {
       leaf_size_[i] = round16(sizeof(MultiLeaf8) + data);
       s.leaf_data_bytes += data;
       s.multileaf_bytes += sizeof(MultiLeaf8);
-      s.multileaf++;
-      s.leaves_in_multileaf += k;
-      s.sah += double(n.box.half_area()) / root_area_;
+      s.st.multileaf++;
+      s.st.leaves_in_multileaf += k;
+      s.st.sah_cost += double(n.box.half_area()) / root_area_;
       for (int c = 0; c < k; ++c) {
-        s.leaves++;
-        s.leaf_blocks++;
-        s.prims += b2_.nodes[kids[c]].count;
-        s.sah += double(b2_.nodes[kids[c]].box.half_area()) / root_area_;
+        s.st.leaves++;
+        s.st.leaf_blocks++;
+        s.st.prims += b2_.nodes[kids[c]].count;
+        s.st.sah_cost += double(b2_.nodes[kids[c]].box.half_area()) / root_area_;
       }
       return s;
     }
     uint32_t kids[8];
     int k = gather(i, kids);
-    s.sah += double(n.box.half_area()) / root_area_;
+    s.st.sah_cost += double(n.box.half_area()) / root_area_;
     if (kind_ == NodeKind::QBvh8)
-      s.qnode8++;
+      s.st.qnode8++;
     else
-      s.node8++;
+      s.st.node8++;
     s.node_bytes += node_bytes();
     SubtreeStats sub[8];
     // The multi-leaf cache (clbvh-compact) is a map: filled serially.
-    if (prims_[i] >= kParallelEmit && !enc_.encode_multileaf) {
-      tbb::task_group tg;
-      for (int c = 0; c < k; ++c) tg.run([&, c] { sub[c] = measure(kids[c], depth + 1); });
-      tg.wait();
-    } else {
-      for (int c = 0; c < k; ++c) sub[c] = measure(kids[c], depth + 1);
-    }
+    for_children(
+        i, k, [&](int c) { sub[c] = measure(kids[c], depth + 1); }, !enc_.encode_multileaf);
     uint64_t nb = node_bytes(), lb = 0;
     for (int c = 0; c < k; ++c) {
       s.add(sub[c]);
@@ -521,13 +514,7 @@ class Collapser {
       no += node_size_[kids[c]];
       lo += leaf_size_[kids[c]];
     }
-    if (prims_[i] >= kParallelEmit) {
-      tbb::task_group tg;
-      for (int c = 0; c < k; ++c) tg.run([&, c] { refs[c] = emit(kids[c], noff[c], loff[c]); });
-      tg.wait();
-    } else {
-      for (int c = 0; c < k; ++c) refs[c] = emit(kids[c], noff[c], loff[c]);
-    }
+    for_children(i, k, [&](int c) { refs[c] = emit(kids[c], noff[c], loff[c]); });
     if (kind_ == NodeKind::QBvh8) {
       auto* q = reinterpret_cast<QNode8*>(out_.nodes.data() + node_off);
       Box3f boxes[8];

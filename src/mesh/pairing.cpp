@@ -759,29 +759,12 @@ uint64_t augment(const PairingInput& in, const uint32_t* twin, uint32_t* mate) {
   return gained;
 }
 
-bool find_shared_edge(const PairingInput& in, uint32_t a, uint32_t b, bool by_position,
-                      TrianglePair& p) {
+// The first shared edge of triangles a and b by position (pair_shares_edge's order: a's edge
+// i, then b's edge j). Index keys use the shared-edge table below.
+bool find_shared_edge_by_position(const PairingInput& in, uint32_t a, uint32_t b, TrianglePair& p) {
   p.a = std::min(a, b);
   p.b = std::max(a, b);
   if (in.groups && in.groups[a] != in.groups[b]) return false;
-  if (!by_position) {
-    // Fast path of pair_shares_edge for index keys.
-    const uint32_t* ta = &in.tris[3 * size_t(p.a)];
-    const uint32_t* tb = &in.tris[3 * size_t(p.b)];
-    for (int i = 0; i < 3; ++i) {
-      uint32_t a0 = ta[i], a1 = ta[next3(i)];
-      if (a0 == a1) continue;
-      for (int j = 0; j < 3; ++j) {
-        uint32_t b0 = tb[j], b1 = tb[next3(j)];
-        if ((a0 == b0 && a1 == b1) || (a0 == b1 && a1 == b0)) {
-          p.ea = uint8_t(i);
-          p.eb = uint8_t(j);
-          return true;
-        }
-      }
-    }
-    return false;
-  }
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) {
       p.ea = uint8_t(i);
@@ -835,8 +818,8 @@ PairingResult heuristic(const PairingInput& in_arg, bool coordinate_keys, EdgeOr
 }
 
 // Shared edge of two index triangles a, b as one look-up: bit 3i+j of the index is a_i == b_j,
-// bit 9+i is "a's edge i is degenerate"; the entry is 3i+j of the first (i, j) in the order of
-// find_shared_edge with a's edge i = b's edge j (either direction), 0xff if none.
+// bit 9+i is "a's edge i is degenerate"; the entry is 3i+j of the first (i, j) in the order
+// a's edge i, then b's edge j, with a's edge i = b's edge j (either direction), 0xff if none.
 struct SharedEdgeTable {
   uint8_t code[4096];
   constexpr SharedEdgeTable() : code() {
@@ -882,7 +865,7 @@ uint64_t window_scan(const PairingInput& in, bool by_position, double keep_thres
   if (by_position) {
     for (uint64_t i = 0; i + 1 < T;) {
       TrianglePair p;
-      if (find_shared_edge(in, uint32_t(i), uint32_t(i + 1), true, p)) {
+      if (find_shared_edge_by_position(in, uint32_t(i), uint32_t(i + 1), p)) {
         if (keep) pairs.push_back(p);
         count++;
         i += 2;

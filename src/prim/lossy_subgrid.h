@@ -321,10 +321,10 @@ struct LossyContext {
 
 // What both lossy leaves share: the build-side hooks, the whole and half sub-grid tests, the
 // multi-leaf layout (whole or half sub-grids) and validation. Leaf provides
-//   static uint32_t decode(ctx, block, w, g0, g1)  // code groups g0..g1-1, escapes applied
+//   static void decode(ctx, block, w, g0, g1)  // code groups g0..g1-1, escapes applied
 //   static uint32_t flips(ctx, block)
 //   static void record(ctx, block, SubGridHit, HitRecord&)
-template <class Leaf, class Block, int kEnc>
+template <class Leaf, class Block>
 struct LossyLeafBase {
   using Context = LossyContext;
   static constexpr uint32_t kBlockPrims = 1;
@@ -352,36 +352,40 @@ struct LossyLeafBase {
     Leaf::decode(ctx, b, w, 0, 3);
   }
 
+  // The whole sub-grid: every code group, ray-space group and row.
   template <bool kAny, class Stats>
   static SLIM_INLINE bool intersect(const Context& ctx, const uint8_t* p, TravRay& ray,
                                     HitRecord& hit, Stats& st) {
-    simd::prefetch(p + 64);  // the codes' cache line, fetched alongside the first one
     const auto& b = *reinterpret_cast<const Block*>(p);
-    SubGridVerts w;
-    Leaf::decode(ctx, b, w, 0, 3);
-    SubGridHit h;
-    if (!intersect_subgrid<kAny>(w, b.res & 15, b.res >> 4, Leaf::flips(ctx, b), ray, h, st))
-      return false;
-    if constexpr (!kAny) Leaf::record(ctx, b, h, hit);
-    return true;
+    return intersect_rows<kAny>(ctx, b, 0, 3, 0, 4, 0, (b.res >> 4) - 1u, ray, hit, st);
   }
 
   // Half `half` of the sub-grid: code groups half, half+1; ray-space groups 0-1 or 1-3.
   template <bool kAny, class Stats>
   static SLIM_INLINE bool intersect_half(const Context& ctx, const uint8_t* p, uint32_t half,
                                          TravRay& ray, HitRecord& hit, Stats& st) {
-    simd::prefetch(p + 64);
     const auto& b = *reinterpret_cast<const Block*>(p);
-    const uint32_t rx = b.res & 15, ry = b.res >> 4;
     uint32_t j0, j1;
-    subgrid_half_rows(half, ry, j0, j1);
+    subgrid_half_rows(half, b.res >> 4, j0, j1);
     if (j0 >= j1) return false;
+    const int h = int(half);
+    return intersect_rows<kAny>(ctx, b, h, h + 2, h, h == 0 ? 2 : 4, j0, j1, ray, hit, st);
+  }
+
+  // Decodes code groups [cg0, cg1), moves ray-space groups [rg0, rg1) and tests cell rows
+  // [j0, j1).
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect_rows(const Context& ctx, const Block& b, int cg0, int cg1,
+                                         int rg0, int rg1, uint32_t j0, uint32_t j1, TravRay& ray,
+                                         HitRecord& hit, Stats& st) {
+    // The codes' cache line, fetched alongside the first one.
+    simd::prefetch(reinterpret_cast<const uint8_t*>(&b) + 64);
     SubGridVerts w;
-    Leaf::decode(ctx, b, w, int(half), int(half) + 2);
+    Leaf::decode(ctx, b, w, cg0, cg1);
     alignas(32) float r[3][32];
-    subgrid_to_ray_space(ray.wt, w, r, int(half), half == 0 ? 2 : 4);
+    subgrid_to_ray_space(ray.wt, w, r, rg0, rg1);
     SubGridHit h;
-    if (!intersect_subgrid_rows<kAny>(w, r, rx, j0, j1, Leaf::flips(ctx, b), ray, h, st))
+    if (!intersect_subgrid_rows<kAny>(w, r, b.res & 15, j0, j1, Leaf::flips(ctx, b), ray, h, st))
       return false;
     if constexpr (!kAny) Leaf::record(ctx, b, h, hit);
     return true;
@@ -416,9 +420,9 @@ struct LossyLeafBase {
 
 // Leaf format: one LossySubGrid (Listing 1) per block.
 template <int kEnc>
-struct LossyGridLeaf : LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid, kEnc> {
+struct LossyGridLeaf : LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid> {
   using Context = LossyContext;
-  using LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid, kEnc>::decode;
+  using LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid>::decode;
 
   static SLIM_INLINE void decode(const Context& ctx, const LossySubGrid& b, SubGridVerts& w, int g0,
                                  int g1) {
@@ -440,9 +444,9 @@ struct LossyGridLeaf : LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid, kEnc> {
 
 // Leaf format: one LossySubGridShared per block.
 template <int kEnc>
-struct LossySharedLeaf : LossyLeafBase<LossySharedLeaf<kEnc>, LossySubGridShared, kEnc> {
+struct LossySharedLeaf : LossyLeafBase<LossySharedLeaf<kEnc>, LossySubGridShared> {
   using Context = LossyContext;
-  using LossyLeafBase<LossySharedLeaf<kEnc>, LossySubGridShared, kEnc>::decode;
+  using LossyLeafBase<LossySharedLeaf<kEnc>, LossySubGridShared>::decode;
 
   static SLIM_INLINE void decode(const Context& ctx, const LossySubGridShared& b, SubGridVerts& w,
                                  int g0, int g1) {

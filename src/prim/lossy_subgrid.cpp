@@ -36,6 +36,10 @@ UnitVectorTable::UnitVectorTable() {
       x[n] = float(v[0] / len);
       y[n] = float(v[1] / len);
       z[n] = float(v[2] / len);
+      xyz[n][0] = x[n];
+      xyz[n][1] = y[n];
+      xyz[n][2] = z[n];
+      xyz[n][3] = 0.0f;
       ++n;
     }
   }

@@ -60,6 +60,10 @@ struct UnitVectorTable {
   alignas(64) float x[kEntries];
   alignas(64) float y[kEntries];
   alignas(64) float z[kEntries];
+  // The same vectors interleaved (x, y, z, 0): the decoder fetches one 16-byte row per code and
+  // transposes 8 of them (simd::gather_xyz), instead of three 8-lane gathers, which are slow on
+  // some cores (AMD Zen 4: ~20 ns more per half sub-grid in a loop over cached blocks).
+  alignas(64) float xyz[kEntries][4];
   uint16_t ring_start[kRings + 1];
 
   UnitVectorTable();
@@ -225,9 +229,10 @@ SLIM_INLINE uint32_t decode_subgrid(const Vec3f corner[4], const uint8_t* displ,
       const vint8 m = shr<19>(code);
       const vfloat8 len =
           select(zero, vfloat8(0.0f), as_float(ior(shl<23>(e + vint8(bias)), shl<18>(m))));
-      d[0] = gather(kUnitVectors.x, k) * len;
-      d[1] = gather(kUnitVectors.y, k) * len;
-      d[2] = gather(kUnitVectors.z, k) * len;
+      gather_xyz(kUnitVectors.xyz, k, d[0], d[1], d[2]);
+      d[0] = d[0] * len;
+      d[1] = d[1] * len;
+      d[2] = d[2] * len;
     } else {
       const vfloat8 scale = select(zero, vfloat8(0.0f), as_float(shl<23>(e + vint8(bias - 5))));
       d[0] = to_float(iand(shr<3>(code), vint8(31))) * scale;

@@ -233,6 +233,62 @@ TEST(GridCodec, SimdDecodeMatchesScalar) {
     }
 }
 
+// The quarter decoder (one 8-lane decode per 2x2 cells, prim/subgrid.h) gives bit for bit the
+// vertices the whole decoder gives at the same positions, escape codes included, for every
+// resolution; lane 8 is the quarter's sub-grid corner.
+TEST(GridCodec, QuarterDecodeMatchesWholeDecode) {
+  std::mt19937 rng(12);
+  std::uniform_real_distribution<float> U(-1, 1);
+  const int bias = displacement_bias(4.0f);
+  for (int enc = 1; enc <= 2; ++enc)
+    for (int iter = 0; iter < 160; ++iter) {
+      SubGridInput in;
+      in.res_x = 2 + iter % 4;
+      in.res_y = 2 + (iter / 4) % 4;
+      for (int k = 0; k < 25; ++k) {
+        in.v[k] = Vec3f(float(k % 5) * 0.25f + 0.05f * U(rng),
+                        float(k / 5) * 0.25f + 0.05f * U(rng), 0.1f * U(rng));
+        // Every 7th position (but corners) is an exact vertex: an escape code.
+        in.exact[k] = (k * 3 + iter) % 7 == 0 ? uint32_t(k) : kNotExact;
+      }
+      uint8_t displ[64 + 16] = {};
+      if (enc == 1)
+        encode_subgrid<1>(in, bias, displ);
+      else
+        encode_subgrid<2>(in, bias, displ);
+      const uint32_t rx = in.res_x, ry = in.res_y;
+      const Vec3f c[4] = {in.v[0], in.v[rx - 1], in.v[5 * (ry - 1)], in.v[5 * (ry - 1) + rx - 1]};
+      SubGridVerts w;
+      alignas(32) uint32_t codes[32];
+      uint32_t esc = enc == 1 ? decode_subgrid<1>(c, displ, rx, ry, bias, w, codes)
+                              : decode_subgrid<2>(c, displ, rx, ry, bias, w, codes);
+      apply_escapes(esc, codes, in.v, w);
+      int escaped = 0;
+      for (uint32_t q = 0; q < 4; ++q) {
+        QuarterVerts qv;
+        alignas(32) uint32_t qcodes[8];
+        const uint32_t qesc = enc == 1 ? decode_quarter<1>(c, displ, rx, ry, bias, q, qv, qcodes)
+                                       : decode_quarter<2>(c, displ, rx, ry, bias, q, qv, qcodes);
+        escaped += simd::popcount(qesc);
+        apply_escapes(qesc, qcodes, in.v, qv);
+        uint32_t i0, i1, j0, j1;
+        subgrid_part_cells(4, q, rx, ry, i0, i1, j0, j1);
+        if (i0 >= i1 || j0 >= j1) continue;  // no cell: never tested
+        for (uint32_t b = 0; b <= j1 - j0; ++b)
+          for (uint32_t a = 0; a <= i1 - i0; ++a) {
+            const int l = kQuarterTables.lane[q][b][a];
+            const int k = int(5 * (j0 + b) + i0 + a);
+            ASSERT_EQ(kQuarterTables.position[q][l], k);
+            for (int ax = 0; ax < 3; ++ax)
+              EXPECT_EQ(std::memcmp(&qv.p[ax][l], &w.p[ax][k], 4), 0)
+                  << "enc " << enc << " res " << rx << "x" << ry << " quarter " << q << " (" << a
+                  << "," << b << ")";
+          }
+      }
+      if (rx == 5 && ry == 5) EXPECT_GT(escaped, 0);
+    }
+}
+
 TEST(GridKernel, DeinterleavesRowsOfFivePoints) {
   // simd::load_xyz5 (the `grid` decoder's whole-row path) against the plain copy, and
   // SubGridLeaf::decode of a full and a partial sub-grid against the vertex array.
@@ -590,12 +646,13 @@ TEST(GridWatertight, ClosedTorusNoLeaks) {
   }
 }
 
-// Half sub-grids (prim/subgrid.h): under the compressed-leaf BVH each sub-grid of a multi-leaf
-// gets two child boxes (cell rows 0-1 and 2-3) over one block. The hits must be exactly those of
-// whole sub-grids (same decoded vertices, same triangle test), partial sub-grids with an empty
-// half included (19 cells: the last sub-grid row has 3 cells; the seamed torus has 3-cell
-// strips), and each multi-leaf holds at most 4 sub-grids.
-TEST(GridHits, HalfSubGridChildrenMatchWholeSubGrids) {
+// Sub-grid parts (prim/subgrid.h): under the compressed-leaf BVH each sub-grid of a multi-leaf
+// gets two (cell rows 0-1 and 2-3) or four (2x2 cells) child boxes over one block. The hits must be
+// exactly those of whole sub-grids (same decoded vertices, same triangles with the same corners),
+// partial sub-grids with empty parts included (19 cells: the last sub-grid row and column have 3
+// cells; the seamed torus has 3-cell strips and flipped cells), and each multi-leaf holds at most
+// 8 / parts sub-grids.
+TEST(GridHits, SubGridPartChildrenMatchWholeSubGrids) {
   std::vector<PolyMesh> meshes{make_terrain(19),
                                add_uv_seams(rotate_some_faces(make_torus(64), 64, 6, 5), 64, 7, 3)};
   auto detail = [](const Scene& s, const std::string& key) {
@@ -606,34 +663,40 @@ TEST(GridHits, HalfSubGridChildrenMatchWholeSubGrids) {
   for (const PolyMesh& m : meshes) {
     for (const char* config : {"lossy-grid", "lossy-grid-e2", "lossy-grid-shared"}) {
       const BuildOptions opt = BuildOptions::from_config(config);
-      setenv("SLIM_GRID_HALVES", "0", 1);
+      setenv("SLIM_GRID_PARTS", "1", 1);
       Scene whole = Scene::build(m, opt);
-      unsetenv("SLIM_GRID_HALVES");
-      Scene halves = Scene::build(m, opt);
-      ASSERT_EQ(detail(whole, "half_subgrid_children"), 0.0) << config;
-      ASSERT_EQ(detail(halves, "half_subgrid_children"), 1.0) << config;
-      std::string why;
-      EXPECT_TRUE(halves.validate(&why)) << config << ": " << why;
-      const double ml = detail(halves, "multileaf_count");
-      ASSERT_GT(ml, 0.0) << config;
-      EXPECT_LE(detail(halves, "leaves_in_multileaf"), 4.0 * ml) << config;
-      const Box3f box = halves.bounds();
-      Rng rng(77);
-      int hits = 0;
-      for (int i = 0; i < 20000; ++i) {
-        const Ray r = random_ray(rng, box);
-        const Hit a = whole.intersect(r), b = halves.intersect(r);
-        ASSERT_EQ(a.valid(), b.valid()) << config << " ray " << i;
-        EXPECT_EQ(whole.occluded(r), halves.occluded(r)) << config << " ray " << i;
-        if (!a.valid()) continue;
-        hits++;
-        EXPECT_EQ(a.t, b.t) << config << " ray " << i;
-        EXPECT_EQ(a.primID, b.primID) << config << " ray " << i;
-        EXPECT_EQ(a.geomID, b.geomID) << config << " ray " << i;
-        EXPECT_EQ(a.u, b.u) << config << " ray " << i;
-        EXPECT_EQ(a.v, b.v) << config << " ray " << i;
+      ASSERT_EQ(detail(whole, "subgrid_parts"), 1.0) << config;
+      for (const char* parts : {"2", "4"}) {
+        setenv("SLIM_GRID_PARTS", parts, 1);
+        Scene parted = Scene::build(m, opt);
+        unsetenv("SLIM_GRID_PARTS");
+        ASSERT_EQ(detail(parted, "subgrid_parts"), std::stod(parts)) << config;
+        std::string why;
+        EXPECT_TRUE(parted.validate(&why)) << config << " " << parts << ": " << why;
+        const double ml = detail(parted, "multileaf_count");
+        ASSERT_GT(ml, 0.0) << config;
+        EXPECT_LE(detail(parted, "leaves_in_multileaf"), 8.0 / std::stod(parts) * ml) << config;
+        const Box3f box = parted.bounds();
+        Rng rng(77);
+        int hits = 0;
+        for (int i = 0; i < 20000; ++i) {
+          const Ray r = random_ray(rng, box);
+          const Hit a = whole.intersect(r), b = parted.intersect(r);
+          ASSERT_EQ(a.valid(), b.valid()) << config << " ray " << i;
+          EXPECT_EQ(whole.occluded(r), parted.occluded(r)) << config << " ray " << i;
+          if (!a.valid()) continue;
+          hits++;
+          EXPECT_EQ(a.t, b.t) << config << " ray " << i;
+          EXPECT_EQ(a.primID, b.primID) << config << " ray " << i;
+          EXPECT_EQ(a.geomID, b.geomID) << config << " ray " << i;
+          EXPECT_EQ(a.u, b.u) << config << " ray " << i;
+          EXPECT_EQ(a.v, b.v) << config << " ray " << i;
+          EXPECT_EQ(a.Ng.x, b.Ng.x) << config << " ray " << i;
+          EXPECT_EQ(a.Ng.y, b.Ng.y) << config << " ray " << i;
+          EXPECT_EQ(a.Ng.z, b.Ng.z) << config << " ray " << i;
+        }
+        EXPECT_GT(hits, 2000) << config;
       }
-      EXPECT_GT(hits, 2000) << config;
     }
   }
 }

@@ -581,13 +581,21 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
   const uint64_t n = p.sub_start.back();
   std::vector<Block> blocks(n);
   std::vector<Box3f> bounds(n);
-  // Half sub-grids as multi-leaf children (prim/subgrid.h) under the compressed-leaf BVH; the
-  // environment variable SLIM_GRID_HALVES=0 turns them off (measurements).
-  const char* halves_env = std::getenv("SLIM_GRID_HALVES");
-  const bool halves = (opt.bvh == Bvh::CompressedLeaf || opt.bvh == Bvh::CompressedLeafCompact) &&
-                      !(halves_env && std::string(halves_env) == "0");
-  std::vector<Box3f> half_bounds(halves ? 2 * n : 0);
-  s->ctx.halves = halves;
+  // Sub-grid parts as multi-leaf children under the compressed-leaf BVH (prim/subgrid.h):
+  // quarters for the 128-byte sub-grids, halves for the 72-byte shared-corner ones (whose
+  // memory target, 4.5 bytes/triangle, leaves no room for the twice as many multi-leaves of
+  // quarters); SLIM_GRID_PARTS=1|2|4 forces one (measurements).
+  uint32_t parts = 1;
+  if (opt.bvh == Bvh::CompressedLeaf || opt.bvh == Bvh::CompressedLeafCompact) {
+    parts = std::is_same_v<Block, LossySubGrid> ? 4 : 2;
+    if (const char* env = std::getenv("SLIM_GRID_PARTS")) {
+      const std::string v(env);
+      if (v != "1" && v != "2" && v != "4") throw Error("SLIM_GRID_PARTS must be 1, 2 or 4");
+      parts = uint32_t(std::stoi(v));
+    }
+  }
+  std::vector<Box3f> part_bounds(parts > 1 ? parts * n : 0);
+  s->ctx.parts = parts;
   std::vector<SubGridError> errs(n);
   for_each_subgrid(p, [&](uint64_t si, size_t gi, uint32_t sx, uint32_t sy) {
     const VertexGrid& g = gs.grids[gi];
@@ -620,9 +628,9 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
     SubGridVerts w;
     Leaf::decode(s->ctx, b, w);
     bounds[si] = subgrid_bounds(w, in.res_x, in.res_y);
-    if (halves)
-      for (uint32_t h = 0; h < 2; ++h)
-        half_bounds[2 * si + h] = subgrid_half_bounds(w, in.res_x, in.res_y, h);
+    if (parts > 1)
+      for (uint32_t k = 0; k < parts; ++k)
+        part_bounds[parts * si + k] = subgrid_part_bounds(w, in.res_x, in.res_y, parts, k);
     errs[si] = measure_error(in, w, g, gx, gy);
   });
   const double encode_s = seconds_since(t0);
@@ -638,7 +646,7 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
     return nullptr;
   }
   LossySource src{reinterpret_cast<const uint8_t*>(blocks.data()), sizeof(Block), bounds.data(),
-                  halves ? half_bounds.data() : nullptr};
+                  parts, parts > 1 ? part_bounds.data() : nullptr};
   s->build(src, uint32_t(n), subgrid_bvh_options(opt));
   s->mem.geometry_bytes += (s->vertices.size() + s->exact.size()) * sizeof(Vec3f);
   add_grid_details(p, s->stats, encode_s);
@@ -651,7 +659,7 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
   d.emplace_back("shared_corners", double(s->vertices.size()));
   d.emplace_back("displacement_bias", double(bias));
   d.emplace_back("block_bytes", double(sizeof(Block)));
-  d.emplace_back("half_subgrid_children", halves ? 1.0 : 0.0);
+  d.emplace_back("subgrid_parts", double(parts));
   finish_scene(*s, p, meshes, opt);
   return s;
 }

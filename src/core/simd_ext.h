@@ -73,6 +73,8 @@ SLIM_INLINE vbool8 lanes_from_bits(uint32_t m) {
 SLIM_INLINE vfloat8 gather(const float* base, vint8 idx) {
   return _mm256_i32gather_ps(base, idx.v, 4);
 }
+// Lane i of the result is lane idx[i] (0..7) of a.
+SLIM_INLINE vfloat8 permute(vfloat8 a, vint8 idx) { return _mm256_permutevar8x32_ps(a.v, idx.v); }
 // Rows table[idx[i]] of a table of (x, y, z, -) rows, transposed: lane i of x, y, z. Eight
 // 16-byte loads and a 4x4 transpose per 128-bit half instead of three gathers.
 SLIM_INLINE void gather_xyz(const float (*table)[4], vint8 idx, vfloat8& x, vfloat8& y,
@@ -225,6 +227,11 @@ SLIM_INLINE vbool8 lanes_from_bits(uint32_t m) { return {m & 0xffu}; }
 SLIM_INLINE vfloat8 gather(const float* base, vint8 idx) {
   vfloat8 r;
   for (int i = 0; i < 8; ++i) r.v[i] = base[idx.v[i]];
+  return r;
+}
+SLIM_INLINE vfloat8 permute(vfloat8 a, vint8 idx) {
+  vfloat8 r;
+  for (int i = 0; i < 8; ++i) r.v[i] = a.v[idx.v[i] & 7];
   return r;
 }
 SLIM_INLINE void gather_xyz(const float (*table)[4], vint8 idx, vfloat8& x, vfloat8& y,

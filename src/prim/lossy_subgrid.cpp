@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 namespace slim {
 
@@ -122,6 +123,81 @@ CodeUnpack::CodeUnpack() {
 }
 
 const CodeUnpack kCodeUnpack;
+
+}  // namespace detail
+
+QuarterTables::QuarterTables() {
+  std::memset(this, 0, sizeof(*this));
+  for (int q = 0; q < 4; ++q) {
+    const int qx = q & 1, qy = q >> 1;
+    int next = 0;
+    for (int b = 0; b < 3; ++b)
+      for (int a = 0; a < 3; ++a) {
+        const bool corner = a == 2 * qx && b == 2 * qy;
+        const int l = corner ? 8 : next++;
+        lane[q][b][a] = uint8_t(l);
+        position[q][l] = uint8_t(5 * (2 * qy + b) + 2 * qx + a);
+      }
+    // Triangle t: cell (ci, cj) = (t & 1, (t >> 1) & 1), A for t < 4, B otherwise; corners as in
+    // intersect_subgrid_rows (A: p00 p10 p11, flipped p01; B: p11 p01 p00, flipped p10).
+    for (int t = 0; t < 8; ++t) {
+      const int ci = t & 1, cj = (t >> 1) & 1;
+      const int A[4][2] = {{ci, cj}, {ci + 1, cj}, {ci + 1, cj + 1}, {ci, cj + 1}};
+      const int B[4][2] = {{ci + 1, cj + 1}, {ci, cj + 1}, {ci, cj}, {ci + 1, cj}};
+      for (int k = 0; k < 4; ++k) {
+        const int* v = t < 4 ? A[k] : B[k];
+        const int l = lane[q][v[1]][v[0]];
+        perm[q][k][t] = l == 8 ? 0 : l;
+        if (l == 8) corner_mask[q][k] |= 1u << t;
+      }
+    }
+  }
+}
+
+const QuarterTables kQuarterTables;
+
+namespace detail {
+
+QuarterUnpack::QuarterUnpack() {
+  std::memset(this, 0, sizeof(*this));
+  const QuarterTables qt;  // kQuarterTables may not be constructed yet
+  for (int q = 0; q < 4; ++q) {
+    for (int half = 0; half < 2; ++half) {
+      int slot[4];
+      for (int l = 0; l < 4; ++l) slot[l] = displ_position_slot(qt.position[q][4 * half + l]);
+      // Two windows: the first from the first lane's code, the second from the first code it
+      // misses. A window of 16 bytes at code s holds codes s .. s+4 and starts at most at code
+      // 18 (7 readable bytes follow the 63 code bytes).
+      bool done[4] = {false, false, false, false};
+      for (int k = 0; k < 2; ++k) {
+        int first = -1;
+        for (int l = 0; l < 4 && first < 0; ++l)
+          if (!done[l]) first = slot[l];
+        const int start = first < 0 ? 0 : std::min(first, 18);
+        (half ? hi : lo)[q][k] = uint8_t(3 * start);
+        for (int l = 0; l < 4; ++l) {
+          const bool take = !done[l] && slot[l] >= start && slot[l] <= start + 4;
+          for (int b = 0; b < 4; ++b)
+            ctrl[q][k][16 * half + 4 * l + b] =
+                take && b < 3 ? uint8_t(3 * (slot[l] - start) + b) : 0x80;
+          done[l] = done[l] || take;
+        }
+      }
+      for (int l = 0; l < 4; ++l)
+        if (!done[l]) throw std::logic_error("quarter code unpack: codes out of two windows");
+    }
+    for (int n = 2; n <= 5; ++n)
+      for (int l = 0; l < 8; ++l) {
+        const int k = qt.position[q][l];
+        u0[n][q][l] = kPatchWeights.u0[n][k];
+        u1[n][q][l] = kPatchWeights.u1[n][k];
+        v0[n][q][l] = kPatchWeights.v0[n][k];
+        v1[n][q][l] = kPatchWeights.v1[n][k];
+      }
+  }
+}
+
+const QuarterUnpack kQuarterUnpack;
 
 }  // namespace detail
 

@@ -191,6 +191,63 @@ struct CodeUnpack {
 };
 extern const CodeUnpack kCodeUnpack;
 
+// The same for the 8 code lanes of each quarter (prim/subgrid.h QuarterTables: lanes 0-7 are the
+// quarter's vertices other than the sub-grid corner): their codes lie in up to 4 windows, so two
+// shuffles are OR-ed; and the patch weights of those lanes per resolution.
+struct QuarterUnpack {
+  alignas(32) uint8_t ctrl[4][2][32];
+  uint8_t lo[4][2], hi[4][2];
+  alignas(32) float u0[6][4][8];  // [res_x][quarter][lane]
+  alignas(32) float u1[6][4][8];
+  alignas(32) float v0[6][4][8];  // [res_y][quarter][lane]
+  alignas(32) float v1[6][4][8];
+  QuarterUnpack();
+};
+extern const QuarterUnpack kQuarterUnpack;
+
+// Section 4.3 for 8 lanes: the patch at weights (u0, u1, v0, v1) from the broadcast corners c
+// plus the decoded displacement `code`, stored to x, y, z. Returns the lanes with escape codes.
+template <int kEnc>
+SLIM_INLINE uint32_t decode_lanes(simd::vint8 code, simd::vfloat8 u0, simd::vfloat8 u1,
+                                  simd::vfloat8 v0, simd::vfloat8 v1, const simd::vfloat8 (*c)[4],
+                                  int bias, float* x, float* y, float* z) {
+  using namespace simd;
+  vfloat8 d[3];
+  const vint8 e = iand(shr<kDisplExpShift>(code), vint8(63));
+  const vbool8 zero = ieq(e, vint8(0));
+  const uint32_t esc = ieq(e, vint8(int(kDisplEscape))).mask();
+  if constexpr (kEnc == 1) {
+    const vint8 k = iand(shr<3>(code), vint8(1023));
+    const vint8 m = shr<19>(code);
+    const vfloat8 len =
+        select(zero, vfloat8(0.0f), as_float(ior(shl<23>(e + vint8(bias)), shl<18>(m))));
+    gather_xyz(kUnitVectors.xyz, k, d[0], d[1], d[2]);
+    d[0] = d[0] * len;
+    d[1] = d[1] * len;
+    d[2] = d[2] * len;
+  } else {
+    const vfloat8 scale = select(zero, vfloat8(0.0f), as_float(shl<23>(e + vint8(bias - 5))));
+    d[0] = to_float(iand(shr<3>(code), vint8(31))) * scale;
+    d[1] = to_float(iand(shr<8>(code), vint8(31))) * scale;
+    d[2] = to_float(shr<19>(code)) * scale;
+  }
+  d[0] = d[0] ^ as_float(shl<31>(code));
+  d[1] = d[1] ^ as_float(shl<31>(shr<1>(code)));
+  d[2] = d[2] ^ as_float(shl<31>(shr<2>(code)));
+  float* out[3] = {x, y, z};
+  for (int a = 0; a < 3; ++a) {
+    const vfloat8 top = u0 * c[a][0] + u1 * c[a][1];
+    const vfloat8 bot = u0 * c[a][2] + u1 * c[a][3];
+    (v0 * top + v1 * bot + d[a]).store(out[a]);
+  }
+  return esc;
+}
+
+SLIM_INLINE void broadcast_corners(const Vec3f corner[4], simd::vfloat8 (*c)[4]) {
+  for (int a = 0; a < 3; ++a)
+    for (int q = 0; q < 4; ++q) c[a][q] = simd::vfloat8(corner[q][a]);
+}
+
 }  // namespace detail
 
 // Decompression (section 4.3), 8 positions at a time: patch + decoded displacement for the 25
@@ -208,44 +265,16 @@ SLIM_INLINE uint32_t decode_subgrid(const Vec3f corner[4], const uint8_t* displ,
   const detail::CodeUnpack& cu = detail::kCodeUnpack;
   uint32_t escapes = 0;
   vfloat8 c[3][4];
-  for (int a = 0; a < 3; ++a)
-    for (int q = 0; q < 4; ++q) c[a][q] = vfloat8(corner[q][a]);
+  detail::broadcast_corners(corner, c);
   for (int g = g0; g < g1; ++g) {
-    const vfloat8 u0 = vfloat8::load(&pw.u0[res_x][8 * g]),
-                  u1 = vfloat8::load(&pw.u1[res_x][8 * g]);
-    const vfloat8 v0 = vfloat8::load(&pw.v0[res_y][8 * g]),
-                  v1 = vfloat8::load(&pw.v1[res_y][8 * g]);
-    vfloat8 d[3];
     const vint8 code = load_shuffle_2x16(displ + cu.lo[g], displ + cu.hi[g], cu.ctrl[g]);
-    const vint8 e = iand(shr<kDisplExpShift>(code), vint8(63));
-    const vbool8 zero = ieq(e, vint8(0));
-    const uint32_t esc = ieq(e, vint8(int(kDisplEscape))).mask();
+    const uint32_t esc = detail::decode_lanes<kEnc>(
+        code, vfloat8::load(&pw.u0[res_x][8 * g]), vfloat8::load(&pw.u1[res_x][8 * g]),
+        vfloat8::load(&pw.v0[res_y][8 * g]), vfloat8::load(&pw.v1[res_y][8 * g]), c, bias,
+        &w.p[0][8 * g], &w.p[1][8 * g], &w.p[2][8 * g]);
     if (esc) {
       escapes |= esc << (8 * g);
       code.storeu(reinterpret_cast<int32_t*>(codes + 8 * g));
-    }
-    if constexpr (kEnc == 1) {
-      const vint8 k = iand(shr<3>(code), vint8(1023));
-      const vint8 m = shr<19>(code);
-      const vfloat8 len =
-          select(zero, vfloat8(0.0f), as_float(ior(shl<23>(e + vint8(bias)), shl<18>(m))));
-      gather_xyz(kUnitVectors.xyz, k, d[0], d[1], d[2]);
-      d[0] = d[0] * len;
-      d[1] = d[1] * len;
-      d[2] = d[2] * len;
-    } else {
-      const vfloat8 scale = select(zero, vfloat8(0.0f), as_float(shl<23>(e + vint8(bias - 5))));
-      d[0] = to_float(iand(shr<3>(code), vint8(31))) * scale;
-      d[1] = to_float(iand(shr<8>(code), vint8(31))) * scale;
-      d[2] = to_float(shr<19>(code)) * scale;
-    }
-    d[0] = d[0] ^ as_float(shl<31>(code));
-    d[1] = d[1] ^ as_float(shl<31>(shr<1>(code)));
-    d[2] = d[2] ^ as_float(shl<31>(shr<2>(code)));
-    for (int a = 0; a < 3; ++a) {
-      const vfloat8 top = u0 * c[a][0] + u1 * c[a][1];
-      const vfloat8 bot = u0 * c[a][2] + u1 * c[a][3];
-      (v0 * top + v1 * bot + d[a]).store(&w.p[a][8 * g]);
     }
   }
   // Position 24 is the patch corner (4,4), or unused in a partial sub-grid (where its clamped
@@ -258,9 +287,35 @@ SLIM_INLINE uint32_t decode_subgrid(const Vec3f corner[4], const uint8_t* displ,
   return escapes;
 }
 
-// Replaces the escaped positions by their exact vertices.
+// Decompression of quarter q (prim/subgrid.h): lanes 0-7 of w as decode_subgrid computes those
+// positions, lane 8 the sub-grid corner of the quarter (c00, c10, c01, c11 for q = 0..3; the
+// patch evaluates a corner to itself plus a zero displacement, see above; in a partial sub-grid
+// whose quarter does not reach that corner, the lane is unused). Returns the lanes with escape
+// codes, whose codes are then in codes[0..7].
+template <int kEnc>
+SLIM_INLINE uint32_t decode_quarter(const Vec3f corner[4], const uint8_t* displ, uint32_t res_x,
+                                    uint32_t res_y, int bias, uint32_t q, QuarterVerts& w,
+                                    uint32_t* codes) {
+  using namespace simd;
+  const detail::QuarterUnpack& qu = detail::kQuarterUnpack;
+  vfloat8 c[3][4];
+  detail::broadcast_corners(corner, c);
+  const vint8 code =
+      ior(load_shuffle_2x16(displ + qu.lo[q][0], displ + qu.hi[q][0], qu.ctrl[q][0]),
+          load_shuffle_2x16(displ + qu.lo[q][1], displ + qu.hi[q][1], qu.ctrl[q][1]));
+  const uint32_t esc =
+      detail::decode_lanes<kEnc>(code, vfloat8::load(qu.u0[res_x][q]),
+                                 vfloat8::load(qu.u1[res_x][q]), vfloat8::load(qu.v0[res_y][q]),
+                                 vfloat8::load(qu.v1[res_y][q]), c, bias, w.p[0], w.p[1], w.p[2]);
+  if (esc) code.storeu(reinterpret_cast<int32_t*>(codes));
+  for (int a = 0; a < 3; ++a) w.p[a][8] = corner[q][a] + 0.0f;
+  return esc;
+}
+
+// Replaces the escaped positions (or quarter lanes) by their exact vertices.
+template <class Verts>
 SLIM_INLINE void apply_escapes(uint32_t escapes, const uint32_t* codes, const Vec3f* exact,
-                               SubGridVerts& w) {
+                               Verts& w) {
   while (escapes) {
     const int k = simd::pop_lowest(escapes);
     const Vec3f& p = exact[escape_index(codes[k])];
@@ -304,13 +359,14 @@ static_assert(sizeof(LossySubGridShared) == 72, "shared-corner lossy sub-grid is
 // ---- leaf formats ---------------------------------------------------------------------------
 
 // Build-time source for both lossy leaves: encoded blocks and their (decoded) bounds; with
-// half_bounds (2 per block: halves 0 and 1, prim/subgrid.h) the compressed-leaf BVH gives each
-// sub-grid of a multi-leaf two child boxes.
+// parts > 1 (2 or 4 boxes per block: its halves or quarters, prim/subgrid.h, in part_bounds) the
+// compressed-leaf BVH gives each sub-grid of a multi-leaf that many child boxes.
 struct LossySource {
   const uint8_t* blocks = nullptr;
   uint32_t block_bytes = 0;
   const Box3f* bounds = nullptr;
-  const Box3f* half_bounds = nullptr;
+  uint32_t parts = 1;
+  const Box3f* part_bounds = nullptr;  // parts per block
 };
 
 struct LossyContext {
@@ -321,15 +377,16 @@ struct LossyContext {
   const Vec3f* exact = nullptr;     // exact vertices (escape codes)
   const Vec3f* corners = nullptr;   // shared layout: corner lattices
   int bias = 0;
-  bool halves = false;  // multi-leaf children are half sub-grids (LossySource::half_bounds)
+  uint32_t parts = 1;  // multi-leaf children per sub-grid: 1, 2 (halves) or 4 (quarters)
 };
 
-// What both lossy leaves share: the build-side hooks, the whole and half sub-grid tests, the
-// multi-leaf layout (whole or half sub-grids) and validation. Leaf provides
-//   static void decode(ctx, block, w, g0, g1)  // code groups g0..g1-1, escapes applied
+// What both lossy leaves share: decoding, the build-side hooks, the whole, half and quarter
+// sub-grid tests, the multi-leaf layout and validation. Leaf provides
+//   static void corners(ctx, block, Vec3f c[4])     // patch corners c00, c10, c01, c11
+//   static const Vec3f* exact(ctx, block)          // the grid's exact vertices
 //   static uint32_t flips(ctx, block)
 //   static void record(ctx, block, SubGridHit, HitRecord&)
-template <class Leaf, class Block>
+template <class Leaf, class Block, int kEnc>
 struct LossyLeafBase {
   using Context = LossyContext;
   static constexpr uint32_t kBlockPrims = 1;
@@ -345,16 +402,22 @@ struct LossyLeafBase {
     std::memcpy(out, s.blocks + uint64_t(prims[0]) * kBlockBytes, kBlockBytes);
   }
   // Multi-leaf children per block (LeafEncoder::parts_per_block) and their boxes.
-  static uint32_t multileaf_parts(const Source& s) { return s.half_bounds ? 2 : 1; }
+  static uint32_t multileaf_parts(const Source& s) { return s.parts; }
   static void part_bounds(const Source& s, uint32_t i, Box3f* out) {
-    out[0] = s.half_bounds[2 * uint64_t(i)];
-    out[1] = s.half_bounds[2 * uint64_t(i) + 1];
+    for (uint32_t k = 0; k < s.parts; ++k) out[k] = s.part_bounds[uint64_t(s.parts) * i + k];
   }
   // Multi-leaf child i is the first part of its block (validate() counts each block once).
-  static bool primary_part(const Context& ctx, uint32_t i) { return !ctx.halves || i % 2 == 0; }
+  static bool primary_part(const Context& ctx, uint32_t i) { return i % ctx.parts == 0; }
 
-  static SLIM_INLINE void decode(const Context& ctx, const Block& b, SubGridVerts& w) {
-    Leaf::decode(ctx, b, w, 0, 3);
+  // Code groups g0 .. g1-1 of the block, escapes applied.
+  static SLIM_INLINE void decode(const Context& ctx, const Block& b, SubGridVerts& w, int g0 = 0,
+                                 int g1 = 3) {
+    Vec3f c[4];
+    Leaf::corners(ctx, b, c);
+    alignas(32) uint32_t codes[32];
+    const uint32_t esc =
+        decode_subgrid<kEnc>(c, b.displ, b.res & 15, b.res >> 4, ctx.bias, w, codes, g0, g1);
+    if (esc) apply_escapes(esc, codes, Leaf::exact(ctx, b), w);
   }
 
   // The whole sub-grid: every code group, ray-space group and row.
@@ -377,6 +440,27 @@ struct LossyLeafBase {
     return intersect_rows<kAny>(ctx, b, h, h + 2, h, h == 0 ? 2 : 4, j0, j1, ray, hit, st);
   }
 
+  // Quarter q of the sub-grid: one 8-lane decode, one 8-wide test.
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect_quarter(const Context& ctx, const uint8_t* p, uint32_t q,
+                                            TravRay& ray, HitRecord& hit, Stats& st) {
+    const auto& b = *reinterpret_cast<const Block*>(p);
+    const uint32_t res_x = b.res & 15, res_y = b.res >> 4;
+    if (2 * (q & 1) + 1 >= res_x || 2 * (q >> 1) + 1 >= res_y) return false;  // no cell
+    simd::prefetch(reinterpret_cast<const uint8_t*>(&b) + 64);
+    Vec3f c[4];
+    Leaf::corners(ctx, b, c);
+    QuarterVerts w;
+    alignas(32) uint32_t codes[8];
+    const uint32_t esc = decode_quarter<kEnc>(c, b.displ, res_x, res_y, ctx.bias, q, w, codes);
+    if (esc) apply_escapes(esc, codes, Leaf::exact(ctx, b), w);
+    SubGridHit h;
+    if (!intersect_subgrid_quarter<kAny>(w, res_x, res_y, q, Leaf::flips(ctx, b), ray, h, st))
+      return false;
+    if constexpr (!kAny) Leaf::record(ctx, b, h, hit);
+    return true;
+  }
+
   // Decodes code groups [cg0, cg1), moves ray-space groups [rg0, rg1) and tests cell rows
   // [j0, j1).
   template <bool kAny, class Stats>
@@ -386,7 +470,7 @@ struct LossyLeafBase {
     // The codes' cache line, fetched alongside the first one.
     simd::prefetch(reinterpret_cast<const uint8_t*>(&b) + 64);
     SubGridVerts w;
-    Leaf::decode(ctx, b, w, cg0, cg1);
+    decode(ctx, b, w, cg0, cg1);
     alignas(32) float r[3][32];
     subgrid_to_ray_space(ray.wt, w, r, rg0, rg1);
     SubGridHit h;
@@ -399,42 +483,43 @@ struct LossyLeafBase {
   template <bool kAny, class Stats>
   static SLIM_INLINE bool intersect_in_multileaf(const Context& ctx, const uint8_t* data, uint32_t,
                                                  int i, TravRay& ray, HitRecord& hit, Stats& st) {
-    if (!ctx.halves) return intersect<kAny>(ctx, data + uint64_t(i) * kBlockBytes, ray, hit, st);
-    return intersect_half<kAny>(ctx, data + uint64_t(i >> 1) * kBlockBytes, uint32_t(i & 1), ray,
-                                hit, st);
+    if (ctx.parts == 4)
+      return intersect_quarter<kAny>(ctx, data + uint64_t(i >> 2) * kBlockBytes, uint32_t(i & 3),
+                                     ray, hit, st);
+    if (ctx.parts == 2)
+      return intersect_half<kAny>(ctx, data + uint64_t(i >> 1) * kBlockBytes, uint32_t(i & 1), ray,
+                                  hit, st);
+    return intersect<kAny>(ctx, data + uint64_t(i) * kBlockBytes, ray, hit, st);
   }
 
   template <class F>
   static void visit(const Context& ctx, const uint8_t* p, F&& fn) {
     const auto& b = *reinterpret_cast<const Block*>(p);
     SubGridVerts w;
-    Leaf::decode(ctx, b, w, 0, 3);
+    decode(ctx, b, w);
     fn(subgrid_bounds(w, b.res & 15, b.res >> 4), subgrid_key(p, kBlockBytes));
   }
   template <class F>
   static void visit_in_multileaf(const Context& ctx, const uint8_t* data, uint32_t, int i, F&& fn) {
-    if (!ctx.halves) return visit(ctx, data + uint64_t(i) * kBlockBytes, fn);
-    const uint8_t* p = data + uint64_t(i >> 1) * kBlockBytes;
+    const uint8_t* p = data + uint64_t(i / ctx.parts) * kBlockBytes;
     const auto& b = *reinterpret_cast<const Block*>(p);
     SubGridVerts w;
-    Leaf::decode(ctx, b, w, 0, 3);
-    fn(subgrid_half_bounds(w, b.res & 15, b.res >> 4, uint32_t(i & 1)),
+    decode(ctx, b, w);
+    fn(subgrid_part_bounds(w, b.res & 15, b.res >> 4, ctx.parts, uint32_t(i) % ctx.parts),
        subgrid_key(p, kBlockBytes));
   }
 };
 
 // Leaf format: one LossySubGrid (Listing 1) per block.
 template <int kEnc>
-struct LossyGridLeaf : LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid> {
+struct LossyGridLeaf : LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid, kEnc> {
   using Context = LossyContext;
-  using LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid>::decode;
 
-  static SLIM_INLINE void decode(const Context& ctx, const LossySubGrid& b, SubGridVerts& w, int g0,
-                                 int g1) {
-    alignas(32) uint32_t codes[32];
-    uint32_t esc =
-        decode_subgrid<kEnc>(b.corner, b.displ, b.res & 15, b.res >> 4, ctx.bias, w, codes, g0, g1);
-    if (esc) apply_escapes(esc, codes, ctx.exact + ctx.hot[b.primitive_id].exact, w);
+  static SLIM_INLINE void corners(const Context&, const LossySubGrid& b, Vec3f c[4]) {
+    for (int k = 0; k < 4; ++k) c[k] = b.corner[k];
+  }
+  static SLIM_INLINE const Vec3f* exact(const Context& ctx, const LossySubGrid& b) {
+    return ctx.exact + ctx.hot[b.primitive_id].exact;
   }
   static SLIM_INLINE uint32_t flips(const Context& ctx, const LossySubGrid& b) {
     return subgrid_flips(ctx.hot[b.primitive_id], ctx.flips, b.grid_x / kSubGridCells,
@@ -449,19 +534,18 @@ struct LossyGridLeaf : LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid> {
 
 // Leaf format: one LossySubGridShared per block.
 template <int kEnc>
-struct LossySharedLeaf : LossyLeafBase<LossySharedLeaf<kEnc>, LossySubGridShared> {
+struct LossySharedLeaf : LossyLeafBase<LossySharedLeaf<kEnc>, LossySubGridShared, kEnc> {
   using Context = LossyContext;
-  using LossyLeafBase<LossySharedLeaf<kEnc>, LossySubGridShared>::decode;
 
-  static SLIM_INLINE void decode(const Context& ctx, const LossySubGridShared& b, SubGridVerts& w,
-                                 int g0, int g1) {
+  static SLIM_INLINE void corners(const Context& ctx, const LossySubGridShared& b, Vec3f c[4]) {
     const uint32_t row = ctx.hot[b.grid].lattice_row;
-    const Vec3f c[4] = {ctx.corners[b.corner], ctx.corners[b.corner + 1],
-                        ctx.corners[b.corner + row], ctx.corners[b.corner + row + 1]};
-    alignas(32) uint32_t codes[32];
-    uint32_t esc =
-        decode_subgrid<kEnc>(c, b.displ, b.res & 15, b.res >> 4, ctx.bias, w, codes, g0, g1);
-    if (esc) apply_escapes(esc, codes, ctx.exact + ctx.hot[b.grid].exact, w);
+    c[0] = ctx.corners[b.corner];
+    c[1] = ctx.corners[b.corner + 1];
+    c[2] = ctx.corners[b.corner + row];
+    c[3] = ctx.corners[b.corner + row + 1];
+  }
+  static SLIM_INLINE const Vec3f* exact(const Context& ctx, const LossySubGridShared& b) {
+    return ctx.exact + ctx.hot[b.grid].exact;
   }
   // Sub-grid position (sx, sy) in its grid, from its lattice corner.
   static SLIM_INLINE void position(const Context& ctx, const LossySubGridShared& b, uint32_t& sx,

@@ -111,6 +111,35 @@ SLIM_INLINE Vec3f subgrid_vertex(const SubGridVerts& w, int k) {
   return {w.p[0][k], w.p[1][k], w.p[2][k]};
 }
 
+// Fills h for a hit on triangle tri (0 = A, 1 = B) of cell (cx, cy), whose corners p(i,j),
+// p(i+1,j), p(i,j+1), p(i+1,j+1) are at k00, k10, k01, k11 of the vertex rows px, py, pz,
+// tested as below (intersect_subgrid_rows) with barycentrics (u, v) at distance t.
+SLIM_INLINE void finish_cell_hit(const float* px, const float* py, const float* pz, int k00,
+                                 int k10, int k01, int k11, uint32_t cx, uint32_t cy, int tri,
+                                 bool flipped, float t, float u, float v, SubGridHit& h) {
+  h.t = t;
+  h.cell_x = cx;
+  h.cell_y = cy;
+  h.tri = tri;
+  int c0, c1, c2;  // corners as tested: point = c0 + u (c1 - c0) + v (c2 - c0)
+  if (tri == 0) {
+    c0 = k00;
+    c1 = k10;
+    c2 = flipped ? k01 : k11;
+    h.cu = flipped ? u : u + v;
+    h.cv = v;
+  } else {
+    c0 = k11;
+    c1 = k01;
+    c2 = flipped ? k10 : k00;
+    h.cu = flipped ? 1.0f - u : 1.0f - u - v;
+    h.cv = 1.0f - v;
+  }
+  auto vert = [&](int k) { return Vec3f(px[k], py[k], pz[k]); };
+  const Vec3f p0 = vert(c0), p1 = vert(c1), p2 = vert(c2);
+  h.Ng = cross(p1 - p0, p2 - p0);
+}
+
 }  // namespace detail
 
 // The 32 lanes of a decompressed sub-grid in ray space: core/watertight.h's to_ray_space, the
@@ -186,30 +215,10 @@ SLIM_INLINE bool intersect_subgrid_rows(const SubGridVerts& w, const float (*r)[
   if constexpr (!kAny) {
     if (!found) return false;
     const int i = best_lane & 3, j = best_row;
-    const int k00 = 5 * j + i, k10 = k00 + 1, k01 = k00 + 5, k11 = k00 + 6;
-    h.t = ray.tfar;
-    h.cell_x = uint32_t(i);
-    h.cell_y = uint32_t(j);
-    const bool flipped = (flips >> (4 * j + i)) & 1;
-    int c0, c1, c2;  // corners as tested: point = c0 + u (c1 - c0) + v (c2 - c0)
-    if (best_lane < 4) {
-      h.tri = 0;
-      c0 = k00;
-      c1 = k10;
-      c2 = flipped ? k01 : k11;
-      h.cu = flipped ? best_u : best_u + best_v;
-      h.cv = best_v;
-    } else {
-      h.tri = 1;
-      c0 = k11;
-      c1 = k01;
-      c2 = flipped ? k10 : k00;
-      h.cu = flipped ? 1.0f - best_u : 1.0f - best_u - best_v;
-      h.cv = 1.0f - best_v;
-    }
-    const Vec3f p0 = detail::subgrid_vertex(w, c0), p1 = detail::subgrid_vertex(w, c1),
-                p2 = detail::subgrid_vertex(w, c2);
-    h.Ng = cross(p1 - p0, p2 - p0);
+    const int k00 = 5 * j + i;
+    detail::finish_cell_hit(w.p[0], w.p[1], w.p[2], k00, k00 + 1, k00 + 5, k00 + 6, uint32_t(i),
+                            uint32_t(j), best_lane >> 2, (flips >> (4 * j + i)) & 1, ray.tfar,
+                            best_u, best_v, h);
   }
   return found;
 }
@@ -234,23 +243,124 @@ inline Box3f subgrid_bounds(const SubGridVerts& w, uint32_t res_x, uint32_t res_
   return subgrid_bounds(w, res_x, 0, res_y);
 }
 
-// ---- half sub-grids --------------------------------------------------------------------------
-// Under the compressed-leaf BVH, a multi-leaf may give each of its sub-grids two child boxes:
-// half 0 = cell rows 0-1 (vertex rows 0-2), half 1 = cell rows 2-3 (vertex rows 2-4), both
-// referring to the same block. A ray then decodes, moves to ray space and tests only the half
-// whose box it enters: 2 of the 3 code groups, 2-3 of the 4 ray-space groups, 2 of the 4 rows.
-// (Not in the paper, whose section 5 gives each BVH leaf one whole sub-grid; issue 7.)
-// A half of a sub-grid with res_y - 1 <= 2 cell rows may be empty (j0 >= j1).
+// ---- half and quarter sub-grids ---------------------------------------------------------------
+// Under the compressed-leaf BVH, a multi-leaf may give each of its sub-grids 2 or 4 child boxes
+// (its parts), all referring to the same block, so that a ray decodes and tests only the part
+// whose box it enters (not in the paper, whose section 5 gives each BVH leaf one whole sub-grid;
+// issue 7):
+//   halves:   half h = cell rows 2h, 2h+1 (vertex rows 2h .. 2h+2): 2 of the 3 code groups,
+//             2-3 of the 4 ray-space groups, 2 of the 4 rows;
+//   quarters: quarter q = cells (2qx .. 2qx+1, 2qy .. 2qy+1), qx = q & 1, qy = q >> 1: its 3x3
+//             vertices are one sub-grid corner and 8 displacement codes, i.e. one 8-lane decode,
+//             and its 8 triangles one 8-wide test (intersect_subgrid_quarter below).
+// The part of a partial sub-grid may hold no cell.
 SLIM_INLINE void subgrid_half_rows(uint32_t half, uint32_t res_y, uint32_t& j0, uint32_t& j1) {
   j0 = 2 * half;
   j1 = std::min<uint32_t>(2 * half + 2, res_y - 1);
 }
-// Bounds of half `half` (empty if it holds no cell).
-inline Box3f subgrid_half_bounds(const SubGridVerts& w, uint32_t res_x, uint32_t res_y,
-                                 uint32_t half) {
-  uint32_t j0, j1;
-  subgrid_half_rows(half, res_y, j0, j1);
-  return j0 < j1 ? subgrid_bounds(w, res_x, j0, j1 + 1) : Box3f();
+// Cells [i0, i1) x [j0, j1) of part `part` of `parts` (1, 2 or 4).
+SLIM_INLINE void subgrid_part_cells(uint32_t parts, uint32_t part, uint32_t res_x, uint32_t res_y,
+                                    uint32_t& i0, uint32_t& i1, uint32_t& j0, uint32_t& j1) {
+  i0 = 0;
+  i1 = res_x - 1;
+  j0 = 0;
+  j1 = res_y - 1;
+  if (parts == 2) subgrid_half_rows(part, res_y, j0, j1);
+  if (parts == 4) {
+    i0 = 2 * (part & 1);
+    i1 = std::min<uint32_t>(i0 + 2, res_x - 1);
+    j0 = 2 * (part >> 1);
+    j1 = std::min<uint32_t>(j0 + 2, res_y - 1);
+  }
+}
+// Bounds of part `part` of `parts` (empty if it holds no cell).
+inline Box3f subgrid_part_bounds(const SubGridVerts& w, uint32_t res_x, uint32_t res_y,
+                                 uint32_t parts, uint32_t part) {
+  uint32_t i0, i1, j0, j1;
+  subgrid_part_cells(parts, part, res_x, res_y, i0, i1, j0, j1);
+  Box3f b;
+  if (i0 >= i1 || j0 >= j1) return b;
+  for (uint32_t j = j0; j <= j1; ++j)
+    for (uint32_t i = i0; i <= i1; ++i) b.extend(detail::subgrid_vertex(w, int(5 * j + i)));
+  return b;
+}
+
+// The 9 vertices of a quarter: p[axis][lane], lanes 0-7 the 8 vertices other than the sub-grid
+// corner in row-major order, lane 8 that corner (lanes 9-15 unused).
+struct alignas(32) QuarterVerts {
+  float p[3][16];
+};
+
+// Lane tables of the quarter test (built once, prim/lossy_subgrid.cpp).
+struct QuarterTables {
+  // Vertex rows position (5x5 layout) of lane l of quarter q (lane 8 = the corner).
+  uint8_t position[4][9];
+  // lane[q][b][a]: lane of quarter q holding local vertex (a, b), a, b in 0..2 (position
+  // 5 * (2qy + b) + 2qx + a).
+  uint8_t lane[4][3][3];
+  // Triangle corners of the 8 triangles (A of cells (0,0) (1,0) (0,1) (1,1), then B) as lanes
+  // of the quarter: the permutation of lanes 0-7 and the mask of triangles whose corner is the
+  // sub-grid corner (lane 8). Corner 2 has a second form for flipped cells.
+  alignas(32) int32_t perm[4][4][8];  // [q][corner 0, 1, 2, 2 flipped][triangle]
+  uint32_t corner_mask[4][4];
+  QuarterTables();
+};
+extern const QuarterTables kQuarterTables;
+
+// Intersects the cells of quarter q of a res_x x res_y sub-grid (prim/subgrid.h: the same
+// triangles with the same corners in the same order as intersect_subgrid_rows, so the same bits
+// for the same vertices). Closest hit: lowers ray.tfar and fills h; any hit: true at a hit.
+template <bool kAny, class Stats>
+SLIM_INLINE bool intersect_subgrid_quarter(const QuarterVerts& w, uint32_t res_x, uint32_t res_y,
+                                           uint32_t q, uint32_t flips, TravRay& ray, SubGridHit& h,
+                                           Stats& st) {
+  using namespace simd;
+  uint32_t i0, i1, j0, j1;
+  subgrid_part_cells(4, q, res_x, res_y, i0, i1, j0, j1);
+  // Cells (c & 1, c >> 1) of the quarter that exist: lanes c (A) and c + 4 (B).
+  const uint32_t cols = i1 - i0, rows = j1 - j0;  // 1 or 2 each (the part is not empty)
+  const uint32_t cells = (cols == 2 ? 3u : 1u) * (rows == 2 ? 5u : 1u);
+  const uint32_t valid = cells | (cells << 4);
+  // Flip bits of the 4 cells, in lanes order.
+  const uint32_t f4 = ((flips >> (4 * j0 + i0)) & 3) | (((flips >> (4 * j0 + 4 + i0)) & 3) << 2);
+  // Ray space (core/watertight.h to_ray_space, the same operations as subgrid_to_ray_space).
+  const WatertightRay& wr = ray.wt;
+  const vfloat8 ox(wr.org[wr.kx]), oy(wr.org[wr.ky]), oz(wr.org[wr.kz]);
+  const vfloat8 sx(wr.Sx), sy(wr.Sy), sz(wr.Sz);
+  const vfloat8 ax = vfloat8::load(w.p[wr.kx]) - ox, ay = vfloat8::load(w.p[wr.ky]) - oy,
+                az = vfloat8::load(w.p[wr.kz]) - oz;
+  const vfloat8 rx = fnmadd(sx, az, ax), ry = fnmadd(sy, az, ay), rz = sz * az;
+  const vfloat8 cx = vfloat8(w.p[wr.kx][8]) - ox, cy = vfloat8(w.p[wr.ky][8]) - oy,
+                cz = vfloat8(w.p[wr.kz][8]) - oz;
+  const vfloat8 crx = fnmadd(sx, cz, cx), cry = fnmadd(sy, cz, cy), crz = sz * cz;
+  const QuarterTables& qt = kQuarterTables;
+  auto corner = [&](int c) {
+    const vint8 idx = vint8::loadu(qt.perm[q][c]);
+    const vbool8 m = lanes_from_bits(qt.corner_mask[q][c]);
+    return RayVertex<vfloat8>{select(m, crx, permute(rx, idx)), select(m, cry, permute(ry, idx)),
+                              select(m, crz, permute(rz, idx))};
+  };
+  const RayVertex<vfloat8> V0 = corner(0), V1 = corner(1);
+  RayVertex<vfloat8> V2 = corner(2);
+  if (f4 & cells) {  // flipped cells: A p(i,j+1) | B p(i+1,j)
+    const RayVertex<vfloat8> F = corner(3);
+    const vbool8 m = lanes_from_bits(f4 | (f4 << 4));
+    V2 = {select(m, F.x, V2.x), select(m, F.y, V2.y), select(m, F.z, V2.z)};
+  }
+  if constexpr (!std::is_same_v<Stats, NoStats>) st.prims(popcount(valid));
+  vfloat8 t(0.0f), u(0.0f), v(0.0f);
+  const uint32_t m = intersect_triangles(V0, V1, V2, valid, ray.tnear, ray.tfar, t, u, v);
+  if (!m) return false;
+  if constexpr (!kAny) {
+    const int lane = detail::closest_lane8(m, t);
+    ray.tfar = t[lane];
+    const int c = lane & 3, a = c & 1, b = c >> 1;
+    const auto& L = qt.lane[q];
+    detail::finish_cell_hit(w.p[0], w.p[1], w.p[2], L[b][a], L[b][a + 1], L[b + 1][a],
+                            L[b + 1][a + 1], i0 + uint32_t(a), j0 + uint32_t(b), lane >> 2,
+                            (f4 >> c) & 1, ray.tfar, u[lane], v[lane], h);
+  }
+  return true;
 }
 
 // Fills the public hit from a sub-grid hit: per-grid u,v (section 5:

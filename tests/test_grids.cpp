@@ -285,7 +285,9 @@ TEST(GridCodec, QuarterDecodeMatchesWholeDecode) {
                   << "," << b << ")";
           }
       }
-      if (rx == 5 && ry == 5) EXPECT_GT(escaped, 0);
+      if (rx == 5 && ry == 5) {
+        EXPECT_GT(escaped, 0);
+      }
     }
 }
 

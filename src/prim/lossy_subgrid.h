@@ -244,8 +244,11 @@ SLIM_INLINE uint32_t decode_lanes(simd::vint8 code, simd::vfloat8 u0, simd::vflo
 }
 
 SLIM_INLINE void broadcast_corners(const Vec3f corner[4], simd::vfloat8 (*c)[4]) {
-  for (int a = 0; a < 3; ++a)
-    for (int q = 0; q < 4; ++q) c[a][q] = simd::vfloat8(corner[q][a]);
+  for (int q = 0; q < 4; ++q) {
+    c[0][q] = simd::vfloat8(corner[q].x);
+    c[1][q] = simd::vfloat8(corner[q].y);
+    c[2][q] = simd::vfloat8(corner[q].z);
+  }
 }
 
 }  // namespace detail
@@ -308,7 +311,10 @@ SLIM_INLINE uint32_t decode_quarter(const Vec3f corner[4], const uint8_t* displ,
                                  vfloat8::load(qu.u1[res_x][q]), vfloat8::load(qu.v0[res_y][q]),
                                  vfloat8::load(qu.v1[res_y][q]), c, bias, w.p[0], w.p[1], w.p[2]);
   if (esc) code.storeu(reinterpret_cast<int32_t*>(codes));
-  for (int a = 0; a < 3; ++a) w.p[a][8] = corner[q][a] + 0.0f;
+  const Vec3f& cq = corner[q];
+  w.p[0][8] = cq.x + 0.0f;
+  w.p[1][8] = cq.y + 0.0f;
+  w.p[2][8] = cq.z + 0.0f;
   return esc;
 }
 

@@ -152,7 +152,7 @@ SLIM_INLINE void subgrid_to_ray_space(const WatertightRay& wr, const SubGridVert
   const float* px = w.p[wr.kx];
   const float* py = w.p[wr.ky];
   const float* pz = w.p[wr.kz];
-  const vfloat8 ox(wr.org[wr.kx]), oy(wr.org[wr.ky]), oz(wr.org[wr.kz]);
+  const vfloat8 ox(wr.ox), oy(wr.oy), oz(wr.oz);
   const vfloat8 sx(wr.Sx), sy(wr.Sy), sz(wr.Sz);
   for (int g = g0; g < g1; ++g) {
     const vfloat8 ax = vfloat8::load(px + 8 * g) - ox;
@@ -325,7 +325,7 @@ SLIM_INLINE bool intersect_subgrid_quarter(const QuarterVerts& w, uint32_t res_x
   const uint32_t f4 = ((flips >> (4 * j0 + i0)) & 3) | (((flips >> (4 * j0 + 4 + i0)) & 3) << 2);
   // Ray space (core/watertight.h to_ray_space, the same operations as subgrid_to_ray_space).
   const WatertightRay& wr = ray.wt;
-  const vfloat8 ox(wr.org[wr.kx]), oy(wr.org[wr.ky]), oz(wr.org[wr.kz]);
+  const vfloat8 ox(wr.ox), oy(wr.oy), oz(wr.oz);
   const vfloat8 sx(wr.Sx), sy(wr.Sy), sz(wr.Sz);
   const vfloat8 ax = vfloat8::load(w.p[wr.kx]) - ox, ay = vfloat8::load(w.p[wr.ky]) - oy,
                 az = vfloat8::load(w.p[wr.kz]) - oz;

@@ -1,5 +1,5 @@
 // SIMD wrapper extensions used by the grid primitives (prim/subgrid.h, prim/lossy_subgrid.h):
-// integer bit operations on vint8, float/int reinterpretation, table gathers, two-half loads and
+// integer bit operations on vint8, float/int reinterpretation, table row gathers, lane permutes, two-half loads and
 // a byte shuffle for unpacking 3-byte codes. Same rules as core/simd.h: raw intrinsics live here
 // only, and the scalar path gives bit-identical results.
 //
@@ -68,10 +68,6 @@ SLIM_INLINE vbool8 lanes_from_bits(uint32_t m) {
   const __m256i bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
   return _mm256_castsi256_ps(
       _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(int(m)), bit), bit));
-}
-// base[idx[i]] for each lane.
-SLIM_INLINE vfloat8 gather(const float* base, vint8 idx) {
-  return _mm256_i32gather_ps(base, idx.v, 4);
 }
 // Lane i of the result is lane idx[i] (0..7) of a.
 SLIM_INLINE vfloat8 permute(vfloat8 a, vint8 idx) { return _mm256_permutevar8x32_ps(a.v, idx.v); }
@@ -224,11 +220,6 @@ SLIM_INLINE vfloat8 mask_zero(vbool8 m, vfloat8 a) {
   return r;
 }
 SLIM_INLINE vbool8 lanes_from_bits(uint32_t m) { return {m & 0xffu}; }
-SLIM_INLINE vfloat8 gather(const float* base, vint8 idx) {
-  vfloat8 r;
-  for (int i = 0; i < 8; ++i) r.v[i] = base[idx.v[i]];
-  return r;
-}
 SLIM_INLINE vfloat8 permute(vfloat8 a, vint8 idx) {
   vfloat8 r;
   for (int i = 0; i < 8; ++i) r.v[i] = a.v[idx.v[i] & 7];

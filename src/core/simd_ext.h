@@ -1,7 +1,7 @@
 // SIMD wrapper extensions used by the grid primitives (prim/subgrid.h, prim/lossy_subgrid.h):
-// integer bit operations on vint8, float/int reinterpretation, table row gathers, lane permutes, two-half loads and
-// a byte shuffle for unpacking 3-byte codes. Same rules as core/simd.h: raw intrinsics live here
-// only, and the scalar path gives bit-identical results.
+// integer bit operations on vint8, float/int reinterpretation, table row gathers, lane permutes,
+// two-half loads and a byte shuffle for unpacking 3-byte codes. Same rules as core/simd.h: raw
+// intrinsics live here only, and the scalar path gives bit-identical results.
 //
 // Names are chosen so that they cannot collide with operators core/simd.h may add later.
 #pragma once

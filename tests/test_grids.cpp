@@ -187,28 +187,47 @@ TEST(GridCodec, DisplacementRoundTrip) {
   }
 }
 
+// A random res_x x res_y sub-grid (resolution from iter) encoded with encoding enc; with
+// escapes, every 7th position (but corners) is an exact vertex (its index = its position).
+struct TestSubGrid {
+  SubGridInput in;
+  uint8_t displ[64 + 16] = {};
+  Vec3f c[4];
+};
+TestSubGrid make_test_subgrid(std::mt19937& rng, int iter, int enc, int bias, bool escapes) {
+  std::uniform_real_distribution<float> U(-1, 1);
+  TestSubGrid t;
+  SubGridInput& in = t.in;
+  in.res_x = 2 + iter % 4;
+  in.res_y = 2 + (iter / 4) % 4;
+  for (int k = 0; k < 25; ++k) {
+    in.v[k] = Vec3f(float(k % 5) * 0.25f + 0.05f * U(rng), float(k / 5) * 0.25f + 0.05f * U(rng),
+                    0.1f * U(rng));
+    in.exact[k] = escapes && (k * 3 + iter) % 7 == 0 ? uint32_t(k) : kNotExact;
+  }
+  if (enc == 1)
+    encode_subgrid<1>(in, bias, t.displ);
+  else
+    encode_subgrid<2>(in, bias, t.displ);
+  const uint32_t rx = in.res_x, ry = in.res_y;
+  t.c[0] = in.v[0];
+  t.c[1] = in.v[rx - 1];
+  t.c[2] = in.v[5 * (ry - 1)];
+  t.c[3] = in.v[5 * (ry - 1) + rx - 1];
+  return t;
+}
+
 // The SIMD decoder gives bit for bit what the scalar twin (used by the encoder) gives.
 TEST(GridCodec, SimdDecodeMatchesScalar) {
   std::mt19937 rng(11);
-  std::uniform_real_distribution<float> U(-1, 1);
   const int bias = displacement_bias(4.0f);
   for (int enc = 1; enc <= 2; ++enc)
     for (int iter = 0; iter < 300; ++iter) {
-      SubGridInput in;
-      in.res_x = 2 + iter % 4;
-      in.res_y = 2 + (iter / 4) % 4;
-      for (int k = 0; k < 25; ++k) {
-        in.v[k] = Vec3f(float(k % 5) * 0.25f + 0.05f * U(rng),
-                        float(k / 5) * 0.25f + 0.05f * U(rng), 0.1f * U(rng));
-        in.exact[k] = kNotExact;
-      }
-      uint8_t displ[64 + 16] = {};
-      if (enc == 1)
-        encode_subgrid<1>(in, bias, displ);
-      else
-        encode_subgrid<2>(in, bias, displ);
+      const TestSubGrid t = make_test_subgrid(rng, iter, enc, bias, false);
+      const SubGridInput& in = t.in;
+      const uint8_t* displ = t.displ;
       const uint32_t rx = in.res_x, ry = in.res_y;
-      const Vec3f c[4] = {in.v[0], in.v[rx - 1], in.v[5 * (ry - 1)], in.v[5 * (ry - 1) + rx - 1]};
+      const Vec3f* c = t.c;
       SubGridVerts w;
       uint32_t codes[32];
       const uint32_t esc = enc == 1 ? decode_subgrid<1>(c, displ, rx, ry, bias, w, codes)
@@ -238,26 +257,14 @@ TEST(GridCodec, SimdDecodeMatchesScalar) {
 // resolution; lane 8 is the quarter's sub-grid corner.
 TEST(GridCodec, QuarterDecodeMatchesWholeDecode) {
   std::mt19937 rng(12);
-  std::uniform_real_distribution<float> U(-1, 1);
   const int bias = displacement_bias(4.0f);
   for (int enc = 1; enc <= 2; ++enc)
     for (int iter = 0; iter < 160; ++iter) {
-      SubGridInput in;
-      in.res_x = 2 + iter % 4;
-      in.res_y = 2 + (iter / 4) % 4;
-      for (int k = 0; k < 25; ++k) {
-        in.v[k] = Vec3f(float(k % 5) * 0.25f + 0.05f * U(rng),
-                        float(k / 5) * 0.25f + 0.05f * U(rng), 0.1f * U(rng));
-        // Every 7th position (but corners) is an exact vertex: an escape code.
-        in.exact[k] = (k * 3 + iter) % 7 == 0 ? uint32_t(k) : kNotExact;
-      }
-      uint8_t displ[64 + 16] = {};
-      if (enc == 1)
-        encode_subgrid<1>(in, bias, displ);
-      else
-        encode_subgrid<2>(in, bias, displ);
+      const TestSubGrid t = make_test_subgrid(rng, iter, enc, bias, true);
+      const SubGridInput& in = t.in;
+      const uint8_t* displ = t.displ;
       const uint32_t rx = in.res_x, ry = in.res_y;
-      const Vec3f c[4] = {in.v[0], in.v[rx - 1], in.v[5 * (ry - 1)], in.v[5 * (ry - 1) + rx - 1]};
+      const Vec3f* c = t.c;
       SubGridVerts w;
       alignas(32) uint32_t codes[32];
       uint32_t esc = enc == 1 ? decode_subgrid<1>(c, displ, rx, ry, bias, w, codes)

@@ -81,7 +81,7 @@ class BvhScene : public Scene::Impl {
     MultiLeafValidator multi;
     if constexpr (HasMultiLeafLayout<Leaf>)
       multi = [&](const uint8_t* data, uint32_t k, uint32_t i, Box3f& bounds, std::string*) {
-        // A block split into several children (half sub-grids) is counted once.
+        // A block split into several children (sub-grid parts) is counted once.
         bool primary = true;
         if constexpr (HasMultiLeafParts<Leaf>) primary = Leaf::primary_part(ctx, i);
         Leaf::visit_in_multileaf(ctx, data, k, int(i), [&](const Box3f& b, uint64_t key) {

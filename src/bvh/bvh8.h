@@ -124,9 +124,9 @@ struct LeafEncoder {
   std::function<std::vector<uint8_t>(const uint32_t* const* prims, const uint32_t* counts, int k)>
       encode_multileaf;
   // Optional (block_prims = 1): each block of a multi-leaf takes parts_per_block child boxes (its
-  // parts, e.g. the two halves of a sub-grid), part_bounds(prim, boxes) gives them (an empty box
-  // for an empty part). The multi-leaf then holds at most 8 / parts_per_block blocks, its child
-  // count is blocks x parts_per_block, and the leaf format maps child i to its block.
+  // parts, e.g. the halves or quarters of a sub-grid), part_bounds(prim, boxes) gives them (an
+  // empty box for an empty part). The multi-leaf then holds at most 8 / parts_per_block blocks, its
+  // child count is blocks x parts_per_block, and the leaf format maps child i to its block.
   uint32_t parts_per_block = 1;
   std::function<void(uint32_t prim, Box3f* boxes)> part_bounds;
 };

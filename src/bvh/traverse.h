@@ -92,8 +92,8 @@ template <class L>
 concept HasMultiLeafEncoder = requires {
   &L::encode_multileaf;
 };
-// Its blocks may each take several child boxes of a multi-leaf (half sub-grids): then it
-// provides multileaf_parts(source), part_bounds(source, prim, boxes) and primary_part(ctx, i)
+// Its blocks may each take several child boxes of a multi-leaf (sub-grid halves or quarters): then
+// it provides multileaf_parts(source), part_bounds(source, prim, boxes) and primary_part(ctx, i)
 // (child i is its block's first part), and intersect_in_multileaf maps children to blocks.
 template <class L>
 concept HasMultiLeafParts = requires(const typename L::Source& s) {
@@ -103,7 +103,8 @@ concept HasMultiLeafParts = requires(const typename L::Source& s) {
 // Multi-leaf (compressed-leaf-bvh.txt section 4.4): test the 8 quantized boxes, then the blocks
 // of the children hit. The paper tests them in any order; closest-hit rays here take them near to
 // far and stop at the first whose entry distance lies beyond the closest hit so far (with up to 8
-// half sub-grids per multi-leaf, a ray often enters several children that a hit then hides).
+// sub-grid halves or quarters per multi-leaf, a ray often enters several children that a hit
+// then hides).
 template <class Leaf, bool kAny, class Stats>
 SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const uint8_t* p,
                                      uint32_t children, uint32_t block_bytes, TravRay& ray,
@@ -117,16 +118,16 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
   alignas(32) float d[8];
   if constexpr (!kAny) dist.store(d);
   while (mask) {
-    int i = simd::pop_lowest(mask);
-    if constexpr (!kAny) {
-      for (uint32_t m = mask; m;) {  // the nearest child left
+    int i;
+    if constexpr (kAny) {
+      i = simd::pop_lowest(mask);
+    } else {
+      i = simd::ctz(mask);  // the nearest child left (the lowest index among equals)
+      for (uint32_t m = mask & (mask - 1); m;) {
         const int k = simd::pop_lowest(m);
-        if (d[k] < d[i]) {
-          mask |= 1u << i;
-          mask &= ~(1u << k);
-          i = k;
-        }
+        if (d[k] < d[i]) i = k;
       }
+      mask &= ~(1u << i);
       if (d[i] > ray.tfar) break;  // so are all others
     }
     bool h;

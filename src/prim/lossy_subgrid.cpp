@@ -160,7 +160,7 @@ namespace detail {
 
 QuarterUnpack::QuarterUnpack() {
   std::memset(this, 0, sizeof(*this));
-  const QuarterTables qt;  // kQuarterTables may not be constructed yet
+  const QuarterTables& qt = kQuarterTables;  // defined above in this file: constructed first
   for (int q = 0; q < 4; ++q) {
     for (int half = 0; half < 2; ++half) {
       int slot[4];

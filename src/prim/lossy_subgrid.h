@@ -452,7 +452,9 @@ struct LossyLeafBase {
                                             TravRay& ray, HitRecord& hit, Stats& st) {
     const auto& b = *reinterpret_cast<const Block*>(p);
     const uint32_t res_x = b.res & 15, res_y = b.res >> 4;
-    if (2 * (q & 1) + 1 >= res_x || 2 * (q >> 1) + 1 >= res_y) return false;  // no cell
+    uint32_t i0, i1, j0, j1;
+    subgrid_part_cells(4, q, res_x, res_y, i0, i1, j0, j1);
+    if (i0 >= i1 || j0 >= j1) return false;  // no cell
     simd::prefetch(reinterpret_cast<const uint8_t*>(&b) + 64);
     Vec3f c[4];
     Leaf::corners(ctx, b, c);
@@ -461,7 +463,7 @@ struct LossyLeafBase {
     const uint32_t esc = decode_quarter<kEnc>(c, b.displ, res_x, res_y, ctx.bias, q, w, codes);
     if (esc) apply_escapes(esc, codes, Leaf::exact(ctx, b), w);
     SubGridHit h;
-    if (!intersect_subgrid_quarter<kAny>(w, res_x, res_y, q, Leaf::flips(ctx, b), ray, h, st))
+    if (!intersect_subgrid_quarter<kAny>(w, q, i0, i1, j0, j1, Leaf::flips(ctx, b), ray, h, st))
       return false;
     if constexpr (!kAny) Leaf::record(ctx, b, h, hit);
     return true;

@@ -307,16 +307,14 @@ struct QuarterTables {
 };
 extern const QuarterTables kQuarterTables;
 
-// Intersects the cells of quarter q of a res_x x res_y sub-grid (prim/subgrid.h: the same
-// triangles with the same corners in the same order as intersect_subgrid_rows, so the same bits
-// for the same vertices). Closest hit: lowers ray.tfar and fills h; any hit: true at a hit.
+// Intersects the cells [i0, i1) x [j0, j1) of quarter q (subgrid_part_cells, not empty): the
+// same triangles with the same corners in the same order as intersect_subgrid_rows, so the same
+// bits for the same vertices. Closest hit: lowers ray.tfar and fills h; any hit: true at a hit.
 template <bool kAny, class Stats>
-SLIM_INLINE bool intersect_subgrid_quarter(const QuarterVerts& w, uint32_t res_x, uint32_t res_y,
-                                           uint32_t q, uint32_t flips, TravRay& ray, SubGridHit& h,
-                                           Stats& st) {
+SLIM_INLINE bool intersect_subgrid_quarter(const QuarterVerts& w, uint32_t q, uint32_t i0,
+                                           uint32_t i1, uint32_t j0, uint32_t j1, uint32_t flips,
+                                           TravRay& ray, SubGridHit& h, Stats& st) {
   using namespace simd;
-  uint32_t i0, i1, j0, j1;
-  subgrid_part_cells(4, q, res_x, res_y, i0, i1, j0, j1);
   // Cells (c & 1, c >> 1) of the quarter that exist: lanes c (A) and c + 4 (B).
   const uint32_t cols = i1 - i0, rows = j1 - j0;  // 1 or 2 each (the part is not empty)
   const uint32_t cells = (cols == 2 ? 3u : 1u) * (rows == 2 ? 5u : 1u);

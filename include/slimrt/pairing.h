@@ -39,7 +39,10 @@ struct PairingStats {
   uint64_t pairs = 0;          // pairs formed (2 triangles each)
   uint64_t unpaired = 0;       // triangles left alone (triangles - 2 * pairs)
   double paired_fraction = 0;  // 2 * pairs / triangles, of the result used
-  double window2_paired_fraction = 0;    // the paper's "old" figure: in-order window N = 2
+  // The paper's "old" figure: in-order window N = 2. pair_triangles() leaves it NaN when its
+  // pre-scan stopped early (once the threshold was out of reach: the heuristic runs);
+  // pairing_stats() always measures it (outside pairing_s).
+  double window2_paired_fraction = 0;
   double heuristic_paired_fraction = 0;  // the paper's greedy scan alone (also when skipped)
   bool prescan_skipped = false;          // input order already well paired: kept, heuristic not run
   double pairing_s = 0;  // wall time of the pairing used by Scene::build (one thread):

@@ -16,6 +16,8 @@
 //     4.59 / 4.83; and they take the least memory (bunny 46.4 vs 52.0 / 49.3 B/triangle). The
 //     price: twice the triangle tests per ray of tri4v (8 lanes per leaf test instead of 4); Pair2
 //     with 2-pair leaves tests as many triangles as tri4v (or slightly fewer) but gains only 3%.
+#include <cmath>
+
 #include "api/bvh_scene.h"
 #include "mesh/pairing.h"
 #include "mesh/triangulate.h"
@@ -51,7 +53,9 @@ std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>
   const PairingStats& ps = pr.stats;
   auto& d = s->stats.details;
   d.emplace_back("paired_fraction", ps.paired_fraction);
-  d.emplace_back("window2_paired_fraction", ps.window2_paired_fraction);
+  // Known when the pre-scan ran to the end; it stops once the heuristic is sure to run.
+  if (!std::isnan(ps.window2_paired_fraction))
+    d.emplace_back("window2_paired_fraction", ps.window2_paired_fraction);
   d.emplace_back("pairing_s", ps.pairing_s);
   d.emplace_back("pairs", double(ps.pairs));
   d.emplace_back("unpaired_triangles", double(ps.unpaired));

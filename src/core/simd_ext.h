@@ -1,6 +1,7 @@
 // SIMD wrapper extensions used by the grid primitives (prim/subgrid.h, prim/lossy_subgrid.h):
 // integer bit operations on vint8, float/int reinterpretation, table row gathers, lane permutes,
-// two-half loads and a byte shuffle for unpacking 3-byte codes. Same rules as core/simd.h: raw
+// two-half loads and a byte shuffle for unpacking 3-byte codes; and a small rank sort of 64-bit
+// keys (mesh/pairing.cpp). Same rules as core/simd.h: raw
 // intrinsics live here only, and the scalar path gives bit-identical results.
 //
 // Names are chosen so that they cannot collide with operators core/simd.h may add later.
@@ -113,6 +114,32 @@ SLIM_INLINE void load_xyz5(const float* p, vfloat8& x, vfloat8& y, vfloat8& z) {
   x = _mm256_blend_ps(_mm256_permutevar8x32_ps(a, ix_a), _mm256_permutevar8x32_ps(b, ix_b), 0xf8);
   y = _mm256_blend_ps(_mm256_permutevar8x32_ps(a, iy_a), _mm256_permutevar8x32_ps(b, iy_b), 0xf8);
   z = _mm256_blend_ps(_mm256_permutevar8x32_ps(a, iz_a), _mm256_permutevar8x32_ps(b, iz_b), 0xfc);
+}
+
+// Sorts k <= 16 distinct 64-bit keys in[0, k) ascending into out[0, k) (out holds 16 entries):
+// each key goes to its rank, the number of keys below it, by compares of all keys at once, with
+// no branch on the keys (mesh/pairing.cpp's twin buckets, where an insertion sort mispredicts
+// about once per key). Reads in[0, k) only.
+SLIM_INLINE void rank_sort16(const uint64_t* in, size_t k, uint64_t* out) {
+  const __m256i sign = _mm256_set1_epi64x(int64_t(uint64_t(1) << 63));
+  const __m256i lane = _mm256_setr_epi64x(0, 1, 2, 3);
+  const int nv = k <= 8 ? 2 : 4;
+  __m256i v[4];
+  for (int j = 0; j < 4; ++j) {
+    // Lanes >= k: all ones (ranked after every key), others the key; biased for signed compares.
+    const __m256i live = _mm256_cmpgt_epi64(_mm256_set1_epi64x(int64_t(k) - 4 * j), lane);
+    const __m256i x = _mm256_maskload_epi64(reinterpret_cast<const long long*>(in + 4 * j), live);
+    v[j] =
+        _mm256_xor_si256(_mm256_or_si256(x, _mm256_xor_si256(live, _mm256_set1_epi64x(-1))), sign);
+  }
+  for (size_t i = 0; i < k; ++i) {
+    const __m256i b = _mm256_set1_epi64x(int64_t(in[i] ^ (uint64_t(1) << 63)));
+    uint32_t below = 0;
+    for (int j = 0; j < nv; ++j)
+      below |= uint32_t(_mm256_movemask_pd(_mm256_castsi256_pd(_mm256_cmpgt_epi64(b, v[j]))))
+               << (4 * j);
+    out[__builtin_popcount(below)] = in[i];
+  }
 }
 
 #else
@@ -244,6 +271,14 @@ SLIM_INLINE vint8 load_shuffle_2x16(const uint8_t* lo, const uint8_t* hi, const 
   vint8 r;
   std::memcpy(r.v, out, 32);
   return r;
+}
+
+SLIM_INLINE void rank_sort16(const uint64_t* in, size_t k, uint64_t* out) {
+  for (size_t i = 0; i < k; ++i) {
+    uint32_t r = 0;
+    for (size_t j = 0; j < k; ++j) r += in[j] < in[i];
+    out[r] = in[i];
+  }
 }
 
 #endif

@@ -143,6 +143,15 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
   return found;
 }
 
+// Starts loading the node or leaf a pushed stack entry refers to (its first 256 bytes: a whole
+// Node8, or a multi-leaf header and its first blocks), so that a later pop finds it in cache.
+SLIM_INLINE void prefetch_ref(const uint8_t* nodes, const uint8_t* leaves, uint64_t ref) {
+  const uint32_t tag = NodeRef::tag(ref);
+  const uint8_t* p =
+      (tag == kRefNode8 || tag == kRefQNode8 ? nodes : leaves) + NodeRef::offset(ref);
+  for (int l = 0; l < 4; ++l) simd::prefetch(p + 64 * l);
+}
+
 // Traverses the BVH from bvh.root. Closest hit: returns true if `hit` was filled (ray.tfar = t).
 // Any hit: returns true as soon as one primitive is hit.
 template <class Leaf, bool kAny, class Stats>
@@ -171,6 +180,7 @@ bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& 
       const uint8_t* np = nodes + NodeRef::offset(cur);
       if (tag == kRefNode8) {
         const auto* n = reinterpret_cast<const Node8*>(np);
+        simd::prefetch(n->child);  // read once the box test is done
         mask = detail::intersect_node8(n, ray, dist);
         child = n->child;
       } else {
@@ -201,6 +211,7 @@ bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& 
           stack[sp++] = {child[i0], d[i0]};
           cur = child[i1];
         }
+        prefetch_ref(nodes, leaves, stack[sp - 1].ref);
         continue;
       }
       // Three or more: push all, sort the pushed entries far to near, pop the nearest.
@@ -221,6 +232,7 @@ bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& 
         stack[j] = e;
       }
       cur = stack[--sp].ref;
+      for (int k = base; k < sp; ++k) prefetch_ref(nodes, leaves, stack[k].ref);
     }
 
     // Leaf.

@@ -288,13 +288,16 @@ class Builder {
   }
 
   // Bins the range and returns the best SAH split. Not inlined so that the bins (several KB) do
-  // not live in the frame of the recursive build(). Small nodes use fewer bins (one per
-  // primitive at most), which keeps the per-node cost proportional to the node.
+  // not live in the frame of the recursive build(). Small nodes use fewer bins, 4 + n / 20 up to
+  // cfg.bins (Embree's BinMapping rule): clearing and sweeping the bins is the cost of a small
+  // node, not binning its few references. Against one bin per primitive up to cfg.bins: BVH2
+  // build of terrain:1024 0.47 -> 0.42 s, SAH cost +0.02% (terrain), +0.2% (hawaii), +0.5%
+  // (torus).
   __attribute__((noinline)) Split bin_and_split(uint32_t begin, uint32_t end, const Box3f& cbox,
                                                 Binner& b) const {
     const uint32_t n = end - begin;
     const Vec3f cext = cbox.hi - cbox.lo;
-    const int nb = int(std::min<uint32_t>(uint32_t(nb_), std::max<uint32_t>(n, 2)));
+    const int nb = int(std::min<uint32_t>(uint32_t(nb_), 4 + n / 20));
     b.nb = nb;
     float lo4[4] = {cbox.lo.x, cbox.lo.y, cbox.lo.z, 0.0f}, sc4[4] = {0, 0, 0, 0};
     for (int a = 0; a < 3; ++a) sc4[a] = cext[a] > 0.0f ? float(nb) * 0.99999f / cext[a] : 0.0f;

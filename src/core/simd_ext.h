@@ -1,8 +1,8 @@
 // SIMD wrapper extensions used by the grid primitives (prim/subgrid.h, prim/lossy_subgrid.h):
 // integer bit operations on vint8, float/int reinterpretation, table row gathers, lane permutes,
 // two-half loads and a byte shuffle for unpacking 3-byte codes; and a small rank sort of 64-bit
-// keys (mesh/pairing.cpp). Same rules as core/simd.h: raw
-// intrinsics live here only, and the scalar path gives bit-identical results.
+// keys (mesh/pairing.cpp). Same rules as core/simd.h: raw intrinsics live here only, and the
+// scalar path gives bit-identical results.
 //
 // Names are chosen so that they cannot collide with operators core/simd.h may add later.
 #pragma once
@@ -125,10 +125,13 @@ SLIM_INLINE void rank_sort16(const uint64_t* in, size_t k, uint64_t* out) {
   const __m256i lane = _mm256_setr_epi64x(0, 1, 2, 3);
   const int nv = k <= 8 ? 2 : 4;
   __m256i v[4];
-  for (int j = 0; j < 4; ++j) {
+  for (int j = 0; j < nv; ++j) {
     // Lanes >= k: all ones (ranked after every key), others the key; biased for signed compares.
+    // The masked load touches no lane >= k (the address is formed as an integer: it may lie
+    // past the end of the keys).
     const __m256i live = _mm256_cmpgt_epi64(_mm256_set1_epi64x(int64_t(k) - 4 * j), lane);
-    const __m256i x = _mm256_maskload_epi64(reinterpret_cast<const long long*>(in + 4 * j), live);
+    const auto* p = reinterpret_cast<const long long*>(reinterpret_cast<uintptr_t>(in) + 32 * j);
+    const __m256i x = _mm256_maskload_epi64(p, live);
     v[j] =
         _mm256_xor_si256(_mm256_or_si256(x, _mm256_xor_si256(live, _mm256_set1_epi64x(-1))), sign);
   }

@@ -899,11 +899,7 @@ SLIM_INLINE uint8_t shared_edge_code(const uint32_t* a, const uint32_t* b) {
 uint64_t window_scan(const PairingInput& in, bool by_position, double keep_threshold,
                      std::vector<TrianglePair>& pairs, bool decide_only = false,
                      bool* complete = nullptr) {
-  if (complete) *complete = true;
-  auto out_of_reach = [&] {
-    if (complete) *complete = false;
-    pairs = {};
-  };
+  bool stopped = false;  // decide_only and the threshold is out of reach
   const uint64_t T = in.tri_count;
   pairs.clear();
   bool keep = T > 0 && 1.0 >= keep_threshold;
@@ -920,10 +916,7 @@ uint64_t window_scan(const PairingInput& in, bool by_position, double keep_thres
         i += 1;
       }
       if (keep && double(T + 2 * count - i) / double(T) < keep_threshold) keep = false;
-      if (!keep && decide_only) {
-        out_of_reach();
-        return count;
-      }
+      if ((stopped = !keep && decide_only)) break;
     }
   } else {
     constexpr uint64_t kBlock = 256;
@@ -947,12 +940,10 @@ uint64_t window_scan(const PairingInput& in, bool by_position, double keep_thres
       // The triangles of [0, e) in no pair so far stay unpaired: give up storing the pairs once
       // the threshold is out of reach.
       if (keep && double(T + 2 * count - e) / double(T) < keep_threshold) keep = false;
-      if (!keep && decide_only) {
-        out_of_reach();
-        return count;
-      }
+      if ((stopped = !keep && decide_only)) break;
     }
   }
+  if (complete) *complete = !stopped;
   if (!keep) pairs = {};
   return count;
 }

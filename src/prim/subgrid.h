@@ -231,16 +231,17 @@ SLIM_INLINE bool intersect_subgrid(const SubGridVerts& w, uint32_t res_x, uint32
   return intersect_subgrid_rows<kAny>(w, r, res_x, 0, res_y - 1, flips, ray, h, st);
 }
 
-// Bounds of the vertex rows j0 .. j1-1 (res_x vertices each) of a decompressed sub-grid.
-inline Box3f subgrid_bounds(const SubGridVerts& w, uint32_t res_x, uint32_t j0, uint32_t j1) {
+// Bounds of the vertices [i0, i1) x [j0, j1) of a decompressed sub-grid.
+inline Box3f subgrid_vertex_bounds(const SubGridVerts& w, uint32_t i0, uint32_t i1, uint32_t j0,
+                                   uint32_t j1) {
   Box3f b;
   for (uint32_t j = j0; j < j1; ++j)
-    for (uint32_t i = 0; i < res_x; ++i) b.extend(detail::subgrid_vertex(w, int(5 * j + i)));
+    for (uint32_t i = i0; i < i1; ++i) b.extend(detail::subgrid_vertex(w, int(5 * j + i)));
   return b;
 }
 // Bounds of the res_x x res_y vertices of a decompressed sub-grid.
 inline Box3f subgrid_bounds(const SubGridVerts& w, uint32_t res_x, uint32_t res_y) {
-  return subgrid_bounds(w, res_x, 0, res_y);
+  return subgrid_vertex_bounds(w, 0, res_x, 0, res_y);
 }
 
 // ---- half and quarter sub-grids ---------------------------------------------------------------
@@ -278,11 +279,8 @@ inline Box3f subgrid_part_bounds(const SubGridVerts& w, uint32_t res_x, uint32_t
                                  uint32_t parts, uint32_t part) {
   uint32_t i0, i1, j0, j1;
   subgrid_part_cells(parts, part, res_x, res_y, i0, i1, j0, j1);
-  Box3f b;
-  if (i0 >= i1 || j0 >= j1) return b;
-  for (uint32_t j = j0; j <= j1; ++j)
-    for (uint32_t i = i0; i <= i1; ++i) b.extend(detail::subgrid_vertex(w, int(5 * j + i)));
-  return b;
+  if (i0 >= i1 || j0 >= j1) return Box3f();
+  return subgrid_vertex_bounds(w, i0, i1 + 1, j0, j1 + 1);  // cells [i0, i1): vertices to i1
 }
 
 // The 9 vertices of a quarter: p[axis][lane], lanes 0-7 the 8 vertices other than the sub-grid

@@ -49,7 +49,7 @@ class CostaScene : public BvhScene<CostaLeaf<P, F, V>> {
 };
 
 // The primitives of `m` in the order `order` (the BVH's leaf order).
-NgonMesh reorder(const NgonMesh& m, const std::vector<uint32_t>& order) {
+NgonMesh reorder(const NgonMesh& m, const LargeArray<uint32_t>& order) {
   NgonMesh r;
   r.vertices = m.vertices;
   r.face_base = m.face_base;
@@ -118,7 +118,7 @@ void order_leaves_for_prediction(Bvh2& b2, const NgonMesh& m) {
       leaf.erase(leaf.begin() + long(best));
     }
   }
-  b2.prim_ids = std::move(ids);
+  std::copy(ids.begin(), ids.end(), b2.prim_ids.begin());
 }
 
 // Mesh of a global face id (for the validation keys of the source primitives).
@@ -229,7 +229,7 @@ Bvh2 build_costa_bvh2(const NgonMesh& loaded, const std::vector<Vec3f>& decoded,
       1, std::min<uint32_t>(opt.max_leaf_size, CostaBlockLeaf::kBlockPrims * kMaxLeafBlocks));
   cfg.block_prims = CostaBlockLeaf::kBlockPrims;
   cfg.threads = opt.threads;
-  Bvh2 b2 = build_bvh2(std::move(refs), cfg);
+  Bvh2 b2 = build_bvh2(refs, cfg);
   if (prim_count) order_leaves_for_prediction(b2, loaded);
   return b2;
 }

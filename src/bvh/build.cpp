@@ -135,8 +135,9 @@ struct Split {
 
 class Builder {
  public:
-  Builder(std::vector<PrimRef>& input, const Bvh2BuildConfig& cfg, Bvh2& out)
-      : input_(input),
+  Builder(uint32_t count, const PrimRefFill& fill, const Bvh2BuildConfig& cfg, Bvh2& out)
+      : count_(count),
+        fill_(fill),
         cfg_(cfg),
         out_(out),
         nb_(std::clamp(cfg.bins, 2, kMaxBins)),
@@ -144,35 +145,41 @@ class Builder {
 
   void run() {
     // Counts are summed in 32-bit signed lanes by the SAH sweep.
-    if (input_.size() >= (size_t(1) << 31))
+    if (count_ >= (uint32_t(1) << 31))
       throw std::length_error("BVH build: at most 2^31 - 1 primitives");
-    const uint32_t n = uint32_t(input_.size());
-    out_.nodes.clear();
-    out_.prim_ids.clear();
+    const uint32_t n = count_;
     if (n == 0) return;
-    refs_.reset(new Ref[n]);
+    // Every large array is uninitialised huge-page memory (core/large_array.h), first touched by
+    // the threads that fill it; the nodes are bounded by 2n - 1 but only the pages of the nodes
+    // made are ever touched.
+    refs_ = LargeArray<Ref>(n);
     Range root = tbb::parallel_reduce(
         tbb::blocked_range<uint32_t>(0, n, 8192), Range{},
         [&](const tbb::blocked_range<uint32_t>& r, Range a) {
-          for (uint32_t i = r.begin(); i < r.end(); ++i) {
-            refs_[i] = make_ref(input_[i]);
-            a.add(refs_[i].row());
+          constexpr uint32_t kChunk = 256;
+          PrimRef tmp[kChunk];
+          for (uint32_t b = r.begin(); b < r.end(); b += kChunk) {
+            const uint32_t e = std::min(r.end(), b + kChunk);
+            fill_(b, e, tmp);
+            for (uint32_t i = b; i < e; ++i) {
+              refs_[i] = make_ref(tmp[i - b]);
+              a.add(refs_[i].row());
+            }
           }
           return a;
         },
         Range::merged);
-    std::vector<PrimRef>().swap(input_);
-    out_.nodes.resize(2 * size_t(n) - 1);
+    out_.nodes = LargeArray<Bvh2Node>(2 * size_t(n) - 1);
     node_count_ = 1;
     build(0, 0, n, root, 0);
-    out_.nodes.resize(node_count_.load());
-    out_.prim_ids.resize(n);
+    out_.nodes.shrink(node_count_.load());
+    out_.prim_ids = LargeArray<uint32_t>(n);
     tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n, 16384),
                       [&](const tbb::blocked_range<uint32_t>& r) {
                         for (uint32_t i = r.begin(); i < r.end(); ++i)
                           out_.prim_ids[i] = refs_[i].id();
                       });
-    refs_.reset();
+    refs_ = LargeArray<Ref>();
     out_.depth = max_depth_.load();
   }
 
@@ -275,7 +282,7 @@ class Builder {
   uint32_t partition(const Binner& b, const Split& s, uint32_t begin, uint32_t end, Range& left,
                      Range& right) {
     uint32_t i = begin, j = end;
-    Ref* refs = refs_.get();
+    Ref* refs = refs_.data();
     for (;;) {
       while (i < j && b.bin(refs[i], s.axis) < s.pos) left.add(refs[i++].row());
       while (i < j && b.bin(refs[j - 1], s.axis) >= s.pos) right.add(refs[--j].row());
@@ -368,7 +375,7 @@ class Builder {
       mid = begin + n / 2;
       if (reduce_max(cext) > 0.0f) {
         int a = max_dim(cext);
-        Ref* refs = refs_.get();
+        Ref* refs = refs_.data();
         std::nth_element(refs + begin, refs + mid, refs + end,
                          [a](const Ref& x, const Ref& y) { return x.c2(a) < y.c2(a); });
       }
@@ -390,21 +397,22 @@ class Builder {
     }
   }
 
-  std::vector<PrimRef>& input_;
+  uint32_t count_;
+  const PrimRefFill& fill_;
   const Bvh2BuildConfig& cfg_;
   Bvh2& out_;
   int nb_;
   float inv_block_;
-  std::unique_ptr<Ref[]> refs_;
+  LargeArray<Ref> refs_;
   std::atomic<uint32_t> node_count_{0};
   std::atomic<int> max_depth_{0};
 };
 
 }  // namespace
 
-Bvh2 build_bvh2(std::vector<PrimRef>&& refs, const Bvh2BuildConfig& cfg) {
+Bvh2 build_bvh2(uint32_t count, const PrimRefFill& fill, const Bvh2BuildConfig& cfg) {
   Bvh2 out;
-  Builder b(refs, cfg, out);
+  Builder b(count, fill, cfg, out);
   if (cfg.threads > 0) {
     tbb::task_arena arena(cfg.threads);
     arena.execute([&] { b.run(); });
@@ -412,6 +420,17 @@ Bvh2 build_bvh2(std::vector<PrimRef>&& refs, const Bvh2BuildConfig& cfg) {
     b.run();
   }
   return out;
+}
+
+Bvh2 build_bvh2(const std::vector<PrimRef>& refs, const Bvh2BuildConfig& cfg) {
+  if (refs.size() >= (size_t(1) << 31))
+    throw std::length_error("BVH build: at most 2^31 - 1 primitives");
+  return build_bvh2(
+      uint32_t(refs.size()),
+      [&](uint32_t begin, uint32_t end, PrimRef* out) {
+        std::copy(refs.begin() + begin, refs.begin() + end, out);
+      },
+      cfg);
 }
 
 }  // namespace slim

@@ -5,8 +5,10 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
+#include "core/large_array.h"
 #include "slimrt/math.h"
 
 namespace slim {
@@ -33,12 +35,19 @@ struct Bvh2BuildConfig {
 };
 
 struct Bvh2 {
-  std::vector<Bvh2Node> nodes;     // nodes[0] is the root (if any primitive)
-  std::vector<uint32_t> prim_ids;  // primitive ids in leaf order
+  LargeArray<Bvh2Node> nodes;     // nodes[0] is the root (if any primitive)
+  LargeArray<uint32_t> prim_ids;  // primitive ids in leaf order
   int depth = 0;
 };
 
-// Builds a BVH2 over the references (consumed). Empty input gives an empty BVH (no nodes).
-Bvh2 build_bvh2(std::vector<PrimRef>&& refs, const Bvh2BuildConfig& cfg);
+// Writes the references of primitives begin..end-1 to out[0 .. end - begin). Called in parallel
+// over disjoint ranges, so that no array of all references is made besides the builder's own.
+using PrimRefFill = std::function<void(uint32_t begin, uint32_t end, PrimRef* out)>;
+
+// Builds a BVH2 over the `count` primitives that `fill` describes. Empty input gives an empty
+// BVH (no nodes).
+Bvh2 build_bvh2(uint32_t count, const PrimRefFill& fill, const Bvh2BuildConfig& cfg);
+// The same over an array of references.
+Bvh2 build_bvh2(const std::vector<PrimRef>& refs, const Bvh2BuildConfig& cfg);
 
 }  // namespace slim

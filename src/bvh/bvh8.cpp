@@ -15,6 +15,7 @@
 #include <tbb/task_group.h>
 
 #include "core/assert.h"
+#include "core/large_array.h"
 
 namespace slim {
 
@@ -23,8 +24,7 @@ namespace slim {
 void AlignedBytes::reserve(uint64_t n) {
   if (n <= cap_) return;
   uint64_t cap = (n + 63) & ~uint64_t(63);
-  auto* p = static_cast<uint8_t*>(std::aligned_alloc(64, cap));
-  if (!p) throw std::bad_alloc();
+  auto* p = static_cast<uint8_t*>(large_alloc(cap, 64));  // huge pages for big arenas
   if (size_) std::memcpy(p, data_, size_);
   std::free(data_);
   data_ = p;
@@ -146,9 +146,10 @@ class Collapser {
     }
     // Subtree figures bottom-up (children always have larger indices than their parent).
     const size_t nn = b2_.nodes.size();
-    prims_.assign(nn, 0);
-    leaves_.assign(nn, 0);
-    max_leaf_.assign(nn, 0);
+    // Every entry is written below (core/large_array.h: no zero fill of fresh pages).
+    prims_ = LargeArray<uint32_t>(nn);
+    leaves_ = LargeArray<uint32_t>(nn);
+    max_leaf_ = LargeArray<uint32_t>(nn);
     for (size_t i = nn; i-- > 0;) {
       const Bvh2Node& n = b2_.nodes[i];
       if (n.is_leaf()) {
@@ -175,7 +176,7 @@ class Collapser {
     } else {
       // Child slots of each subtree if flattened into one wide node (a leaf or a multi-leaf
       // candidate takes one), for gather().
-      slots_.assign(nn, 0);
+      slots_ = LargeArray<uint32_t>(nn);
       for (size_t i = nn; i-- > 0;) {
         const Bvh2Node& n = b2_.nodes[i];
         slots_[i] = n.is_leaf() || multileaf_candidate(uint32_t(i))
@@ -183,8 +184,8 @@ class Collapser {
                         : slots_[n.first] + slots_[n.first + 1];
       }
     }
-    node_size_.assign(nn, 0);
-    leaf_size_.assign(nn, 0);
+    node_size_ = LargeArray<uint64_t>(nn, 0);
+    leaf_size_ = LargeArray<uint64_t>(nn, 0);
     const SubtreeStats m = measure(0, 1);
     Bvh8Stats& s = out_.stats;
     s = m.st;
@@ -282,8 +283,8 @@ class Collapser {
     // Written for the inner nodes only (expand() stops at terminals without reading them): no
     // zero fill of 18 bytes per node.
     const size_t nn = b2_.nodes.size();
-    choice_.reset(new std::array<std::array<uint8_t, 2>, 8>[nn]);
-    wide_.reset(new std::array<uint8_t, 2>[nn]);
+    choice_ = LargeArray<std::array<std::array<uint8_t, 2>, 8>>(nn);
+    wide_ = LargeArray<std::array<uint8_t, 2>>(nn);
     optimal_dp(0);
   }
 
@@ -541,11 +542,11 @@ class Collapser {
   NodeKind kind_;
   const LeafEncoder& enc_;
   Bvh8& out_;
-  std::vector<uint32_t> prims_, leaves_, max_leaf_, slots_;
+  LargeArray<uint32_t> prims_, leaves_, max_leaf_, slots_;
   bool optimal_ = true;
-  std::unique_ptr<std::array<std::array<uint8_t, 2>, 8>[]> choice_;  // optimal_collapse()
-  std::unique_ptr<std::array<uint8_t, 2>[]> wide_;
-  std::vector<uint64_t> node_size_, leaf_size_;
+  LargeArray<std::array<std::array<uint8_t, 2>, 8>> choice_;  // optimal_collapse()
+  LargeArray<std::array<uint8_t, 2>> wide_;
+  LargeArray<uint64_t> node_size_, leaf_size_;
   std::unordered_map<uint32_t, std::vector<uint8_t>> multi_cache_;
   double root_area_ = 1;
 };

@@ -32,10 +32,6 @@
 // one process; a process's first call pays the VM's first touch of fresh pages, 2x slower).
 #include "mesh/pairing.h"
 
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -46,6 +42,7 @@
 #include <new>
 #include <string>
 
+#include "core/large_array.h"
 #include "core/simd_ext.h"
 #include "mesh/triangulate.h"
 #include "slimrt/error.h"
@@ -60,51 +57,6 @@ double seconds_since(Clock::time_point t0) {
 }
 
 constexpr uint32_t kNone = 0xffffffffu;
-
-// Uninitialized array for the big temporaries (tens of MB for millions of triangles), backed by
-// transparent huge pages where the system offers them (Linux, THP "madvise" mode): measured on
-// the 2-core build VM, a fresh 100 MB buffer costs 55 ms of page faults with 4 KB pages and 18 ms
-// with 2 MB pages, and the random accesses of the twin table miss the TLB far less.
-template <class T>
-class LargeArray {
- public:
-  LargeArray() = default;
-  explicit LargeArray(size_t n) : n_(n) {
-    if (n == 0) return;
-    constexpr size_t kHuge = size_t(2) << 20;
-    size_t bytes = n * sizeof(T);
-    if (bytes >= kHuge) {
-      bytes = (bytes + kHuge - 1) / kHuge * kHuge;
-      p_ = static_cast<T*>(std::aligned_alloc(kHuge, bytes));
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-      if (p_) madvise(p_, bytes, MADV_HUGEPAGE);
-#endif
-    } else {
-      p_ = static_cast<T*>(std::malloc(bytes));
-    }
-    if (!p_) throw std::bad_alloc();
-  }
-  LargeArray(size_t n, const T& value) : LargeArray(n) { std::fill(p_, p_ + n_, value); }
-  ~LargeArray() { std::free(p_); }
-  LargeArray(LargeArray&& o) noexcept : p_(o.p_), n_(o.n_) { o.p_ = nullptr, o.n_ = 0; }
-  LargeArray& operator=(LargeArray&& o) noexcept {
-    std::swap(p_, o.p_);
-    std::swap(n_, o.n_);
-    return *this;
-  }
-  LargeArray(const LargeArray&) = delete;
-  LargeArray& operator=(const LargeArray&) = delete;
-  T* data() { return p_; }
-  const T* data() const { return p_; }
-  size_t size() const { return n_; }
-  bool empty() const { return n_ == 0; }
-  T& operator[](size_t i) { return p_[i]; }
-  const T& operator[](size_t i) const { return p_[i]; }
-
- private:
-  T* p_ = nullptr;
-  size_t n_ = 0;
-};
 
 // kNone in every entry: a memset (0xff bytes), a sequential stream instead of the random writes
 // of the entries that stay kNone.

@@ -32,9 +32,38 @@ std::string label(const PolyMesh& m) { return m.name.empty() ? std::string("mesh
   throw Error(label(m) + ": face " + std::to_string(f) + ": " + what);
 }
 
+// The first corner c of `index` with index[c] >= limit, or index.size(). A plain linear scan (no
+// per-face offsets array: the check runs on every build and is a stream over the corners).
+uint64_t first_out_of_range(const std::vector<uint32_t>& index, size_t limit) {
+  const uint32_t* p = index.data();
+  const uint64_t n = index.size();
+  if (limit > 0xffffffffull) return n;  // every uint32 index is in range
+  const uint32_t lim = uint32_t(limit);
+  constexpr uint64_t kBlock = 4096;
+  for (uint64_t b = 0; b < n; b += kBlock) {
+    const uint64_t e = std::min(n, b + kBlock);
+    uint32_t mx = 0;
+    for (uint64_t c = b; c < e; ++c) mx = std::max(mx, p[c]);
+    if (mx >= lim)
+      for (uint64_t c = b; c < e; ++c)
+        if (p[c] >= lim) return c;
+  }
+  return n;
+}
+
+// The face of corner c (face sizes add up to the corner count).
+uint64_t face_of_corner(const PolyMesh& m, uint64_t c) {
+  uint64_t k = 0;
+  for (size_t f = 0; f < m.face_sizes.size(); ++f) {
+    k += m.face_sizes[f];
+    if (c < k) return f;
+  }
+  return m.face_sizes.size();
+}
+
 // Checks a per-corner attribute: either index array parallel to face_indices, or per vertex.
 void check_attribute(const PolyMesh& m, const char* attr, size_t attr_count,
-                     const std::vector<uint32_t>& index, const std::vector<uint64_t>& off) {
+                     const std::vector<uint32_t>& index) {
   const std::string name = attr;
   if (index.empty()) {
     if (attr_count != 0 && attr_count != m.positions.size())
@@ -47,12 +76,11 @@ void check_attribute(const PolyMesh& m, const char* attr, size_t attr_count,
     throw Error(label(m) + ": " + name + " index array has " + std::to_string(index.size()) +
                 " entries; expected one per corner (" + std::to_string(m.face_indices.size()) +
                 ")");
-  for (size_t f = 0; f + 1 < off.size(); ++f)
-    for (uint64_t c = off[f]; c < off[f + 1]; ++c)
-      if (index[c] >= attr_count)
-        bad_face(m, f,
-                 name + " index " + std::to_string(index[c]) + " out of range (" +
-                     std::to_string(attr_count) + " " + name + ")");
+  const uint64_t c = first_out_of_range(index, attr_count);
+  if (c < index.size())
+    bad_face(m, face_of_corner(m, c),
+             name + " index " + std::to_string(index[c]) + " out of range (" +
+                 std::to_string(attr_count) + " " + name + ")");
 }
 
 }  // namespace
@@ -67,16 +95,14 @@ void check_mesh(const PolyMesh& m) {
   if (corners != m.face_indices.size())
     throw Error(label(m) + ": face sizes add up to " + std::to_string(corners) +
                 " corners but face_indices has " + std::to_string(m.face_indices.size()));
-  const std::vector<uint64_t> off = m.face_offsets();
   const size_t nv = m.positions.size();
-  for (size_t f = 0; f < m.face_sizes.size(); ++f)
-    for (uint64_t c = off[f]; c < off[f + 1]; ++c)
-      if (m.face_indices[c] >= nv)
-        bad_face(m, f,
-                 "vertex index " + std::to_string(m.face_indices[c]) + " out of range (" +
-                     std::to_string(nv) + " vertices)");
-  check_attribute(m, "normals", m.normals.size(), m.normal_indices, off);
-  check_attribute(m, "uvs", m.uvs.size(), m.uv_indices, off);
+  const uint64_t c = first_out_of_range(m.face_indices, nv);
+  if (c < m.face_indices.size())
+    bad_face(m, face_of_corner(m, c),
+             "vertex index " + std::to_string(m.face_indices[c]) + " out of range (" +
+                 std::to_string(nv) + " vertices)");
+  check_attribute(m, "normals", m.normals.size(), m.normal_indices);
+  check_attribute(m, "uvs", m.uvs.size(), m.uv_indices);
   if (!m.face_object.empty()) {
     if (m.face_object.size() != m.face_sizes.size())
       throw Error(label(m) + ": face_object has " + std::to_string(m.face_object.size()) +

@@ -1,8 +1,46 @@
 #include "mesh/triangulate.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
 #include <string>
 
 namespace slim {
+
+FaceChunks face_chunks(const PolyMesh& m) {
+  const size_t nf = m.face_sizes.size();
+  const size_t nc = (nf + FaceChunks::kFaces - 1) / FaceChunks::kFaces;
+  FaceChunks fc;
+  fc.corner.assign(nc + 1, 0);
+  tbb::parallel_for(size_t(0), nc, [&](size_t k) {
+    const size_t f1 = std::min(nf, (k + 1) * FaceChunks::kFaces);
+    uint64_t c = 0;
+    for (size_t f = k * FaceChunks::kFaces; f < f1; ++f) c += m.face_sizes[f];
+    fc.corner[k + 1] = c;
+  });
+  for (size_t k = 0; k < nc; ++k) fc.corner[k + 1] += fc.corner[k];
+  return fc;
+}
+
+namespace {
+
+// Per mesh: which vertices are finite, and per face chunk the first output triangle and the
+// faces skipped (with a non-finite corner).
+struct MeshPlan {
+  LargeArray<uint8_t> finite;
+  FaceChunks chunks;
+  std::vector<uint64_t> first_tri;  // per chunk, then the total at the end
+  std::vector<uint64_t> skipped;    // per chunk
+};
+
+inline bool face_finite(const uint8_t* finite, const uint32_t* idx, uint32_t n) {
+  bool ok = true;
+  for (uint32_t k = 0; k < n; ++k) ok = ok && finite[idx[k]];
+  return ok;
+}
+
+}  // namespace
 
 TriangleMesh triangulate_fan(const std::vector<const PolyMesh*>& meshes) {
   TriangleMesh out;
@@ -16,36 +54,83 @@ TriangleMesh triangulate_fan(const std::vector<const PolyMesh*>& meshes) {
     throw Error("scene too large: " + std::to_string(nv) + " vertices, " + std::to_string(nt) +
                 " triangles (at most 2^32-1 of each)");
   out.input_triangles = nt;
-  out.vertices.reserve(nv);
-  out.tris.reserve(3 * nt);
-  out.geom_ids.reserve(nt);
-  out.prim_ids.reserve(nt);
+
+  // Pass 1: finite vertices, and the output triangles of each chunk of faces.
+  std::vector<MeshPlan> plan(meshes.size());
+  uint64_t tri_total = 0;
+  for (size_t g = 0; g < meshes.size(); ++g) {
+    const PolyMesh& m = *meshes[g];
+    MeshPlan& p = plan[g];
+    const size_t nvm = m.positions.size();
+    p.finite = LargeArray<uint8_t>(nvm);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nvm, 16384),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t i = r.begin(); i < r.end(); ++i)
+                          p.finite[i] = is_finite(m.positions[i]);
+                      });
+    p.chunks = face_chunks(m);
+    const size_t nc = p.chunks.count();
+    p.first_tri.assign(nc + 1, 0);
+    p.skipped.assign(nc, 0);
+    tbb::parallel_for(size_t(0), nc, [&](size_t k) {
+      const size_t nf = m.face_sizes.size();
+      const size_t f1 = std::min(nf, (k + 1) * FaceChunks::kFaces);
+      uint64_t c = p.chunks.corner[k], tris = 0, skipped = 0;
+      for (size_t f = k * FaceChunks::kFaces; f < f1; ++f) {
+        const uint32_t n = m.face_sizes[f];
+        if (face_finite(p.finite.data(), &m.face_indices[c], n))
+          tris += n - 2;
+        else
+          skipped++;
+        c += n;
+      }
+      p.first_tri[k + 1] = tris;
+      p.skipped[k] = skipped;
+    });
+    p.first_tri[0] = tri_total;
+    for (size_t k = 0; k < nc; ++k) {
+      p.first_tri[k + 1] += p.first_tri[k];
+      out.skipped_faces += p.skipped[k];
+    }
+    tri_total = p.first_tri[nc];
+  }
+
+  // Pass 2: vertices and triangles written in parallel, at the positions a serial loop would
+  // give them.
+  out.vertices.resize(nv);
+  out.tris.resize(3 * tri_total);
+  out.geom_ids.resize(tri_total);
+  out.prim_ids.resize(tri_total);
+  uint64_t vbase = 0;
   for (uint32_t g = 0; g < meshes.size(); ++g) {
     const PolyMesh& m = *meshes[g];
-    uint32_t base = uint32_t(out.vertices.size());
+    const MeshPlan& p = plan[g];
+    const uint32_t base = uint32_t(vbase);
     out.vertex_base.push_back(base);
-    out.vertices.insert(out.vertices.end(), m.positions.begin(), m.positions.end());
-    std::vector<uint8_t> finite(m.positions.size());
-    for (size_t i = 0; i < m.positions.size(); ++i) finite[i] = is_finite(m.positions[i]);
-    uint64_t c = 0;
-    for (uint32_t f = 0; f < m.face_sizes.size(); ++f) {
-      const uint32_t n = m.face_sizes[f];
-      const uint32_t* idx = &m.face_indices[c];
-      c += n;
-      bool ok = true;
-      for (uint32_t k = 0; k < n; ++k) ok = ok && finite[idx[k]];
-      if (!ok) {
-        out.skipped_faces++;
-        continue;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, m.positions.size(), 16384),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t i = r.begin(); i < r.end(); ++i)
+                          out.vertices[base + i] = m.positions[i];
+                      });
+    vbase += m.positions.size();
+    tbb::parallel_for(size_t(0), p.chunks.count(), [&](size_t k) {
+      const size_t nf = m.face_sizes.size();
+      const size_t f1 = std::min(nf, (k + 1) * FaceChunks::kFaces);
+      uint64_t c = p.chunks.corner[k], t = p.first_tri[k];
+      for (size_t f = k * FaceChunks::kFaces; f < f1; ++f) {
+        const uint32_t n = m.face_sizes[f];
+        const uint32_t* idx = &m.face_indices[c];
+        c += n;
+        if (!face_finite(p.finite.data(), idx, n)) continue;
+        for (uint32_t j = 1; j + 1 < n; ++j, ++t) {
+          out.tris[3 * t] = base + idx[0];
+          out.tris[3 * t + 1] = base + idx[j];
+          out.tris[3 * t + 2] = base + idx[j + 1];
+          out.geom_ids[t] = g;
+          out.prim_ids[t] = uint32_t(f);
+        }
       }
-      for (uint32_t k = 1; k + 1 < n; ++k) {
-        out.tris.push_back(base + idx[0]);
-        out.tris.push_back(base + idx[k]);
-        out.tris.push_back(base + idx[k + 1]);
-        out.geom_ids.push_back(g);
-        out.prim_ids.push_back(f);
-      }
-    }
+    });
   }
   return out;
 }

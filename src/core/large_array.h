@@ -1,0 +1,104 @@
+// Big buffers (tens to hundreds of MB for millions of primitives) backed by transparent huge pages
+// where the system offers them (Linux, THP "madvise" mode, Debian's default), as Embree's own
+// allocator does. The first touch of fresh memory costs a page fault per page, which on the VMs
+// this project runs on is a large part of a build: a fresh 256 MB buffer took 1.0 s to fill with
+// 4 KB pages and 0.05-0.6 s with 2 MB pages on the AMD VM of stop 14 (on the Intel VM, 100 MB:
+// 55 ms vs 18 ms). The random accesses of the builders and the pairing miss the TLB less, too.
+#pragma once
+
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdlib>
+#include <new>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+namespace slim {
+
+// `bytes` uninitialised bytes aligned to `align` (a power of two <= 2 MB); free with std::free.
+// Buffers of 2 MB or more are rounded up to whole 2 MB pages and advised as huge pages. Throws
+// std::bad_alloc.
+inline void* large_alloc(size_t bytes, size_t align = 64) {
+  constexpr size_t kHuge = size_t(2) << 20;
+  void* p = nullptr;
+  if (bytes >= kHuge) {
+    bytes = (bytes + kHuge - 1) / kHuge * kHuge;
+    p = std::aligned_alloc(kHuge, bytes);
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+    if (p) madvise(p, bytes, MADV_HUGEPAGE);
+#endif
+  } else if (bytes > 0) {
+    align = std::max(align, alignof(std::max_align_t));
+    p = std::aligned_alloc(align, (bytes + align - 1) / align * align);
+  }
+  if (!p && bytes > 0) throw std::bad_alloc();
+  return p;
+}
+
+// Uninitialised array of trivially copyable T on large_alloc. size() can be lowered (shrink)
+// without moving: the pages past the new size that were never touched cost no memory.
+template <class T>
+class LargeArray {
+  static_assert(std::is_trivially_copyable_v<T>);
+
+ public:
+  LargeArray() = default;
+  explicit LargeArray(size_t n)
+      : p_(static_cast<T*>(large_alloc(n * sizeof(T), alignof(T)))), n_(n) {}
+  LargeArray(size_t n, const T& value) : LargeArray(n) { std::fill(p_, p_ + n_, value); }
+  ~LargeArray() { std::free(p_); }
+  LargeArray(LargeArray&& o) noexcept : p_(o.p_), n_(o.n_) { o.p_ = nullptr, o.n_ = 0; }
+  LargeArray& operator=(LargeArray&& o) noexcept {
+    std::swap(p_, o.p_);
+    std::swap(n_, o.n_);
+    return *this;
+  }
+  LargeArray(const LargeArray&) = delete;
+  LargeArray& operator=(const LargeArray&) = delete;
+  void shrink(size_t n) { n_ = std::min(n, n_); }
+  T* data() { return p_; }
+  const T* data() const { return p_; }
+  size_t size() const { return n_; }
+  bool empty() const { return n_ == 0; }
+  T& operator[](size_t i) { return p_[i]; }
+  const T& operator[](size_t i) const { return p_[i]; }
+  T* begin() { return p_; }
+  T* end() { return p_ + n_; }
+  const T* begin() const { return p_; }
+  const T* end() const { return p_ + n_; }
+
+ private:
+  T* p_ = nullptr;
+  size_t n_ = 0;
+};
+
+// std::allocator on large_alloc, whose resize() default-initialises: no write to the fresh pages
+// of a trivial T until the caller fills them (in parallel, say).
+template <class T>
+struct LargeAllocator {
+  using value_type = T;
+  LargeAllocator() = default;
+  template <class U>
+  LargeAllocator(const LargeAllocator<U>&) noexcept {}
+  T* allocate(size_t n) { return static_cast<T*>(large_alloc(n * sizeof(T), alignof(T))); }
+  void deallocate(T* p, size_t) noexcept { std::free(p); }
+  template <class U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... A>
+  void construct(U* p, A&&... a) {
+    ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
+  }
+  friend bool operator==(const LargeAllocator&, const LargeAllocator&) { return true; }
+};
+
+template <class T>
+using LargeVector = std::vector<T, LargeAllocator<T>>;
+
+}  // namespace slim

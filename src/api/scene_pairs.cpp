@@ -36,7 +36,7 @@ std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>
                   tm.geom_ids.data()};
   PairingResult pr = pair_triangles(in, PairingOptions{});
 
-  std::vector<PairRef> refs;
+  LargeVector<PairRef> refs;  // huge pages: ~12 B per triangle, filled once
   refs.reserve(pr.pairs.size() + pr.unpaired.size());
   for (const TrianglePair& p : pr.pairs) refs.push_back({p.a, p.b, p.ea, p.eb});
   for (uint32_t t : pr.unpaired) refs.push_back({t, kLoneTriangle, 1, 0});

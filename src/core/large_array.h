@@ -2,8 +2,8 @@
 // where the system offers them (Linux, THP "madvise" mode, Debian's default), as Embree's own
 // allocator does. The first touch of fresh memory costs a page fault per page, which on the VMs
 // this project runs on is a large part of a build: a fresh 256 MB buffer took 1.0 s to fill with
-// 4 KB pages and 0.05-0.6 s with 2 MB pages on the AMD VM of stop 14 (on the Intel VM, 100 MB:
-// 55 ms vs 18 ms). The random accesses of the builders and the pairing miss the TLB less, too.
+// 4 KB pages and 0.05-0.6 s with 2 MB pages on the AMD VM of stop 14 (an earlier build VM: 100 MB
+// in 55 ms vs 18 ms). The random accesses of the builders and the pairing miss the TLB less, too.
 #pragma once
 
 #if defined(__linux__)
@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <cstdlib>
 #include <new>
 #include <type_traits>
@@ -48,8 +49,10 @@ class LargeArray {
 
  public:
   LargeArray() = default;
-  explicit LargeArray(size_t n)
-      : p_(static_cast<T*>(large_alloc(n * sizeof(T), alignof(T)))), n_(n) {}
+  explicit LargeArray(size_t n) : n_(n) {
+    if (n > SIZE_MAX / sizeof(T)) throw std::bad_alloc();
+    p_ = static_cast<T*>(large_alloc(n * sizeof(T), alignof(T)));
+  }
   LargeArray(size_t n, const T& value) : LargeArray(n) { std::fill(p_, p_ + n_, value); }
   ~LargeArray() { std::free(p_); }
   LargeArray(LargeArray&& o) noexcept : p_(o.p_), n_(o.n_) { o.p_ = nullptr, o.n_ = 0; }
@@ -85,7 +88,10 @@ struct LargeAllocator {
   LargeAllocator() = default;
   template <class U>
   LargeAllocator(const LargeAllocator<U>&) noexcept {}
-  T* allocate(size_t n) { return static_cast<T*>(large_alloc(n * sizeof(T), alignof(T))); }
+  T* allocate(size_t n) {
+    if (n > SIZE_MAX / sizeof(T)) throw std::bad_alloc();
+    return static_cast<T*>(large_alloc(n * sizeof(T), alignof(T)));
+  }
   void deallocate(T* p, size_t) noexcept { std::free(p); }
   template <class U>
   void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {

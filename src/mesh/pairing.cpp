@@ -904,7 +904,7 @@ uint64_t window_scan(const PairingInput& in, bool by_position, double keep_thres
 // gaps between them.
 PairingResult window_result(const PairingInput& in, std::vector<TrianglePair>&& pairs) {
   PairingResult r;
-  r.pairs = std::move(pairs);
+  r.pairs.assign(pairs.begin(), pairs.end());
   uint64_t next = 0;
   for (const TrianglePair& p : r.pairs) {
     for (; next < p.a; ++next) r.unpaired.push_back(uint32_t(next));

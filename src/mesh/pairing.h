@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/large_array.h"
 #include "slimrt/math.h"
 #include "slimrt/pairing.h"
 
@@ -28,8 +29,8 @@ struct TrianglePair {
 };
 
 struct PairingResult {
-  std::vector<TrianglePair> pairs;  // ascending by a
-  std::vector<uint32_t> unpaired;   // triangles in no pair, ascending
+  LargeVector<TrianglePair> pairs;  // ascending by a
+  LargeVector<uint32_t> unpaired;   // triangles in no pair, ascending
   PairingStats stats;               // pairing_stats() figures of this result
 };
 

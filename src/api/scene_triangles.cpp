@@ -14,7 +14,7 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   s->build(src, uint32_t(tm.tri_count()), opt);
   if constexpr (std::is_base_of_v<Tri4i, Leaf>) {
     // The scene keeps the shared vertex array (geometry); the index data lives in the leaves.
-    auto verts = std::make_shared<LargeVector<Vec3f>>(std::move(tm.vertices));
+    auto verts = std::make_shared<LargeVector<Vec3f, true>>(std::move(tm.vertices));
     verts->shrink_to_fit();
     s->ctx.vertices = verts->data();
     s->mem.geometry_bytes += verts->size() * sizeof(Vec3f);

@@ -24,7 +24,7 @@ namespace slim {
 void AlignedBytes::reserve(uint64_t n) {
   if (n <= cap_) return;
   uint64_t cap = (n + 63) & ~uint64_t(63);
-  auto* p = static_cast<uint8_t*>(large_alloc(cap, 64));  // huge pages for big arenas
+  auto* p = static_cast<uint8_t*>(large_alloc(cap, 64, /*kept=*/true));  // a scene's arena
   if (size_) std::memcpy(p, data_, size_);
   std::free(data_);
   data_ = p;

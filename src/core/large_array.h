@@ -22,16 +22,18 @@
 namespace slim {
 
 // `bytes` uninitialised bytes aligned to `align` (a power of two <= 2 MB); free with std::free.
-// Buffers of 2 MB or more are rounded up to whole 2 MB pages and advised as huge pages. Throws
-// std::bad_alloc.
-inline void* large_alloc(size_t bytes, size_t align = 64) {
+// Buffers of 2 MB or more are rounded up to whole 2 MB pages and advised as huge pages. A buffer
+// that a scene keeps (`kept`: its memory figures count its bytes) takes huge pages only if the
+// rounding adds at most 1/32 (the rule of Embree's os_malloc: 2 MB multiples, or >= 128 MB): the
+// kernel backs a touched huge page whole. Throws std::bad_alloc.
+inline void* large_alloc(size_t bytes, size_t align = 64, bool kept = false) {
   constexpr size_t kHuge = size_t(2) << 20;
   void* p = nullptr;
-  if (bytes >= kHuge) {
-    bytes = (bytes + kHuge - 1) / kHuge * kHuge;
-    p = std::aligned_alloc(kHuge, bytes);
+  const size_t rounded = (bytes + kHuge - 1) / kHuge * kHuge;
+  if (bytes >= kHuge && (!kept || (rounded - bytes) <= bytes / 32)) {
+    p = std::aligned_alloc(kHuge, rounded);
 #if defined(__linux__) && defined(MADV_HUGEPAGE)
-    if (p) madvise(p, bytes, MADV_HUGEPAGE);
+    if (p) madvise(p, rounded, MADV_HUGEPAGE);
 #endif
   } else if (bytes > 0) {
     align = std::max(align, alignof(std::max_align_t));
@@ -80,17 +82,22 @@ class LargeArray {
   size_t n_ = 0;
 };
 
-// std::allocator on large_alloc, whose resize() default-initialises: no write to the fresh pages
-// of a trivial T until the caller fills them (in parallel, say).
-template <class T>
+// std::allocator on large_alloc (`Kept`: memory a scene keeps, see large_alloc), whose resize()
+// default-initialises: no write to the fresh pages of a trivial T until the caller fills them
+// (in parallel, say).
+template <class T, bool Kept = false>
 struct LargeAllocator {
   using value_type = T;
+  template <class U>
+  struct rebind {
+    using other = LargeAllocator<U, Kept>;
+  };
   LargeAllocator() = default;
   template <class U>
-  LargeAllocator(const LargeAllocator<U>&) noexcept {}
+  LargeAllocator(const LargeAllocator<U, Kept>&) noexcept {}
   T* allocate(size_t n) {
     if (n > SIZE_MAX / sizeof(T)) throw std::bad_alloc();
-    return static_cast<T*>(large_alloc(n * sizeof(T), alignof(T)));
+    return static_cast<T*>(large_alloc(n * sizeof(T), alignof(T), Kept));
   }
   void deallocate(T* p, size_t) noexcept { std::free(p); }
   template <class U>
@@ -104,7 +111,7 @@ struct LargeAllocator {
   friend bool operator==(const LargeAllocator&, const LargeAllocator&) { return true; }
 };
 
-template <class T>
-using LargeVector = std::vector<T, LargeAllocator<T>>;
+template <class T, bool Kept = false>
+using LargeVector = std::vector<T, LargeAllocator<T, Kept>>;
 
 }  // namespace slim

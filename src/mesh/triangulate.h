@@ -11,7 +11,8 @@
 namespace slim {
 
 struct TriangleMesh {
-  LargeVector<Vec3f> vertices;  // all meshes' positions, concatenated (mesh g at vertex_base[g])
+  LargeVector<Vec3f, true> vertices;  // all meshes' positions, concatenated (mesh g at
+                                      // vertex_base[g]); kept by the tri4i scenes
   std::vector<uint32_t> vertex_base;
   LargeVector<uint32_t> tris;      // 3 indices into `vertices` per triangle
   LargeVector<uint32_t> geom_ids;  // input mesh per triangle

@@ -14,8 +14,9 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   s->build(src, uint32_t(tm.tri_count()), opt);
   if constexpr (std::is_base_of_v<Tri4i, Leaf>) {
     // The scene keeps the shared vertex array (geometry); the index data lives in the leaves.
-    auto verts = std::make_shared<LargeVector<Vec3f, true>>(std::move(tm.vertices));
-    verts->shrink_to_fit();
+    // A copy in memory that a scene may keep (core/large_array.h): the triangulation's array is
+    // a temporary on huge pages.
+    auto verts = std::make_shared<LargeVector<Vec3f, true>>(tm.vertices.begin(), tm.vertices.end());
     s->ctx.vertices = verts->data();
     s->mem.geometry_bytes += verts->size() * sizeof(Vec3f);
     s->keepalive = verts;
@@ -34,7 +35,8 @@ std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMe
   else if (opt.geometry == Geometry::IndexedTriangles)
     s = build_with<Tri4i>(tm, opt);
   else if (opt.bvh == Bvh::CompressedLeafCompact)
-    throw Error(opt.config_name() + ": does not apply: the compact layout stores vertex indices "
+    throw Error(opt.config_name() +
+                ": does not apply: the compact layout stores vertex indices "
                 "(use clbvh-compact)");
   else
     s = build_with<Tri4v>(tm, opt);

@@ -11,8 +11,7 @@
 namespace slim {
 
 struct TriangleMesh {
-  LargeVector<Vec3f, true> vertices;  // all meshes' positions, concatenated (mesh g at
-                                      // vertex_base[g]); kept by the tri4i scenes
+  LargeVector<Vec3f> vertices;  // all meshes' positions, concatenated (mesh g at vertex_base[g])
   std::vector<uint32_t> vertex_base;
   LargeVector<uint32_t> tris;      // 3 indices into `vertices` per triangle
   LargeVector<uint32_t> geom_ids;  // input mesh per triangle

@@ -24,7 +24,7 @@ namespace slim {
 // `bytes` uninitialised bytes aligned to `align` (a power of two <= 2 MB); free with std::free.
 // Buffers of 2 MB or more are rounded up to whole 2 MB pages and advised as huge pages. A buffer
 // that a scene keeps (`kept`: its memory figures count its bytes) takes huge pages only if the
-// rounding adds at most 1/32 (the rule of Embree's os_malloc: 2 MB multiples, or >= 128 MB): the
+// rounding adds at most 1/32 (close to Embree's os_malloc: 2 MB multiples, or >= 128 MB): the
 // kernel backs a touched huge page whole. Throws std::bad_alloc.
 inline void* large_alloc(size_t bytes, size_t align = 64, bool kept = false) {
   constexpr size_t kHuge = size_t(2) << 20;

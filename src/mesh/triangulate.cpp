@@ -78,8 +78,8 @@ TriangleMesh triangulate_fan(const std::vector<const PolyMesh*>& meshes) {
       uint64_t c = p.chunks.corner[k], tris = 0, skipped = 0;
       for (size_t f = k * FaceChunks::kFaces; f < f1; ++f) {
         const uint32_t n = m.face_sizes[f];
-        if (face_finite(p.finite.data(), &m.face_indices[c], n))
-          tris += n - 2;
+        if (face_finite(p.finite.data(), m.face_indices.data() + c, n))
+          tris += n >= 3 ? n - 2 : 0;  // check_mesh refuses faces of fewer than 3 corners
         else
           skipped++;
         c += n;
@@ -119,7 +119,7 @@ TriangleMesh triangulate_fan(const std::vector<const PolyMesh*>& meshes) {
       uint64_t c = p.chunks.corner[k], t = p.first_tri[k];
       for (size_t f = k * FaceChunks::kFaces; f < f1; ++f) {
         const uint32_t n = m.face_sizes[f];
-        const uint32_t* idx = &m.face_indices[c];
+        const uint32_t* idx = m.face_indices.data() + c;
         c += n;
         if (!face_finite(p.finite.data(), idx, n)) continue;
         for (uint32_t j = 1; j + 1 < n; ++j, ++t) {

@@ -59,19 +59,14 @@ void check_coordinate_range(const std::vector<const PolyMesh*>& meshes) {
       uint32_t bad_vertex = 0;
     };
     std::vector<Part> parts(fc.count());
-    tbb::parallel_for(size_t(0), fc.count(), [&](size_t ch) {
-      Part& part = parts[ch];
-      const size_t f1 = std::min(m.face_sizes.size(), (ch + 1) * FaceChunks::kFaces);
-      uint64_t k = fc.corner[ch];
-      for (size_t f = ch * FaceChunks::kFaces; f < f1; k += m.face_sizes[f], ++f) {
-        const uint32_t* idx = m.face_indices.data() + k;
-        uint8_t all = kFinite;
-        for (uint32_t c = 0; c < m.face_sizes[f]; ++c) all &= flag[idx[c]];
-        if (!all) continue;  // a non-finite corner: the face is skipped by every builder
-        for (uint32_t c = 0; c < m.face_sizes[f]; ++c) {
+    for_each_face_chunk(m, fc, [&](size_t ch, size_t f0, size_t f1, const uint32_t* idx) {
+      for (size_t f = f0; f < f1; idx += m.face_sizes[f], ++f) {
+        const uint32_t n = m.face_sizes[f];
+        // A face with a non-finite corner is skipped by every builder.
+        if (!face_finite(flag.data(), idx, n)) continue;
+        for (uint32_t c = 0; c < n; ++c) {
           if (flag[idx[c]] & kBeyond) {
-            part.bad_face = f;
-            part.bad_vertex = idx[c];
+            parts[ch] = {f, idx[c]};
             return;
           }
           std::atomic_ref<uint8_t>(used[idx[c]]).store(1, std::memory_order_relaxed);

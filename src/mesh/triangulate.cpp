@@ -34,12 +34,6 @@ struct MeshPlan {
   std::vector<uint64_t> skipped;    // per chunk
 };
 
-inline bool face_finite(const uint8_t* finite, const uint32_t* idx, uint32_t n) {
-  bool ok = true;
-  for (uint32_t k = 0; k < n; ++k) ok = ok && finite[idx[k]];
-  return ok;
-}
-
 }  // namespace
 
 TriangleMesh triangulate_fan(const std::vector<const PolyMesh*>& meshes) {
@@ -72,17 +66,14 @@ TriangleMesh triangulate_fan(const std::vector<const PolyMesh*>& meshes) {
     const size_t nc = p.chunks.count();
     p.first_tri.assign(nc + 1, 0);
     p.skipped.assign(nc, 0);
-    tbb::parallel_for(size_t(0), nc, [&](size_t k) {
-      const size_t nf = m.face_sizes.size();
-      const size_t f1 = std::min(nf, (k + 1) * FaceChunks::kFaces);
-      uint64_t c = p.chunks.corner[k], tris = 0, skipped = 0;
-      for (size_t f = k * FaceChunks::kFaces; f < f1; ++f) {
+    for_each_face_chunk(m, p.chunks, [&](size_t k, size_t f0, size_t f1, const uint32_t* idx) {
+      uint64_t tris = 0, skipped = 0;
+      for (size_t f = f0; f < f1; idx += m.face_sizes[f], ++f) {
         const uint32_t n = m.face_sizes[f];
-        if (face_finite(p.finite.data(), m.face_indices.data() + c, n))
+        if (face_finite(p.finite.data(), idx, n))
           tris += n >= 3 ? n - 2 : 0;  // check_mesh refuses faces of fewer than 3 corners
         else
           skipped++;
-        c += n;
       }
       p.first_tri[k + 1] = tris;
       p.skipped[k] = skipped;
@@ -113,14 +104,10 @@ TriangleMesh triangulate_fan(const std::vector<const PolyMesh*>& meshes) {
                           out.vertices[base + i] = m.positions[i];
                       });
     vbase += m.positions.size();
-    tbb::parallel_for(size_t(0), p.chunks.count(), [&](size_t k) {
-      const size_t nf = m.face_sizes.size();
-      const size_t f1 = std::min(nf, (k + 1) * FaceChunks::kFaces);
-      uint64_t c = p.chunks.corner[k], t = p.first_tri[k];
-      for (size_t f = k * FaceChunks::kFaces; f < f1; ++f) {
+    for_each_face_chunk(m, p.chunks, [&](size_t k, size_t f0, size_t f1, const uint32_t* idx) {
+      uint64_t t = p.first_tri[k];
+      for (size_t f = f0; f < f1; idx += m.face_sizes[f], ++f) {
         const uint32_t n = m.face_sizes[f];
-        const uint32_t* idx = m.face_indices.data() + c;
-        c += n;
         if (!face_finite(p.finite.data(), idx, n)) continue;
         for (uint32_t j = 1; j + 1 < n; ++j, ++t) {
           out.tris[3 * t] = base + idx[0];

@@ -2,6 +2,9 @@
 // pair and BVH-over-triangle formats). Faces with a NaN/Inf vertex are skipped and counted.
 #pragma once
 
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -30,6 +33,24 @@ struct FaceChunks {
   size_t count() const { return corner.empty() ? 0 : corner.size() - 1; }
 };
 FaceChunks face_chunks(const PolyMesh& m);
+
+// fn(chunk, f0, f1, corners) for each chunk of fc, in parallel (TBB): the chunk's faces are
+// [f0, f1) and `corners` points at face f0's first corner in m.face_indices.
+template <class Fn>
+void for_each_face_chunk(const PolyMesh& m, const FaceChunks& fc, Fn&& fn) {
+  tbb::parallel_for(size_t(0), fc.count(), [&](size_t ch) {
+    const size_t f0 = ch * FaceChunks::kFaces;
+    fn(ch, f0, std::min(m.face_sizes.size(), f0 + FaceChunks::kFaces),
+       m.face_indices.data() + fc.corner[ch]);
+  });
+}
+
+// Whether every corner idx[0 .. n) is a finite vertex (one byte per vertex, nonzero = finite).
+inline bool face_finite(const uint8_t* finite, const uint32_t* idx, uint32_t n) {
+  bool ok = true;
+  for (uint32_t k = 0; k < n; ++k) ok = ok && finite[idx[k]];
+  return ok;
+}
 
 // Face (v0, v1, ..., vk) becomes (v0, v1, v2), (v0, v2, v3), ... Throws slim::Error if the
 // meshes hold more than 2^32 - 1 vertices or triangles in total. Runs in parallel (TBB), with the

@@ -5,6 +5,11 @@
 #include <cstdlib>
 #include <new>
 
+#if defined(__linux__)
+#include <sys/mman.h>
+#include <unistd.h>
+#endif
+
 #include "core/large_array.h"
 
 namespace slim {
@@ -18,16 +23,46 @@ TEST(LargeArray, AlignmentAndSizes) {
       void* p = large_alloc(bytes, 64, kept);
       ASSERT_NE(p, nullptr);
       EXPECT_EQ(reinterpret_cast<uintptr_t>(p) % 64, 0u);
-      // Huge-page candidates are 2 MB aligned: temporaries from 2 MB, kept buffers only where
-      // the rounding adds at most 1/32 (5 MB + rounding to 6 MB adds 20%: not kept on huge pages).
-      const bool huge = bytes >= (size_t(2) << 20) && (!kept || bytes % (size_t(2) << 20) == 0);
-      if (huge) {
+      // Huge-page candidates (2 MB and more, kept or not) are 2 MB aligned.
+      if (bytes >= (size_t(2) << 20)) {
         EXPECT_EQ(reinterpret_cast<uintptr_t>(p) % (size_t(2) << 20), 0u);
       }
       static_cast<char*>(p)[bytes - 1] = 1;  // the whole range is usable
       std::free(p);
     }
   EXPECT_EQ(large_alloc(0), nullptr);
+}
+
+// A kept buffer whose rounding to whole huge pages would add more than 1/32 is advised as huge
+// pages only over its whole 2 MB pages: once it is touched throughout, no page past its end is
+// resident (the memory figures count its bytes). 5 MB: rounding to 6 MB would add 20%.
+TEST(LargeArray, KeptBufferIsNeverBackedPastItsEnd) {
+#if defined(__linux__)
+  const size_t page = size_t(sysconf(_SC_PAGESIZE));
+  for (size_t bytes : {(size_t(5) << 20) + 100, (size_t(9) << 20) + 4096 * 3}) {
+    SCOPED_TRACE(bytes);
+    auto* p = static_cast<unsigned char*>(large_alloc(bytes, 64, /*kept=*/true));
+    ASSERT_NE(p, nullptr);
+    for (size_t i = 0; i < bytes; i += 512) p[i] = 1;
+    p[bytes - 1] = 1;
+    // From the first page boundary past the last byte to the end of its huge page: no resident
+    // page (pages that are not mapped at all report ENOMEM and are skipped).
+    const size_t end = (reinterpret_cast<uintptr_t>(p) + bytes + page - 1) / page * page;
+    const size_t huge_end = (end + (size_t(2) << 20) - 1) / (size_t(2) << 20) * (size_t(2) << 20);
+    size_t resident_past = 0, checked = 0;
+    for (size_t a = end; a < huge_end; a += page) {
+      unsigned char v = 0;
+      if (mincore(reinterpret_cast<void*>(a), page, &v) == 0) {
+        ++checked;
+        resident_past += v & 1;
+      }
+    }
+    EXPECT_EQ(resident_past, 0u) << "of " << checked << " mapped pages past the end";
+    std::free(p);
+  }
+#else
+  GTEST_SKIP() << "residency is checked on Linux only";
+#endif
 }
 
 TEST(LargeArray, ShrinkKeepsContentsAndMovesOwnership) {

@@ -92,8 +92,9 @@ struct Range {
   Box8 cb;
   SLIM_INLINE void add(vfloat8 r) {
     box.extend(r);
-    const vfloat4 c = simd::upper4(r) - simd::lower4(r);  // hi + lo
-    cb.extend(simd::combine4(c ^ vfloat4(-0.0f), c));
+    // [-lo | hi] - [hi | -lo] = [-(hi + lo) | hi + lo]: the centroid row in one lane swap and
+    // one subtraction (the same hi + lo as upper4 - lower4, negated exactly).
+    cb.extend(r - simd::swap_halves(r));
   }
   // The join of parallel_reduce.
   static Range merged(Range x, const Range& y) {
@@ -126,11 +127,6 @@ struct Binner {
   int nb;
   SLIM_INLINE vint4 bins(vfloat4 c2) const {
     return simd::clamp(simd::to_int_trunc((c2 - lo) * scale), vint4(0), vint4(nb - 1));
-  }
-  SLIM_INLINE int bin(const Ref& r, int axis) const {
-    float c = (r.c2(axis) - lo[axis]) * scale[axis];
-    int b = int(c);
-    return b < 0 ? 0 : (b > nb - 1 ? nb - 1 : b);
   }
 };
 
@@ -294,9 +290,15 @@ class Builder {
     uint32_t i = begin, j = end;
     Ref* refs = refs_.data();
     Range l, r;
+    // bin < pos without the bin: clamp(trunc(c), 0, nb - 1) < pos <=> c < pos for an integer
+    // 1 <= pos <= nb - 1, with c = (c2 - lo) * scale rounded exactly as Binner::bins (finite: the
+    // coordinates are checked finite and in range).
+    const int a = s.axis;
+    const float lo = b.lo[a], scale = b.scale[a], pos = float(s.pos);
+    auto left_of = [&](const Ref& x) { return (x.c2(a) - lo) * scale < pos; };
     for (;;) {
-      while (i < j && b.bin(refs[i], s.axis) < s.pos) l.add(refs[i++].row());
-      while (i < j && b.bin(refs[j - 1], s.axis) >= s.pos) r.add(refs[--j].row());
+      while (i < j && left_of(refs[i])) l.add(refs[i++].row());
+      while (i < j && !left_of(refs[j - 1])) r.add(refs[--j].row());
       if (i >= j) break;
       const vfloat8 x = refs[i].row(), y = refs[j - 1].row();
       y.store(refs[i].v);

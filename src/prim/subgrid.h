@@ -17,6 +17,7 @@
 #include <cstring>
 #include <type_traits>
 
+#include "core/hash.h"
 #include "core/ray.h"
 #include "core/simd.h"
 #include "core/simd_ext.h"
@@ -373,11 +374,7 @@ SLIM_INLINE void record_grid_hit(const SubGridHit& h, const GridInfo& g, const u
 }
 
 // 64-bit key of a sub-grid block for validate()'s "every primitive once" fingerprint; never 0.
-inline uint64_t subgrid_key(const uint8_t* block, uint32_t bytes) {
-  uint64_t h = 0xcbf29ce484222325ull;
-  for (uint32_t i = 0; i < bytes; ++i) h = (h ^ block[i]) * 0x100000001b3ull;
-  return h | 1;
-}
+inline uint64_t subgrid_key(const uint8_t* block, uint32_t bytes) { return nh_key(block, bytes); }
 
 // ---- the uncompressed grid leaf (`grid`) -----------------------------------------------------
 

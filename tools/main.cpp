@@ -6,6 +6,7 @@
 
 #include "commands.h"
 #include "slimrt/error.h"
+#include "slimrt/scene.h"
 
 namespace {
 
@@ -30,6 +31,7 @@ int main(int argc, char** argv) {
   }
   std::string cmd = argv[1];
   try {
+    slim::check_cpu_isa();  // before any code compiled for the SIMD path runs
     if (cmd == "info") return slim::cli::cmd_info(argc - 1, argv + 1);
     if (cmd == "render") return slim::cli::cmd_render(argc - 1, argv + 1);
     if (cmd == "bench") return slim::cli::cmd_bench(argc - 1, argv + 1);

@@ -95,6 +95,9 @@ std::vector<std::string> all_config_names();
 
 // The SIMD path slimrt was compiled for: "avx512", "avx2" or "scalar" (CMake option SLIM_ISA).
 const char* simd_isa();
+// Throws slim::Error if this CPU lacks an instruction set slimrt was compiled for (simd_isa();
+// SLIM_ISA=auto takes the build machine's). Scene::build calls it, so does the CLI first thing.
+void check_cpu_isa();
 
 // Bytes kept by a scene: geometry (vertices, leaf primitive data), BVH nodes, side tables.
 struct MemoryStats {

@@ -135,6 +135,7 @@ std::unique_ptr<Scene::Impl> build_impl(const std::vector<const PolyMesh*>& mesh
 }  // namespace
 
 Scene Scene::build(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
+  check_cpu_isa();
   const auto t0 = std::chrono::steady_clock::now();
   std::unique_ptr<Impl> impl;
   // Every parallel step of the build (checks, triangulation, pairing, grids, BVH) runs on

@@ -1,0 +1,41 @@
+// check_cpu_isa(): compiled without the SIMD flags of the rest of the library (CMakeLists.txt), so
+// that it runs on any x86-64 CPU and reports a missing instruction set instead of the first
+// AVX-512 or AVX2 instruction killing the process.
+#include "slimrt/error.h"
+#include "slimrt/scene.h"
+
+#include <string>
+
+namespace slim {
+
+void check_cpu_isa() {
+#if defined(__x86_64__) || defined(__i386__)
+  static const std::string missing = [] {
+    __builtin_cpu_init();
+    std::string m;
+    auto need = [&](bool ok, const char* name) {
+      if (!ok) m += std::string(m.empty() ? "" : ", ") + name;
+    };
+#if defined(SLIM_ISA_AVX2)
+    need(__builtin_cpu_supports("avx2"), "avx2");
+    need(__builtin_cpu_supports("fma"), "fma");
+    need(__builtin_cpu_supports("bmi"), "bmi");
+    need(__builtin_cpu_supports("bmi2"), "bmi2");
+    need(__builtin_cpu_supports("f16c"), "f16c");
+#endif
+#if defined(SLIM_ISA_AVX512)
+    need(__builtin_cpu_supports("avx512f"), "avx512f");
+    need(__builtin_cpu_supports("avx512vl"), "avx512vl");
+    need(__builtin_cpu_supports("avx512bw"), "avx512bw");
+    need(__builtin_cpu_supports("avx512dq"), "avx512dq");
+#endif
+    return m;
+  }();
+  if (!missing.empty())
+    throw Error(std::string("slimrt was compiled for ") + simd_isa() +
+                " (CMake SLIM_ISA) but this CPU lacks " + missing +
+                ": rebuild with -DSLIM_ISA=avx2 (or auto, or scalar)");
+#endif
+}
+
+}  // namespace slim

@@ -184,8 +184,10 @@ class Collapser {
                         : slots_[n.first] + slots_[n.first + 1];
       }
     }
-    node_size_ = LargeArray<uint64_t>(nn, 0);
-    leaf_size_ = LargeArray<uint64_t>(nn, 0);
+    // Written by measure() for every node it visits, which are the only ones read (no serial
+    // zero fill of 16 bytes per node: 26 MB on fg_terrain_hawaii).
+    node_size_ = LargeArray<uint64_t>(nn);
+    leaf_size_ = LargeArray<uint64_t>(nn);
     const SubtreeStats m = measure(0, 1);
     Bvh8Stats& s = out_.stats;
     s = m.st;
@@ -404,6 +406,7 @@ class Collapser {
     if (n.is_leaf()) {
       uint32_t blocks = leaf_blocks(i);
       if (blocks > kMaxLeafBlocks) throw std::logic_error("BVH leaf too large");
+      node_size_[i] = 0;
       leaf_size_[i] = round16(uint64_t(blocks) * enc_.block_bytes);
       s.leaf_data_bytes += uint64_t(blocks) * enc_.block_bytes;
       count_leaf(i, s);
@@ -421,6 +424,7 @@ class Collapser {
       } else {
         data = uint64_t(k) * enc_.block_bytes;
       }
+      node_size_[i] = 0;
       leaf_size_[i] = round16(sizeof(MultiLeaf8) + data);
       s.leaf_data_bytes += data;
       s.multileaf_bytes += sizeof(MultiLeaf8);

@@ -53,7 +53,7 @@ TEST(LargeArray, KeptBufferIsNeverBackedPastItsEnd) {
     // From the first page boundary past the last byte to the end of its huge page, within the
     // mapping that holds the last byte (the next mapping, a library say, has pages of its own).
     const uintptr_t last = reinterpret_cast<uintptr_t>(p) + bytes - 1;
-    const size_t end = (last + 1 + page - 1) / page * page;
+    const size_t end = (last + page) / page * page;
     size_t huge_end = (end + (size_t(2) << 20) - 1) / (size_t(2) << 20) * (size_t(2) << 20);
     std::ifstream maps("/proc/self/maps");
     std::string line;
@@ -63,6 +63,7 @@ TEST(LargeArray, KeptBufferIsNeverBackedPastItsEnd) {
       if (std::sscanf(line.c_str(), "%lx-%lx", &lo, &hi) == 2 && lo <= last && last < hi) {
         huge_end = std::min<size_t>(huge_end, hi);
         found = true;
+        break;
       }
     }
     ASSERT_TRUE(found) << "no mapping holds the buffer's last byte";

@@ -40,7 +40,7 @@ inline void* large_alloc(size_t bytes, size_t align = 64, bool kept = false) {
     const bool round_up = !kept || (rounded - bytes) <= bytes / 32;
     // posix_memalign: aligned_alloc requires a size that is a multiple of the alignment (ASan
     // enforces it), which a kept buffer that is not rounded up is not.
-    if (posix_memalign(&p, kHuge, round_up ? rounded : (bytes + 63) / 64 * 64) != 0) p = nullptr;
+    if (posix_memalign(&p, kHuge, round_up ? rounded : bytes) != 0) p = nullptr;
     advised = round_up ? rounded : bytes / kHuge * kHuge;
   } else if (bytes > 0) {
     align = std::max(align, alignof(std::max_align_t));

@@ -14,6 +14,7 @@
 #include <functional>
 #include <memory>
 #include <sstream>
+#include <utility>
 
 #include "embree_scene.h"
 #include "slimrt/costa.h"
@@ -153,16 +154,20 @@ void count_traversal(const Scene& scene, tbb::task_arena& arena, const Workload&
   });
   TraversalCounters s1, s2;
   for (size_t i = 0; i < c1.size(); ++i) {
-    s1.rays += c1[i].rays, s1.box_tests += c1[i].box_tests, s1.prim_tests += c1[i].prim_tests;
-    s2.rays += c2[i].rays, s2.box_tests += c2[i].box_tests, s2.prim_tests += c2[i].prim_tests;
+    for (auto [s, c] : {std::pair{&s1, &c1[i]}, std::pair{&s2, &c2[i]}}) {
+      s->rays += c->rays, s->box_tests += c->box_tests, s->prim_tests += c->prim_tests;
+      s->prim_records += c->prim_records;
+    }
   }
   if (s1.rays) {
     row.box_tests_per_ray = double(s1.box_tests) / double(s1.rays);
     row.prim_tests_per_ray = double(s1.prim_tests) / double(s1.rays);
+    row.prim_records_per_ray = double(s1.prim_records) / double(s1.rays);
   }
   if (s2.rays) {
     row.box_tests_per_ray_w2 = double(s2.box_tests) / double(s2.rays);
     row.prim_tests_per_ray_w2 = double(s2.prim_tests) / double(s2.rays);
+    row.prim_records_per_ray_w2 = double(s2.prim_records) / double(s2.rays);
   }
 }
 
@@ -574,6 +579,12 @@ nlohmann::json report_json(const BenchReport& report) {
     j["ratio_diffuse"] = opt_json(r.ratio_diffuse);
     j["box_tests_per_ray"] = opt_json(r.box_tests_per_ray);
     j["prim_tests_per_ray"] = opt_json(r.prim_tests_per_ray);
+    // Beyond BENCHMARK.md's schema: primitive records (a pair counts once), and the counts of
+    // the workload-2 sample (the paths of every 16th pixel).
+    j["prim_records_per_ray"] = opt_json(r.prim_records_per_ray);
+    j["box_tests_per_ray_w2s"] = opt_json(r.box_tests_per_ray_w2);
+    j["prim_tests_per_ray_w2s"] = opt_json(r.prim_tests_per_ray_w2);
+    j["prim_records_per_ray_w2s"] = opt_json(r.prim_records_per_ray_w2);
     j["hit_agreement"] = opt_json(r.hit_agreement);
     j["hit_agreement_embree_tri"] = opt_json(r.agreement_embree_tri);
     j["error"] = {{"rms", opt_json(r.error.rms)},

@@ -56,8 +56,10 @@ struct BenchRow {
   std::optional<double> mrays_primary, mrays_diffuse, ratio_primary, ratio_diffuse;
   std::optional<double> box_tests_per_ray, prim_tests_per_ray;        // workload 1 (JSON)
   std::optional<double> box_tests_per_ray_w2, prim_tests_per_ray_w2;  // workload 2 sample
-  std::optional<double> hit_agreement;                                // BENCHMARK.md definition
-  std::optional<double> same_face;  // of the rays both hit: fraction naming the same face
+  // Primitive records tested (a triangle pair counts once: TraversalCounters::prim_records).
+  std::optional<double> prim_records_per_ray, prim_records_per_ray_w2;
+  std::optional<double> hit_agreement;  // BENCHMARK.md definition
+  std::optional<double> same_face;      // of the rays both hit: fraction naming the same face
   // Agreement with embree-tri on the input's fan triangles (equals hit_agreement except for the
   // formats validated on their own decoded geometry: grids, lossy grids, costa).
   std::optional<double> agreement_embree_tri;

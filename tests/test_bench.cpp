@@ -363,6 +363,9 @@ TEST(BenchCli, JsonSchemaOnTerrain64) {
     const bool embree = config.rfind("embree-", 0) == 0;
     EXPECT_EQ(r["box_tests_per_ray"].is_null(), embree) << config;
     EXPECT_EQ(r["prim_tests_per_ray"].is_null(), embree) << config;
+    // No pair format in this list: one primitive record per triangle tested.
+    ASSERT_TRUE(r.contains("prim_records_per_ray")) << config;
+    EXPECT_EQ(r["prim_records_per_ray"], r["prim_tests_per_ray"]) << config;
     if (!bench::is_lossy_config(config)) {
       // 1.0 up to the rays that slip through Embree's non-watertight triangle test (about one
       // in a million here; BENCHMARK.md: a lossless format under 99.9% is an error).

@@ -66,6 +66,7 @@ enum class Geometry : uint8_t {
   LossyGrids,        // 128-byte lossy sub-grids, displacement encoding 1
   LossyGridsE2,      // 128-byte lossy sub-grids, displacement encoding 2
   Quantized,         // Costa quantized n-gon mesh (options in BuildOptions::costa)
+  PairsWindow2,      // triangle pairs of the paper's baseline: in-order window N = 2
 };
 
 // Node formats.
@@ -116,6 +117,9 @@ struct TraversalCounters {
   uint64_t node_visits = 0;
   uint64_t box_tests = 0;
   uint64_t prim_tests = 0;
+  // Primitive records tested, a triangle pair counting once (the paper's dual triangle test
+  // unit, "Fast Triangle Pairing", Results); equals prim_tests for formats without pairs.
+  uint64_t prim_records = 0;
 };
 
 struct SceneStats {

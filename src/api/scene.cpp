@@ -116,6 +116,7 @@ std::unique_ptr<Scene::Impl> build_impl(const std::vector<const PolyMesh*>& mesh
       impl = build_triangle_scene(meshes, opt);
       break;
     case Geometry::Pairs:
+    case Geometry::PairsWindow2:
       impl = build_pair_scene(meshes, opt);
       break;
     case Geometry::Grids:

@@ -84,6 +84,7 @@ SLIM_INLINE bool make_trav_ray(const Ray& r, const RaySetupBounds& sb, TravRay& 
 struct NoStats {
   SLIM_INLINE void node(int /*boxes*/) {}
   SLIM_INLINE void prims(int) {}
+  SLIM_INLINE void prims(int, int) {}
 };
 struct CountStats {
   TraversalCounters* c;
@@ -91,7 +92,12 @@ struct CountStats {
     c->node_visits++;
     c->box_tests += boxes;
   }
-  SLIM_INLINE void prims(int n) { c->prim_tests += n; }
+  // n triangles tested (as `records` primitive records: pairs count once; by default n).
+  SLIM_INLINE void prims(int n) { prims(n, n); }
+  SLIM_INLINE void prims(int n, int records) {
+    c->prim_tests += n;
+    c->prim_records += records;
+  }
 };
 
 }  // namespace slim

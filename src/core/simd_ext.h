@@ -22,6 +22,13 @@ SLIM_INLINE vfloat8 load2x4(const float* lo, const float* hi) {
 }
 // Swaps the two 4-lane halves.
 SLIM_INLINE vfloat8 swap_halves(vfloat8 a) { return _mm256_permute2f128_ps(a.v, a.v, 1); }
+// The upper half of a, then the lower half of b: 8-wide [a4..a7 | b0..b3], 4-wide [a2 a3 | b0 b1].
+SLIM_INLINE vfloat8 mid_halves(vfloat8 a, vfloat8 b) {
+  return _mm256_permute2f128_ps(a.v, b.v, 0x21);
+}
+SLIM_INLINE vfloat4 mid_halves(vfloat4 a, vfloat4 b) {
+  return _mm_shuffle_ps(a.v, b.v, _MM_SHUFFLE(1, 0, 3, 2));
+}
 // Lanes 0-3 and lanes 4-7 as 4-wide vectors; two 4-wide vectors as lanes 0-3 and 4-7.
 SLIM_INLINE vfloat4 lower4(vfloat8 a) { return _mm256_castps256_ps128(a.v); }
 SLIM_INLINE vfloat4 upper4(vfloat8 a) { return _mm256_extractf128_ps(a.v, 1); }
@@ -156,6 +163,16 @@ SLIM_INLINE vfloat8 load2x4(const float* lo, const float* hi) {
 SLIM_INLINE vfloat8 swap_halves(vfloat8 a) {
   vfloat8 r;
   for (int i = 0; i < 8; ++i) r.v[i] = a.v[i ^ 4];
+  return r;
+}
+SLIM_INLINE vfloat8 mid_halves(vfloat8 a, vfloat8 b) {
+  vfloat8 r;
+  for (int i = 0; i < 4; ++i) r.v[i] = a.v[i + 4], r.v[i + 4] = b.v[i];
+  return r;
+}
+SLIM_INLINE vfloat4 mid_halves(vfloat4 a, vfloat4 b) {
+  vfloat4 r;
+  for (int i = 0; i < 2; ++i) r.v[i] = a.v[i + 2], r.v[i + 2] = b.v[i];
   return r;
 }
 SLIM_INLINE vfloat4 lower4(vfloat8 a) { return vfloat4::loadu(a.v); }

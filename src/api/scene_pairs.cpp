@@ -17,7 +17,6 @@
 //     4.59 / 4.83; and they take the least memory (bunny 46.4 vs 52.0 / 49.3 B/triangle). The
 //     price: twice the triangle tests per ray of tri4v (8 lanes per leaf test instead of 4); Pair2
 //     with 2-pair leaves tests as many triangles as tri4v (or slightly fewer) but gains only 3%.
-#include <chrono>
 #include <cmath>
 
 #include "api/bvh_scene.h"
@@ -36,13 +35,9 @@ std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>
   TriangleMesh tm = triangulate_fan(meshes);
   PairingInput in{tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(),
                   tm.geom_ids.data()};
-  // bvh8-pairs-w2: the paper's baseline ("Old #pairs"), timed as pairing_s too.
-  const auto t0 = std::chrono::steady_clock::now();
+  // bvh8-pairs-w2: the paper's baseline ("Old #pairs").
   PairingResult pr = opt.geometry == Geometry::PairsWindow2 ? window_pairs(in)
                                                             : pair_triangles(in, PairingOptions{});
-  if (opt.geometry == Geometry::PairsWindow2)
-    pr.stats.pairing_s =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   LargeVector<PairRef> refs;  // huge pages: ~12 B per triangle, filled once
   refs.reserve(pr.pairs.size() + pr.unpaired.size());

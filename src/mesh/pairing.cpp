@@ -941,9 +941,12 @@ bool pair_shares_edge(const PairingInput& in, const TrianglePair& p, bool by_pos
 }
 
 PairingResult window_pairs(const PairingInput& in, bool by_position) {
+  const auto t0 = Clock::now();
   std::vector<TrianglePair> pairs;
   window_scan(in, by_position, -1.0, pairs);
-  return window_result(in, std::move(pairs));
+  PairingResult r = window_result(in, std::move(pairs));
+  r.stats.pairing_s = seconds_since(t0);
+  return r;
 }
 
 uint64_t weld_positions(const Vec3f* vertices, uint64_t vertex_count,

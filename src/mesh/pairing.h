@@ -66,6 +66,7 @@ PairingResult pair_by_edge_heuristic(const PairingInput& in, bool coordinate_key
 
 // The paper's baseline: triangle i pairs with i+1 when both are unpaired and share an edge (two
 // corners with equal vertex indices, or with coordinate keys, bit-identical positions).
+// stats.pairing_s is its wall time.
 PairingResult window_pairs(const PairingInput& in, bool by_position = false);
 
 // Vertex remap that merges bit-identical positions (+0.0 and -0.0 stay apart): remap[v] is the

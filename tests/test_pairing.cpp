@@ -550,6 +550,8 @@ TEST_P(PairConfigs, WeldedShuffledMeshMatchesReference) {
       EXPECT_EQ(get("paired_fraction"), get("window2_paired_fraction"));
       EXPECT_EQ(get("paired_fraction"), window_pairs_fraction(m));
       EXPECT_LT(get("paired_fraction"), 0.5);
+      for (const auto& [k, v] : s.stats().details)  // no pre-scan, no heuristic ran
+        EXPECT_TRUE(k != "heuristic_paired_fraction" && k != "prescan_skipped") << k;
     } else {
       EXPECT_GT(get("paired_fraction"), 0.9);
       for (const auto& [k, v] : s.stats().details)  // the pre-scan stopped early: not known

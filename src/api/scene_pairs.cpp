@@ -62,13 +62,15 @@ std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>
   d.emplace_back("pairing_s", ps.pairing_s);
   d.emplace_back("pairs", double(ps.pairs));
   d.emplace_back("unpaired_triangles", double(ps.unpaired));
-  if (!ps.prescan_skipped) {  // the heuristic ran
-    d.emplace_back("heuristic_paired_fraction", ps.heuristic_paired_fraction);
-    d.emplace_back("augmented_pairs", double(ps.augmented_pairs));
+  if (opt.geometry == Geometry::Pairs) {  // pair_triangles: the pre-scan, then maybe the heuristic
+    if (!ps.prescan_skipped) {
+      d.emplace_back("heuristic_paired_fraction", ps.heuristic_paired_fraction);
+      d.emplace_back("augmented_pairs", double(ps.augmented_pairs));
+    }
+    d.emplace_back("prescan_skipped", ps.prescan_skipped ? 1.0 : 0.0);
+    d.emplace_back("half_edges", double(ps.half_edges));
+    d.emplace_back("nonmanifold_edges", double(ps.nonmanifold_edges));
   }
-  d.emplace_back("prescan_skipped", ps.prescan_skipped ? 1.0 : 0.0);
-  d.emplace_back("half_edges", double(ps.half_edges));
-  d.emplace_back("nonmanifold_edges", double(ps.nonmanifold_edges));
   s->stats.input_faces = tm.input_faces;
   s->stats.triangles = tm.input_triangles;
   s->stats.skipped_faces = tm.skipped_faces;

@@ -34,7 +34,7 @@ constexpr Named kConfigs[] = {
     {"lossy-grid", Geometry::LossyGrids, Bvh::CompressedLeaf},
     {"lossy-grid-e2", Geometry::LossyGridsE2, Bvh::CompressedLeaf},
     // Beyond BENCHMARK.md (issue 7): the 128-byte sub-grids under QBVH8 (the comparison), and the
-    // 72-byte shared-corner sub-grids (the paper's section 9) under the compressed-leaf BVH.
+    // 68-byte shared-corner sub-grids (the paper's section 9) under the compressed-leaf BVH.
     {"lossy-grid-qbvh8", Geometry::LossyGrids, Bvh::Quantized8},
     {"lossy-grid-shared", Geometry::LossyGrids, Bvh::CompressedLeafCompact},
 };

@@ -8,7 +8,7 @@
 //   grid           SubGridRef (16 B) referencing grid-ordered float vertices (prim/subgrid.h)
 //   lossy-grid     lossy sub-grids (prim/lossy_subgrid.h), displacement encoding 1
 //   lossy-grid-e2  the same with encoding 2
-// The lossy layout follows the BVH option: Bvh::CompressedLeafCompact selects the 72-byte
+// The lossy layout follows the BVH option: Bvh::CompressedLeafCompact selects the 68-byte
 // shared-corner sub-grid (section 9), every other node kind the 128-byte Listing 1 sub-grid.
 // Leftovers (lone quads, unpaired triangles) are stored either as 2x2 sub-grids in the same BVH
 // or as Tri4v triangle leaves in a second BVH traversed after the first, whichever the estimate
@@ -220,9 +220,10 @@ class GridScene final : public BvhScene<Leaf> {
   std::vector<GridInfo> grid_table;
   std::vector<GridHot> hot;
   std::vector<uint32_t> face_table;
-  std::vector<uint16_t> flips;  // flip masks of the sub-grids of grids with flipped cells
-  std::vector<Vec3f> vertices;  // uncompressed: grid vertices; shared layout: corner lattices
-  std::vector<Vec3f> exact;     // lossy: exact vertices
+  std::vector<uint16_t> flips;        // flip masks of the sub-grids of grids with flipped cells
+  std::vector<Vec3f> vertices;        // uncompressed: grid vertices; shared layout: corner lattices
+  std::vector<Vec3f> exact;           // lossy: exact vertices
+  std::vector<uint32_t> corner_grid;  // shared layout: grid of each 16-corner chunk
   std::unique_ptr<BvhScene<Tri4v>> tris;
 
   void intersect(TravRay& ray, HitRecord& hit) const override {
@@ -458,7 +459,8 @@ void finish_scene(GridScene<Leaf>& s, const Prepared& p, const std::vector<const
     s.bounds = s.bvh.root ? merge(s.bounds, s.tris->bounds) : s.tris->bounds;
   }
   s.mem.other_bytes += s.grid_table.size() * sizeof(GridInfo) + s.hot.size() * sizeof(GridHot) +
-                       s.face_table.size() * 4 + s.flips.size() * 2;
+                       s.face_table.size() * 4 + s.flips.size() * 2 +
+                       s.corner_grid.size() * sizeof(uint32_t);
   s.stats.input_faces = p.gs.figures.input_faces;
   s.stats.triangles = p.gs.figures.triangles;
   s.stats.skipped_faces = p.gs.figures.skipped_faces;
@@ -570,6 +572,19 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
                                               std::min(kSubGridCells * ly, g.res_y - 1))]);
     }
   }
+  if (shared_corners) {
+    // The grid of each chunk's first corner (LossySharedLeaf::grid): lattices lie in grid order.
+    const uint64_t chunks = (s->vertices.size() >> kCornerChunkShift) + 1;
+    s->corner_grid.resize(chunks);
+    uint32_t gi = 0;
+    for (uint64_t k = 0; k < chunks; ++k) {
+      const uint64_t c = k << kCornerChunkShift;
+      while (gi + 1 < ng && s->hot[gi + 1].lattice_first <= c) ++gi;
+      s->corner_grid[k] = gi;
+    }
+    s->ctx.corner_grid = s->corner_grid.data();
+    s->ctx.grid_count = uint32_t(ng);
+  }
   s->ctx.grids = s->grid_table.data();
   s->ctx.hot = s->hot.data();
   s->ctx.faces = s->face_table.data();
@@ -582,12 +597,14 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
   std::vector<Block> blocks(n);
   std::vector<Box3f> bounds(n);
   // Sub-grid parts as multi-leaf children under the compressed-leaf BVH (prim/subgrid.h):
-  // quarters for the 128-byte sub-grids, halves for the 72-byte shared-corner ones (whose
-  // memory target, 4.5 bytes/triangle, leaves no room for the twice as many multi-leaves of
-  // quarters); SLIM_GRID_PARTS=1|2|4 forces one (measurements).
+  // quarters, for both layouts. The shared layout took halves while its blocks were 72 bytes
+  // (quarters: 4.47-4.52 bytes/triangle on terrain, torus, canyon at 1024, the target is < 4.5);
+  // at 68 bytes quarters fit, and they are faster: W2 / embree-tri torus:1024 0.96 against
+  // 0.81 with halves, terrain 1.18 / 1.14, canyon 1.02 / 1.00 (3 runs each, AMD Zen 5 VM).
+  // SLIM_GRID_PARTS=1|2|4 forces one (measurements).
   uint32_t parts = 1;
   if (opt.bvh == Bvh::CompressedLeaf || opt.bvh == Bvh::CompressedLeafCompact) {
-    parts = std::is_same_v<Block, LossySubGrid> ? 4 : 2;
+    parts = 4;
     if (const char* env = std::getenv("SLIM_GRID_PARTS")) {
       const std::string v(env);
       if (v != "1" && v != "2" && v != "4") throw Error("SLIM_GRID_PARTS must be 1, 2 or 4");
@@ -623,7 +640,6 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
       b.grid_res_y = uint16_t(g.res_y);
     } else {
       b.corner = s->hot[gi].lattice_first + sy * s->hot[gi].lattice_row + sx;
-      b.grid = uint32_t(gi);
     }
     SubGridVerts w;
     Leaf::decode(s->ctx, b, w);

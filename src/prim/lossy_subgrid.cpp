@@ -105,16 +105,24 @@ const PatchWeights kPatchWeights;
 
 namespace detail {
 
+// The last code a 16-byte window may start at: codes 16-20 are bytes 48-62, and byte 63 (res) is
+// the last byte read. A block needs no readable bytes after it (the 68-byte shared layout is
+// followed directly by the next block, or by the end of the arena).
+constexpr int kLastWindowCode = 16;
+
 CodeUnpack::CodeUnpack() {
   for (int g = 0; g < 3; ++g) {
     for (int half = 0; half < 2; ++half) {
-      // The window starts at the first code of the 4 positions of this half.
+      // The window starts at the first code of the 4 positions of this half, at most at code 16:
+      // its 16 bytes then end at the block's res byte (63), whatever follows the block.
       int first = -1;
       for (int l = 0; l < 4 && first < 0; ++l) first = displ_position_slot(8 * g + 4 * half + l);
-      const int base = 3 * first;
+      const int base = 3 * std::min(first, kLastWindowCode);
       (half ? hi : lo)[g] = uint8_t(base);
       for (int l = 0; l < 4; ++l) {
         const int s = displ_position_slot(8 * g + 4 * half + l);
+        if (s >= 0 && (3 * s < base || 3 * s + 2 > base + 15))
+          throw std::logic_error("code unpack: a code outside its window");
         for (int b = 0; b < 4; ++b)
           ctrl[g][16 * half + 4 * l + b] = (s < 0 || b == 3) ? 0x80 : uint8_t(3 * s + b - base);
       }
@@ -167,13 +175,13 @@ QuarterUnpack::QuarterUnpack() {
       for (int l = 0; l < 4; ++l) slot[l] = displ_position_slot(qt.position[q][4 * half + l]);
       // Two windows: the first from the first lane's code, the second from the first code it
       // misses. A window of 16 bytes at code s holds codes s .. s+4 and starts at most at code
-      // 18 (7 readable bytes follow the 63 code bytes).
+      // 16 (kLastWindowCode: it ends at the res byte).
       bool done[4] = {false, false, false, false};
       for (int k = 0; k < 2; ++k) {
         int first = -1;
         for (int l = 0; l < 4 && first < 0; ++l)
           if (!done[l]) first = slot[l];
-        const int start = first < 0 ? 0 : std::min(first, 18);
+        const int start = first < 0 ? 0 : std::min(first, kLastWindowCode);
         (half ? hi : lo)[q][k] = uint8_t(3 * start);
         for (int l = 0; l < 4; ++l) {
           const bool take = !done[l] && slot[l] >= start && slot[l] <= start + 4;

@@ -5,10 +5,11 @@
 // A sub-grid is a bilinear patch through its 4 corner vertices plus 21 displacements (the 25
 // vertices minus the corners), each quantized to 3 bytes (section 4.1). Two layouts:
 //   LossySubGrid        128 B  the paper's Listing 1: self-contained (corners inside)
-//   LossySubGridShared   72 B  section 9 ("future work"): the corners are shared with the
+//   LossySubGridShared   68 B  section 9 ("future work"): the corners are shared with the
 //                              neighbouring sub-grids through a per-grid corner lattice, and the
 //                              fields the grid implies (object id, grid position and resolution)
-//                              come from the grid side table
+//                              come from the grid side table; even the grid index is implied, by
+//                              the lattice corner's position in the scene's corner array
 // Both decode to the same vertices for the same displacement codes.
 //
 // Displacement codes (24 bits, 3 little-endian bytes; the exponent sits at bits 13-18 in both):
@@ -255,10 +256,10 @@ SLIM_INLINE void broadcast_corners(const Vec3f corner[4], simd::vfloat8 (*c)[4])
 
 // Decompression (section 4.3), 8 positions at a time: patch + decoded displacement for the 25
 // vertices. `corner` = the 4 patch corners (c00, c10, c01, c11), `displ` = the 63 code bytes
-// (7 readable bytes must follow them). Escape codes are left for the caller: the return value has
-// bit k set for each position k with an escape code, whose code is then in codes[k].
-// Only the position groups g0 .. g1-1 are decoded (positions 8*g0 .. 8*g1-1, and 24 if g1 = 3):
-// a half sub-grid needs groups 0-1 (vertex rows 0-2) or 1-2 (rows 2-4).
+// (the 16-byte windows read at most up to the res byte after them). Escape codes are left for the
+// caller: the return value has bit k set for each position k with an escape code, whose code is
+// then in codes[k]. Only the position groups g0 .. g1-1 are decoded (positions 8*g0 .. 8*g1-1, and
+// 24 if g1 = 3): a half sub-grid needs groups 0-1 (vertex rows 0-2) or 1-2 (rows 2-4).
 template <int kEnc>
 SLIM_INLINE uint32_t decode_subgrid(const Vec3f corner[4], const uint8_t* displ, uint32_t res_x,
                                     uint32_t res_y, int bias, SubGridVerts& w, uint32_t* codes,
@@ -348,19 +349,25 @@ static_assert(offsetof(LossySubGrid, displ) == 48 && offsetof(LossySubGrid, res)
                   offsetof(LossySubGrid, object_id) == 112,
               "Listing 1 field order");
 
-// ---- section 9: corners shared through the grid's corner lattice, 72 bytes -------------------
+// ---- section 9: corners shared through the grid's corner lattice, 68 bytes -------------------
 
 // The corner lattice of a grid (GridHot::lattice_first / lattice_row): the vertices at x in
 // {0, 4, 8, ..., res_x-1} and y in {0, 4, ..., res_y-1}, row-major, in the scene's corner array.
-// Each corner is stored once for the up to 4 sub-grids around it.
+// Each corner is stored once for the up to 4 sub-grids around it. The lattices lie in grid order,
+// so the corner index also names the grid (LossySharedLeaf::grid): no grid field in the block.
 struct LossySubGridShared {
   uint8_t displ[63];  // 63 B: as in Listing 1
   uint8_t res;        //  1 B: resX (bits 0-3), resY (bits 4-7)
   uint32_t corner;    //  4 B: lattice corner of vertex (0,0) in the scene's corner array; the
                       //       others are corner+1, corner+row, corner+row+1
-  uint32_t grid;      //  4 B: GridInfo / GridHot index
 };
-static_assert(sizeof(LossySubGridShared) == 72, "shared-corner lossy sub-grid is 72 bytes");
+static_assert(sizeof(LossySubGridShared) == 68, "shared-corner lossy sub-grid is 68 bytes");
+
+// The grid of a lattice corner: LossyContext::corner_grid[c >> kCornerChunkShift] is the grid
+// whose lattice holds corner (c >> kCornerChunkShift) << kCornerChunkShift; the grids whose
+// lattices start later in the chunk follow it. A lattice has at least 2 x 2 corners, so at most 4
+// start inside a chunk of 16: the look-up is one table read and at most 4 steps.
+constexpr uint32_t kCornerChunkShift = 4;
 
 // ---- leaf formats ---------------------------------------------------------------------------
 
@@ -378,20 +385,22 @@ struct LossySource {
 struct LossyContext {
   const GridInfo* grids = nullptr;
   const GridHot* hot = nullptr;
-  const uint32_t* faces = nullptr;  // face table
-  const uint16_t* flips = nullptr;  // flip masks
-  const Vec3f* exact = nullptr;     // exact vertices (escape codes)
-  const Vec3f* corners = nullptr;   // shared layout: corner lattices
+  const uint32_t* faces = nullptr;        // face table
+  const uint16_t* flips = nullptr;        // flip masks
+  const Vec3f* exact = nullptr;           // exact vertices (escape codes)
+  const Vec3f* corners = nullptr;         // shared layout: corner lattices
+  const uint32_t* corner_grid = nullptr;  // shared layout: per 16 corners (kCornerChunkShift)
+  uint32_t grid_count = 0;                // shared layout: grids (entries of hot)
   int bias = 0;
   uint32_t parts = 1;  // multi-leaf children per sub-grid: 1, 2 (halves) or 4 (quarters)
 };
 
 // What both lossy leaves share: decoding, the build-side hooks, the whole, half and quarter
 // sub-grid tests, the multi-leaf layout and validation. Leaf provides
-//   static void corners(ctx, block, Vec3f c[4])     // patch corners c00, c10, c01, c11
-//   static const Vec3f* exact(ctx, block)          // the grid's exact vertices
-//   static uint32_t flips(ctx, block)
-//   static void record(ctx, block, SubGridHit, HitRecord&)
+//   static uint32_t grid(ctx, block)                   // the block's grid (GridInfo index)
+//   static void corners(ctx, block, grid, Vec3f c[4])  // patch corners c00, c10, c01, c11
+//   static uint32_t flips(ctx, block, grid)
+//   static void record(ctx, block, grid, SubGridHit, HitRecord&)
 template <class Leaf, class Block, int kEnc>
 struct LossyLeafBase {
   using Context = LossyContext;
@@ -418,12 +427,20 @@ struct LossyLeafBase {
   // Code groups g0 .. g1-1 of the block, escapes applied.
   static SLIM_INLINE void decode(const Context& ctx, const Block& b, SubGridVerts& w, int g0 = 0,
                                  int g1 = 3) {
+    decode(ctx, b, Leaf::grid(ctx, b), w, g0, g1);
+  }
+  static SLIM_INLINE void decode(const Context& ctx, const Block& b, uint32_t grid, SubGridVerts& w,
+                                 int g0 = 0, int g1 = 3) {
     Vec3f c[4];
-    Leaf::corners(ctx, b, c);
+    Leaf::corners(ctx, b, grid, c);
     alignas(32) uint32_t codes[32];
     const uint32_t esc =
         decode_subgrid<kEnc>(c, b.displ, b.res & 15, b.res >> 4, ctx.bias, w, codes, g0, g1);
-    if (esc) apply_escapes(esc, codes, Leaf::exact(ctx, b), w);
+    if (esc) apply_escapes(esc, codes, exact(ctx, grid), w);
+  }
+  // The grid's exact vertices (escape codes).
+  static SLIM_INLINE const Vec3f* exact(const Context& ctx, uint32_t grid) {
+    return ctx.exact + ctx.hot[grid].exact;
   }
 
   // The whole sub-grid: every code group, ray-space group and row.
@@ -456,16 +473,18 @@ struct LossyLeafBase {
     subgrid_part_cells(4, q, res_x, res_y, i0, i1, j0, j1);
     if (i0 >= i1 || j0 >= j1) return false;  // no cell
     simd::prefetch(reinterpret_cast<const uint8_t*>(&b) + 64);
+    const uint32_t grid = Leaf::grid(ctx, b);
     Vec3f c[4];
-    Leaf::corners(ctx, b, c);
+    Leaf::corners(ctx, b, grid, c);
     QuarterVerts w;
     alignas(32) uint32_t codes[8];
     const uint32_t esc = decode_quarter<kEnc>(c, b.displ, res_x, res_y, ctx.bias, q, w, codes);
-    if (esc) apply_escapes(esc, codes, Leaf::exact(ctx, b), w);
+    if (esc) apply_escapes(esc, codes, exact(ctx, grid), w);
     SubGridHit h;
-    if (!intersect_subgrid_quarter<kAny>(w, q, i0, i1, j0, j1, Leaf::flips(ctx, b), ray, h, st))
+    if (!intersect_subgrid_quarter<kAny>(w, q, i0, i1, j0, j1, Leaf::flips(ctx, b, grid), ray, h,
+                                         st))
       return false;
-    if constexpr (!kAny) Leaf::record(ctx, b, h, hit);
+    if constexpr (!kAny) Leaf::record(ctx, b, grid, h, hit);
     return true;
   }
 
@@ -477,14 +496,16 @@ struct LossyLeafBase {
                                          HitRecord& hit, Stats& st) {
     // The codes' cache line, fetched alongside the first one.
     simd::prefetch(reinterpret_cast<const uint8_t*>(&b) + 64);
+    const uint32_t grid = Leaf::grid(ctx, b);
     SubGridVerts w;
-    decode(ctx, b, w, cg0, cg1);
+    decode(ctx, b, grid, w, cg0, cg1);
     alignas(32) float r[3][32];
     subgrid_to_ray_space(ray.wt, w, r, rg0, rg1);
     SubGridHit h;
-    if (!intersect_subgrid_rows<kAny>(w, r, b.res & 15, j0, j1, Leaf::flips(ctx, b), ray, h, st))
+    if (!intersect_subgrid_rows<kAny>(w, r, b.res & 15, j0, j1, Leaf::flips(ctx, b, grid), ray, h,
+                                      st))
       return false;
-    if constexpr (!kAny) Leaf::record(ctx, b, h, hit);
+    if constexpr (!kAny) Leaf::record(ctx, b, grid, h, hit);
     return true;
   }
 
@@ -523,20 +544,18 @@ template <int kEnc>
 struct LossyGridLeaf : LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid, kEnc> {
   using Context = LossyContext;
 
-  static SLIM_INLINE void corners(const Context&, const LossySubGrid& b, Vec3f c[4]) {
+  static SLIM_INLINE uint32_t grid(const Context&, const LossySubGrid& b) { return b.primitive_id; }
+  static SLIM_INLINE void corners(const Context&, const LossySubGrid& b, uint32_t, Vec3f c[4]) {
     for (int k = 0; k < 4; ++k) c[k] = b.corner[k];
   }
-  static SLIM_INLINE const Vec3f* exact(const Context& ctx, const LossySubGrid& b) {
-    return ctx.exact + ctx.hot[b.primitive_id].exact;
-  }
-  static SLIM_INLINE uint32_t flips(const Context& ctx, const LossySubGrid& b) {
-    return subgrid_flips(ctx.hot[b.primitive_id], ctx.flips, b.grid_x / kSubGridCells,
+  static SLIM_INLINE uint32_t flips(const Context& ctx, const LossySubGrid& b, uint32_t grid) {
+    return subgrid_flips(ctx.hot[grid], ctx.flips, b.grid_x / kSubGridCells,
                          b.grid_y / kSubGridCells,
                          (b.grid_res_x + kSubGridCells - 2) / kSubGridCells);
   }
-  static SLIM_INLINE void record(const Context& ctx, const LossySubGrid& b, const SubGridHit& h,
-                                 HitRecord& hit) {
-    record_grid_hit(h, ctx.grids[b.primitive_id], ctx.faces, b.grid_x, b.grid_y, hit);
+  static SLIM_INLINE void record(const Context& ctx, const LossySubGrid& b, uint32_t grid,
+                                 const SubGridHit& h, HitRecord& hit) {
+    record_grid_hit(h, ctx.grids[grid], ctx.faces, b.grid_x, b.grid_y, hit);
   }
 };
 
@@ -545,36 +564,40 @@ template <int kEnc>
 struct LossySharedLeaf : LossyLeafBase<LossySharedLeaf<kEnc>, LossySubGridShared, kEnc> {
   using Context = LossyContext;
 
-  static SLIM_INLINE void corners(const Context& ctx, const LossySubGridShared& b, Vec3f c[4]) {
-    const uint32_t row = ctx.hot[b.grid].lattice_row;
+  // The grid whose lattice holds b.corner (see kCornerChunkShift).
+  static SLIM_INLINE uint32_t grid(const Context& ctx, const LossySubGridShared& b) {
+    uint32_t g = ctx.corner_grid[b.corner >> kCornerChunkShift];
+    while (g + 1 < ctx.grid_count && ctx.hot[g + 1].lattice_first <= b.corner) ++g;
+    return g;
+  }
+  static SLIM_INLINE void corners(const Context& ctx, const LossySubGridShared& b, uint32_t grid,
+                                  Vec3f c[4]) {
+    const uint32_t row = ctx.hot[grid].lattice_row;
     c[0] = ctx.corners[b.corner];
     c[1] = ctx.corners[b.corner + 1];
     c[2] = ctx.corners[b.corner + row];
     c[3] = ctx.corners[b.corner + row + 1];
   }
-  static SLIM_INLINE const Vec3f* exact(const Context& ctx, const LossySubGridShared& b) {
-    return ctx.exact + ctx.hot[b.grid].exact;
-  }
   // Sub-grid position (sx, sy) in its grid, from its lattice corner.
-  static SLIM_INLINE void position(const Context& ctx, const LossySubGridShared& b, uint32_t& sx,
+  static SLIM_INLINE void position(const GridHot& g, const LossySubGridShared& b, uint32_t& sx,
                                    uint32_t& sy) {
-    const GridHot& g = ctx.hot[b.grid];
     const uint32_t c = b.corner - g.lattice_first;
     sx = c % g.lattice_row;
     sy = c / g.lattice_row;
   }
-  static SLIM_INLINE uint32_t flips(const Context& ctx, const LossySubGridShared& b) {
-    const GridHot& g = ctx.hot[b.grid];
+  static SLIM_INLINE uint32_t flips(const Context& ctx, const LossySubGridShared& b,
+                                    uint32_t grid) {
+    const GridHot& g = ctx.hot[grid];
     if (g.flips == kNoFlips) return 0;
     uint32_t sx, sy;
-    position(ctx, b, sx, sy);
+    position(g, b, sx, sy);
     return subgrid_flips(g, ctx.flips, sx, sy, g.lattice_row - 1);
   }
-  static SLIM_INLINE void record(const Context& ctx, const LossySubGridShared& b,
+  static SLIM_INLINE void record(const Context& ctx, const LossySubGridShared& b, uint32_t grid,
                                  const SubGridHit& h, HitRecord& hit) {
     uint32_t sx, sy;
-    position(ctx, b, sx, sy);
-    record_grid_hit(h, ctx.grids[b.grid], ctx.faces, kSubGridCells * sx, kSubGridCells * sy, hit);
+    position(ctx.hot[grid], b, sx, sy);
+    record_grid_hit(h, ctx.grids[grid], ctx.faces, kSubGridCells * sx, kSubGridCells * sy, hit);
   }
 };
 

@@ -359,33 +359,43 @@ void full_table(const PairingInput& in, bool coordinate_keys, Greedy& g, Pairing
 }
 
 // Index keys without the full table: twins found by a counting sort on the smaller vertex.
-struct EdgeRec {
-  uint32_t key;  // complemented BBSA bits (31 bits)
-  uint32_t a;    // first half-edge of the run (smallest id); kNone for a run of 3+
-  uint32_t b;    // second half-edge; for a run of 3+, its offset in Twins::runs
-};
+// Edge record (8 B): BBSA bits (31 bits) << 32 | first half-edge of the edge (smallest id). Its
+// twin is link[first]; a record whose first half-edge has no link is a run of 3+ twins (found
+// through Twins::run_of). 8 B instead of 12 (key, a, b) so that the records and the radix sort's
+// second buffer both fit in the counting sort's buckets (8 B per half-edge, at most one record
+// per 2 half-edges): no array of its own.
+SLIM_INLINE uint32_t rec_key(uint64_t r) { return uint32_t(r >> 32); }
+SLIM_INLINE uint32_t rec_half_edge(uint64_t r) { return uint32_t(r); }
 
 // Twins of the mesh: link[h] = the twin of h for manifold edges (two compatible half-edges),
 // kNone otherwise; runs of 3+ equal keys (edges of 3+ triangles) as [count, half-edges
 // ascending...] in `runs`, and for each half-edge of a run its run offset (run_of, sorted by
-// half-edge) for the local scan. 4 B per half-edge: the edge box area is recomputed from the two
-// corners where it is needed again (augment, local_scan), which is bit-identical (edge_box_area
-// is symmetric and -ffp-contract=off).
+// half-edge). 4 B per half-edge: the edge box area is recomputed from the two corners where it is
+// needed again (augment, local_scan), which is bit-identical (edge_box_area is symmetric and
+// -ffp-contract=off).
 struct Twins {
   LargeArray<uint32_t> link;
-  // The counting sort's buckets (8 B per half-edge). Dead once the edge records are emitted:
-  // sorted_scan reuses them as the radix sort's second buffer (12 B per edge = 6 B per half-edge).
+  // The counting sort's buckets (8 B per half-edge). With edge records asked for, the records
+  // overwrite the buckets as they are read (slots[0, ne)), and slots[ne, 2 ne) is the radix
+  // sort's second buffer.
   LargeArray<uint64_t> slots;
   std::vector<uint32_t> runs;
   std::vector<std::pair<uint32_t, uint32_t>> run_of;
   std::vector<uint64_t> in_run;  // bit per triangle: has a half-edge in a run
+
+  uint32_t run_offset(uint32_t h) const {
+    auto it = std::lower_bound(run_of.begin(), run_of.end(), std::make_pair(h, 0u));
+    return it != run_of.end() && it->first == h ? it->second : kNone;
+  }
 };
 
-// Builds the twins (and, if `edges` is given, one record per run of >= 2 twins, in descending
-// (smaller, larger) vertex order: the input of the area-only radix sort, with the histogram of
-// its top 11 key bits in top_hist).
-void find_twins(const PairingInput& in, Greedy& g, Twins& tw, LargeArray<EdgeRec>* edges,
-                size_t* edge_count, uint32_t* top_hist, PairingStats& st) {
+// Builds the twins (and, if `emit`, one record per run of >= 2 twins into tw.slots[0, ne), in
+// ascending (smaller, larger) vertex order: the input of the area-only radix sort, with the
+// histogram of its top 11 key bits in top_hist). The buckets are visited in ascending smaller
+// vertex, so the records written so far (at most half the entries read) never reach a bucket
+// not yet read; each bucket is read from a copy.
+void find_twins(const PairingInput& in, Greedy& g, Twins& tw, bool emit, size_t* edge_count,
+                uint32_t* top_hist, PairingStats& st) {
   const uint64_t T = in.tri_count, V = in.vertex_count;
   const uint32_t* tris = in.tris;
   // Counting sort of the half-edges by smaller vertex: start[v] .. start[v+1].
@@ -424,58 +434,59 @@ void find_twins(const PairingInput& in, Greedy& g, Twins& tw, LargeArray<EdgeRec
   fill_none(tw.link.data(), tw.link.size());
   uint32_t* link = tw.link.data();
   tw.in_run.assign((T + 63) / 64, 0);
-  size_t ne = 0;  // at most one record per 2 half-edges
-  if (edges) *edges = LargeArray<EdgeRec>(n / 2 + 1);
-  EdgeRec* out = edges ? edges->data() : nullptr;
-  for (uint64_t v0 = V; v0-- > 0;) {
-    uint64_t* e = slots + start[v0];
+  size_t ne = 0;              // at most one record per 2 half-edges
+  std::vector<uint64_t> big;  // copy of a bucket of more than 16 entries
+  for (uint64_t v0 = 0; v0 < V; ++v0) {
     const size_t k = start[v0 + 1] - start[v0];
     if (k < 2) continue;  // boundary edge (or none)
     // Sorted by (larger vertex, half-edge id). Buckets hold ~6 entries (about the vertex valence)
     // and rarely more than 16: those are ranked without branches on the data (an insertion sort
     // mispredicted about once per entry, ~half of this loop on fg_terrain_hawaii), the others
-    // take an insertion sort in place.
+    // take an insertion sort of a copy.
     uint64_t ranked[16];
+    const uint64_t* e = ranked;
     if (k <= 16) {
-      simd::rank_sort16(e, k, ranked);
-      e = ranked;
+      simd::rank_sort16(slots + start[v0], k, ranked);
     } else {
+      big.assign(slots + start[v0], slots + start[v0] + k);
       for (size_t i = 1; i < k; ++i) {
-        uint64_t x = e[i];
+        uint64_t x = big[i];
         size_t j = i;
-        for (; j > 0 && e[j - 1] > x; --j) e[j] = e[j - 1];
-        e[j] = x;
+        for (; j > 0 && big[j - 1] > x; --j) big[j] = big[j - 1];
+        big[j] = x;
       }
+      e = big.data();
     }
-    for (size_t hi = k; hi > 0;) {
-      size_t lo = hi - 1;
+    for (size_t lo = 0; lo < k;) {
       const uint32_t v1 = uint32_t(e[lo] >> 32);
-      while (lo > 0 && uint32_t(e[lo - 1] >> 32) == v1) --lo;
-      const size_t cnt = hi - lo;
-      hi = lo;
+      size_t hi = lo + 1;
+      while (hi < k && uint32_t(e[hi] >> 32) == v1) ++hi;
+      const size_t cnt = hi - lo, first = lo;
+      lo = hi;
       if (cnt < 2) continue;  // boundary edge
-      const uint32_t ha = uint32_t(e[lo]), hb = uint32_t(e[lo + 1]);
+      const uint32_t ha = uint32_t(e[first]), hb = uint32_t(e[first + 1]);
       if (cnt == 2 && !g.compatible(ha, hb)) continue;
       // Checked here, in vertex order (cache friendly): the later scans only touch the "paired"
       // bits.
       const uint32_t key =
-          ~float_bits(edge_box_area(in.vertices[v0], in.vertices[v1])) & 0x7fffffffu;
+          float_bits(edge_box_area(in.vertices[v0], in.vertices[v1])) & 0x7fffffffu;
       if (cnt == 2) {
         link[ha] = hb;
         link[hb] = ha;
-        if (out) out[ne++] = {key, ha, hb};
       } else {
         const uint32_t off = uint32_t(tw.runs.size());
         tw.runs.push_back(uint32_t(cnt));
-        for (size_t x = lo; x < lo + cnt; ++x) {
+        for (size_t x = first; x < first + cnt; ++x) {
           const uint32_t h = uint32_t(e[x]);
           tw.runs.push_back(h);
           tw.run_of.push_back({h, off});
           tw.in_run[h / 3 / 64] |= uint64_t(1) << (h / 3 % 64);
         }
-        if (out) out[ne++] = {key, kNone, off};
       }
-      if (out) top_hist[key >> 20]++;
+      if (emit) {
+        slots[ne++] = uint64_t(key) << 32 | ha;
+        top_hist[key >> 20]++;
+      }
     }
   }
   std::sort(tw.run_of.begin(), tw.run_of.end());
@@ -487,9 +498,9 @@ void find_twins(const PairingInput& in, Greedy& g, Twins& tw, LargeArray<EdgeRec
 // passes of 10 bits inside each bucket, which mostly fits in L2; buckets of a few records take
 // an insertion sort instead (on small meshes the 2 x 1024-entry histograms of the ~2048 buckets
 // cost more than the records). Stable all the way, so equal keys keep the emission order. One
-// pass over memory instead of three: 30% faster than a plain 3-pass LSD on 3M records. `t` holds
-// ne records; the result is in t.
-const EdgeRec* sort_edges(EdgeRec* a, EdgeRec* t, size_t ne, const uint32_t* top_hist) {
+// pass over memory instead of three: 30% faster than a plain 3-pass LSD on 3M records. `a` holds
+// ne records, `t` room for ne more; the result is in t.
+const uint64_t* sort_edges(uint64_t* a, uint64_t* t, size_t ne, const uint32_t* top_hist) {
   constexpr int kTop = 11, top_shift = 31 - kTop;
   const uint32_t* start = top_hist;
   std::vector<uint32_t> cur(size_t(1) << kTop);
@@ -498,7 +509,7 @@ const EdgeRec* sort_edges(EdgeRec* a, EdgeRec* t, size_t ne, const uint32_t* top
     cur[b] = sum;
     sum += start[b];
   }
-  for (size_t i = 0; i < ne; ++i) t[cur[a[i].key >> top_shift]++] = a[i];
+  for (size_t i = 0; i < ne; ++i) t[cur[rec_key(a[i]) >> top_shift]++] = a[i];
   // Now bucket b is t[cur[b] - start[b], cur[b]); its keys differ in bits [0, top_shift) only.
   const Digit low[2] = {{0, top_shift / 2}, {top_shift / 2, top_shift - top_shift / 2}};
   uint32_t h[1u << 10];
@@ -506,72 +517,76 @@ const EdgeRec* sort_edges(EdgeRec* a, EdgeRec* t, size_t ne, const uint32_t* top
     const uint32_t m = start[b], lo = cur[b] - m;
     if (m < 2) continue;
     if (m <= 32) {
-      EdgeRec* r = t + lo;
+      uint64_t* r = t + lo;
       for (uint32_t i = 1; i < m; ++i) {
-        const EdgeRec x = r[i];
+        const uint64_t x = r[i];
         uint32_t j = i;
-        for (; j > 0 && r[j - 1].key > x.key; --j) r[j] = r[j - 1];
+        for (; j > 0 && rec_key(r[j - 1]) > rec_key(x); --j) r[j] = r[j - 1];
         r[j] = x;
       }
       continue;
     }
-    EdgeRec* src = t + lo;
-    EdgeRec* dst = a + lo;
+    uint64_t* src = t + lo;
+    uint64_t* dst = a + lo;
     for (const Digit& d : low) {
       if (d.bits == 0) continue;
       const uint32_t mask = (1u << d.bits) - 1;
       std::fill(h, h + (size_t(1) << d.bits), 0u);
-      for (uint32_t i = 0; i < m; ++i) h[(src[i].key >> d.shift) & mask]++;
+      for (uint32_t i = 0; i < m; ++i) h[(rec_key(src[i]) >> d.shift) & mask]++;
       uint32_t s2 = 0;
       for (uint32_t x = 0; x <= mask; ++x) {
         uint32_t c = h[x];
         h[x] = s2;
         s2 += c;
       }
-      for (uint32_t i = 0; i < m; ++i) dst[h[(src[i].key >> d.shift) & mask]++] = src[i];
+      for (uint32_t i = 0; i < m; ++i) dst[h[(rec_key(src[i]) >> d.shift) & mask]++] = src[i];
       std::swap(src, dst);
     }
-    if (src != t + lo) std::memcpy(t + lo, src, m * sizeof(EdgeRec));
+    if (src != t + lo) std::memcpy(t + lo, src, m * sizeof(uint64_t));
   }
   return t;
 }
 
-// Sort, then the greedy scan. For a pair record, accepting is "neither triangle paired yet": done
-// without a branch (half of them are accepted, unpredictably), the accepted twins compacted in
-// place at the front of the sorted records and written to mate[] afterwards.
-void sorted_scan(Greedy& g, Twins& tw, LargeArray<EdgeRec>& edges, size_t ne,
-                 const uint32_t* top_hist, PairingStats& st) {
+// Sort, then the greedy scan. The records are sorted ascending by (BBSA, smaller vertex, larger
+// vertex) (ascending emission, stable sort), so the paper's descending order is the sorted array
+// read backwards; zero-area edges come last. For a pair record, accepting is "neither triangle
+// paired yet": done without a branch (half of them are accepted, unpredictably), the accepted
+// twins compacted in place at the back of the sorted records (never ahead of the read position)
+// and written to mate[] afterwards. The twin link[a] of a record is a random read, prefetched.
+void sorted_scan(Greedy& g, Twins& tw, size_t ne, const uint32_t* top_hist, PairingStats& st) {
   auto t0 = Clock::now();
   if (ne == 0) return;
-  // The sort's second buffer: the slots of find_twins (8 B per half-edge >= 12 B per record, and
-  // no longer read). A new byte array there implicitly creates the records ([intro.object]).
-  static_assert(sizeof(EdgeRec) <= 2 * sizeof(uint64_t));
-  EdgeRec* tmp = std::launder(reinterpret_cast<EdgeRec*>(::new (static_cast<void*>(tw.slots.data()))
-                                                             std::byte[ne * sizeof(EdgeRec)]));
-  EdgeRec* s = const_cast<EdgeRec*>(sort_edges(edges.data(), tmp, ne, top_hist));
+  uint64_t* s =
+      const_cast<uint64_t*>(sort_edges(tw.slots.data(), tw.slots.data() + ne, ne, top_hist));
   st.sort_s = seconds_since(t0);
   t0 = Clock::now();
+  constexpr size_t kAhead = 64;  // records between the prefetch of a twin and its use
+  const uint32_t* link = tw.link.data();
   uint64_t* used = g.used.data();
-  size_t na = 0;  // accepted pair records, compacted into s[0, na)
-  for (size_t i = 0; i < ne; ++i) {
-    const EdgeRec r = s[i];
-    if (r.a != kNone) {
-      const uint32_t ta = r.a / 3, tb = r.b / 3;
+  size_t w = ne;  // accepted pairs, compacted into s[w, ne) as (b << 32 | a)
+  for (size_t i = ne; i-- > 0;) {
+    if (i >= kAhead) __builtin_prefetch(&link[rec_half_edge(s[i - kAhead])]);
+    const uint32_t ha = rec_half_edge(s[i]);
+    const uint32_t hb = link[ha];
+    if (hb != kNone) {
+      const uint32_t ta = ha / 3, tb = hb / 3;
       const uint64_t free = ~((used[ta >> 6] >> (ta & 63)) | (used[tb >> 6] >> (tb & 63))) & 1;
       used[ta >> 6] |= free << (ta & 63);
       used[tb >> 6] |= free << (tb & 63);
-      s[na] = r;
-      na += free;
+      s[w - 1] = uint64_t(hb) << 32 | ha;  // w - 1 >= i: only records already read
+      w -= free;
     } else {
-      g.run(&tw.runs[r.b + 1], tw.runs[r.b]);
+      const uint32_t off = tw.run_offset(ha);
+      g.run(&tw.runs[off + 1], tw.runs[off]);
     }
   }
   uint32_t* mate = g.mate.data();
-  for (size_t i = 0; i < na; ++i) {
-    mate[s[i].a / 3] = s[i].b;
-    mate[s[i].b / 3] = s[i].a;
+  for (size_t i = w; i < ne; ++i) {
+    const uint32_t a = uint32_t(s[i]), b = uint32_t(s[i] >> 32);
+    mate[a / 3] = b;
+    mate[b / 3] = a;
   }
-  g.pairs += na;
+  g.pairs += ne - w;
   st.scan_s = seconds_since(t0);
 }
 
@@ -619,10 +634,10 @@ void local_scan(const PairingInput& in, Greedy& g, const Twins& tw, PairingStats
     if ((tw.in_run[x / 64] >> (x % 64)) & 1) {
       for (int k = 0; k < 3; ++k) {
         const uint32_t h = 3 * x + k;
-        auto it = std::lower_bound(tw.run_of.begin(), tw.run_of.end(), std::make_pair(h, 0u));
-        if (it == tw.run_of.end() || it->first != h) continue;
-        const uint32_t* run = &tw.runs[it->second + 1];
-        const uint32_t cnt = std::min<uint32_t>(tw.runs[it->second], 0xffff);
+        const uint32_t off = tw.run_offset(h);
+        if (off == kNone) continue;
+        const uint32_t* run = &tw.runs[off + 1];
+        const uint32_t cnt = std::min<uint32_t>(tw.runs[off], 0xffff);
         uint32_t i = 0;
         while (i < cnt && run[i] != h) ++i;
         if (i == cnt) continue;
@@ -784,13 +799,12 @@ PairingResult heuristic(const PairingInput& in_arg, bool coordinate_keys, EdgeOr
     full_table(in, coordinate_keys, g, r.stats);
   } else {
     auto t0 = Clock::now();
-    LargeArray<EdgeRec> edges;
     size_t ne = 0;
     std::vector<uint32_t> top_hist(2048, 0);
-    find_twins(in, g, tw, full == TwinSort ? &edges : nullptr, &ne, top_hist.data(), r.stats);
+    find_twins(in, g, tw, full == TwinSort, &ne, top_hist.data(), r.stats);
     r.stats.table_s = seconds_since(t0);
     if (full == TwinSort)
-      sorted_scan(g, tw, edges, ne, top_hist.data(), r.stats);
+      sorted_scan(g, tw, ne, top_hist.data(), r.stats);
     else
       local_scan(in, g, tw, r.stats);
   }

@@ -41,7 +41,6 @@
 #include <cstring>
 #include <limits>
 #include <memory>
-#include <new>
 #include <string>
 
 #include "core/large_array.h"

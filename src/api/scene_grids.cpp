@@ -565,12 +565,11 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
     uint64_t corners = 0;  // reserved exactly: the kept buffer is what the memory figures count
     for (const VertexGrid& g : gs.grids)
       corners += uint64_t(subgrids_along(g.res_x) + 1) * (subgrids_along(g.res_y) + 1);
-    if (corners < 0xffffffffull) s->vertices.reserve(corners);
+    if (corners >= 0xffffffffull) throw Error("lossy grids: more than 2^32 - 1 sub-grid corners");
+    s->vertices.reserve(corners);
     for (size_t gi = 0; gi < ng; ++gi) {
       const VertexGrid& g = gs.grids[gi];
       const uint32_t nsx = subgrids_along(g.res_x), nsy = subgrids_along(g.res_y);
-      if (s->vertices.size() + uint64_t(nsx + 1) * (nsy + 1) >= 0xffffffffull)
-        throw Error("lossy grids: more than 2^32 - 1 sub-grid corners");
       s->hot[gi].lattice_first = uint32_t(s->vertices.size());
       s->hot[gi].lattice_row = nsx + 1;
       const Vec3f* pos = meshes[g.geom]->positions.data();
@@ -579,8 +578,6 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
           s->vertices.push_back(pos[gs.vertex(g, std::min(kSubGridCells * lx, g.res_x - 1),
                                               std::min(kSubGridCells * ly, g.res_y - 1))]);
     }
-  }
-  if (shared_corners) {
     // The grid of each chunk's first corner (LossySharedLeaf::grid): lattices lie in grid order.
     const uint64_t chunks = (s->vertices.size() >> kCornerChunkShift) + 1;
     s->corner_grid.resize(chunks);

@@ -6,6 +6,10 @@
 
 #include <string>
 
+#if defined(__x86_64__) || defined(__i386__)
+#include <cpuid.h>
+#endif
+
 namespace slim {
 
 void check_cpu_isa() {
@@ -21,7 +25,9 @@ void check_cpu_isa() {
     need(__builtin_cpu_supports("fma"), "fma");
     need(__builtin_cpu_supports("bmi"), "bmi");
     need(__builtin_cpu_supports("bmi2"), "bmi2");
-    need(__builtin_cpu_supports("f16c"), "f16c");
+    // F16C from CPUID leaf 1 (ECX bit 29): clang 14's __builtin_cpu_supports has no "f16c".
+    unsigned a = 0, b = 0, c = 0, d = 0;
+    need(__get_cpuid(1, &a, &b, &c, &d) && (c & bit_F16C), "f16c");
 #endif
 #if defined(SLIM_ISA_AVX512)
     need(__builtin_cpu_supports("avx512f"), "avx512f");

@@ -4,7 +4,8 @@
 # Builds the libFuzzer targets of fuzz/ with clang, ASan and UBSan in ./build-fuzz, writes the seed
 # corpus (fuzz/seed_files.h, generated now: no mesh file is kept in git) and runs each target for
 # SECONDS (default 30), one after the other. TARGET names (obj ply gltf glb xz, and the decoder
-# targets such as lossy_subgrid, quantized_mesh) restrict the run; default: every target built.
+# and algorithm targets lossy_subgrid, quantized_mesh, pairing) restrict the run; default: every
+# target built.
 #
 #   fuzz-out/seeds/<target>/    the generated seeds (rewritten each run)
 #   fuzz-out/corpus/<target>/   the corpus libFuzzer grows (kept between runs: later runs resume)

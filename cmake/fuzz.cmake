@@ -3,11 +3,12 @@
 #   CC=clang-14 CXX=clang++-14 cmake -S . -B build-fuzz -DSLIM_FUZZ=ON -DSLIM_SANITIZE=ON
 #   cmake --build build-fuzz --target slimrt_fuzz
 #
-# SLIM_FUZZ needs clang (Debian's clang-14 ships libFuzzer). The targets do not link the whole
-# library: each compiles just the sources it exercises (readers, decoders) with
-# -fsanitize=fuzzer-no-link, so that coverage reaches the header-only tinyobjloader and tinygltf
-# they include, and the fuzz build stays short. Use it with SLIM_SANITIZE=ON so that memory errors
-# and undefined behaviour stop the run (fuzz.sh does).
+# SLIM_FUZZ needs clang (Debian's clang-14 ships libFuzzer). The targets but `scene` do not link
+# the whole library: each compiles just the sources it exercises (readers, decoders, the pairing)
+# with -fsanitize=fuzzer-no-link, so that coverage reaches the header-only tinyobjloader and
+# tinygltf they include, and the fuzz build stays short; `scene` links the library, which this
+# build tree instruments too. Use it with SLIM_SANITIZE=ON so that memory errors and undefined
+# behaviour stop the run (fuzz.sh does).
 option(SLIM_FUZZ "Build the libFuzzer targets in fuzz/ (clang only)" OFF)
 
 if(SLIM_FUZZ)
@@ -33,10 +34,18 @@ if(SLIM_FUZZ)
   add_dependencies(slimrt_fuzz slimrt_make_seeds)
   # One target per reader and per byte decoder; the name after fuzz_ is its corpus directory.
   # SLIM_FUZZ_SOURCES_<t>: library sources a decoder target compiles besides its own file.
-  set(SLIM_FUZZ_TARGETS obj ply gltf glb xz lossy_subgrid quantized_mesh)
+  set(SLIM_FUZZ_TARGETS obj ply gltf glb xz lossy_subgrid quantized_mesh pairing scene)
   set(SLIM_FUZZ_SOURCES_lossy_subgrid src/prim/lossy_subgrid.cpp)
   set(SLIM_FUZZ_SOURCES_quantized_mesh src/prim/quantized_mesh.cpp src/mesh/tessellate.cpp)
   set(SLIM_FUZZ_LIBS_quantized_mesh ${SLIM_GLU_LIB})
+  # pairing: the pairing and the fan triangulation Scene::build runs first, against the test
+  # reference (tests/pairing_reference.h).
+  set(SLIM_FUZZ_SOURCES_pairing src/mesh/pairing.cpp src/mesh/triangulate.cpp)
+  set(SLIM_FUZZ_LIBS_pairing TBB::tbb)
+  # scene: every configuration through the public API, so the whole library (built here with
+  # coverage instrumentation, unlike in the other build trees).
+  set(SLIM_FUZZ_LIBS_scene slimrt)
+  target_compile_options(slimrt PRIVATE -fsanitize=fuzzer-no-link)
   foreach(t IN LISTS SLIM_FUZZ_TARGETS)
     add_executable(slimrt_fuzz_${t} fuzz/fuzz_${t}.cpp ${SLIM_FUZZ_SOURCES_${t}})
     set_target_properties(slimrt_fuzz_${t} PROPERTIES OUTPUT_NAME fuzz_${t}
@@ -45,6 +54,7 @@ if(SLIM_FUZZ)
                                                     -fsanitize=fuzzer-no-link)
     target_compile_definitions(slimrt_fuzz_${t} PRIVATE ${SLIM_ISA_DEF})
     target_link_options(slimrt_fuzz_${t} PRIVATE -fsanitize=fuzzer)
+    target_include_directories(slimrt_fuzz_${t} PRIVATE tests)
     target_link_libraries(slimrt_fuzz_${t} PRIVATE slimrt_fuzz_io ${SLIM_FUZZ_LIBS_${t}})
     add_dependencies(slimrt_fuzz slimrt_fuzz_${t})
   endforeach()

@@ -17,6 +17,7 @@
 #include "core/simd_ext.h"
 #include "mesh/pairing.h"
 #include "mesh/triangulate.h"
+#include "pairing_reference.h"
 #include "prim/pairs.h"
 #include "slimrt/pairing.h"
 #include "test_util.h"
@@ -149,72 +150,11 @@ struct Tri {
 };
 Tri triangulate(const PolyMesh& m) { return {triangulate_fan({&m})}; }
 
-// Checks the pairing invariants; returns the pairs as a sorted set of (a, b).
-std::set<std::pair<uint32_t, uint32_t>> check_pairing(const PairingInput& in,
-                                                      const PairingResult& r, bool by_position) {
-  std::vector<int> uses(in.tri_count, 0);
-  std::set<std::pair<uint32_t, uint32_t>> out;
-  for (const TrianglePair& p : r.pairs) {
-    EXPECT_LT(p.a, p.b);
-    EXPECT_LT(p.b, in.tri_count);
-    // Shares an edge: the recorded corners, and two common vertices (or positions).
-    EXPECT_TRUE(pair_shares_edge(in, p, by_position)) << p.a << " " << p.b;
-    int common = 0;
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) {
-        uint32_t va = in.tris[3 * p.a + i], vb = in.tris[3 * p.b + j];
-        common += by_position ? std::memcmp(&in.vertices[va], &in.vertices[vb], 12) == 0 : va == vb;
-      }
-    EXPECT_GE(common, 2) << p.a << " " << p.b;
-    uses[p.a]++;
-    uses[p.b]++;
-    out.insert({p.a, p.b});
-  }
-  for (uint32_t t : r.unpaired) uses[t] += 10;
-  for (uint64_t t = 0; t < in.tri_count; ++t)
-    EXPECT_TRUE(uses[t] == 1 || uses[t] == 10) << "triangle " << t << " used " << uses[t];
-  EXPECT_EQ(2 * r.pairs.size() + r.unpaired.size(), in.tri_count);
-  EXPECT_EQ(r.stats.pairs, r.pairs.size());
-  return out;
-}
-
-// The paper's algorithm with std::sort on explicit tuples (the reference for the radix version):
-// half-edges sorted descending by (BBSA, smaller vertex, larger vertex), ties in table order.
-std::set<std::pair<uint32_t, uint32_t>> reference_pairs(const PairingInput& in) {
-  struct HE {
-    float area;
-    uint32_t v0, v1, he;
-  };
-  std::vector<HE> t;
-  for (uint32_t i = 0; i < in.tri_count; ++i)
-    for (int k = 0; k < 3; ++k) {
-      uint32_t a = in.tris[3 * i + k], b = in.tris[3 * i + (k + 1) % 3];
-      if (a == b) continue;
-      uint32_t v0 = std::min(a, b), v1 = std::max(a, b);
-      Vec3f d = abs(in.vertices[v1] - in.vertices[v0]);
-      t.push_back({d.x * d.y + d.y * d.z + d.z * d.x, v0, v1, 3 * i + k});
-    }
-  std::stable_sort(t.begin(), t.end(), [](const HE& x, const HE& y) {
-    return std::make_tuple(x.area, x.v0, x.v1) > std::make_tuple(y.area, y.v0, y.v1);
-  });
-  std::vector<bool> used(in.tri_count, false);
-  std::set<std::pair<uint32_t, uint32_t>> out;
-  for (size_t i = 0; i < t.size();) {
-    size_t j = i + 1;
-    while (j < t.size() && t[j].area == t[i].area && t[j].v0 == t[i].v0 && t[j].v1 == t[i].v1) ++j;
-    for (size_t x = i; x < j; ++x) {
-      uint32_t a = t[x].he / 3;
-      if (used[a]) continue;
-      for (size_t y = x + 1; y < j; ++y) {
-        uint32_t b = t[y].he / 3;
-        if (b == a || used[b] || in.groups[a] != in.groups[b]) continue;
-        used[a] = used[b] = true;
-        out.insert({std::min(a, b), std::max(a, b)});
-        break;
-      }
-    }
-    i = j;
-  }
+// Checks the pairing invariants (tests/pairing_reference.h); returns the pairs as a sorted set of
+// (a, b).
+PairSet check_pairing(const PairingInput& in, const PairingResult& r, bool by_position) {
+  PairSet out;
+  EXPECT_EQ(pairing_problem(in, r, by_position, &out), "");
   return out;
 }
 

@@ -454,7 +454,7 @@ void check_config_name(const std::string& name) {
   } catch (const Error& e) {
     throw Error(std::string(e.what()) +
                 "; Embree anchors: embree-tri, embree-tri-compact, "
-                "embree-quad, embree-grid");
+                "embree-quad, embree-quad-pairs, embree-grid");
   }
 }
 

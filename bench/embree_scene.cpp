@@ -6,16 +6,19 @@
 #include <xmmintrin.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <mutex>
 
+#include "slimrt/pairing.h"
+
 namespace slim::bench {
 
 namespace {
 
-enum class Kind { Triangles, Quads, Grids };
+enum class Kind { Triangles, Quads, QuadPairs, Grids };
 
 // Embree grids hold at most 32767 vertices a side; neighbouring records share a border, so a
 // record spans at most 32766 cells.
@@ -25,6 +28,11 @@ constexpr uint32_t kMaxGridCells = 32766;
 struct GeomInfo {
   Kind kind = Kind::Triangles;
   std::vector<uint32_t> face_of_prim;  // Embree primID -> input face; empty = identity
+  // QuadPairs: per quad, the input faces of its two triangles and, per triangle, the quad corners
+  // of its 2nd and 3rd input corners (2 bits each: corner1 | corner2 << 2), bit 4 set if Embree's
+  // order of the triangle reverses its input winding (Ng is negated).
+  std::vector<std::array<uint32_t, 2>> pair_faces;
+  std::vector<std::array<uint8_t, 2>> pair_corners;
   // Grids: the lattice and how it is cut into records (row-major over tiles of kMaxGridCells).
   uint32_t nx = 0, ny = 0, tiles_x = 0;
 };
@@ -121,6 +129,7 @@ struct EmbreeScene::Impl {
 
   void add_triangles(const PolyMesh& m, uint32_t geom_id);
   void add_quads(const PolyMesh& m, uint32_t geom_id);
+  void add_quad_pairs(const PolyMesh& m, uint32_t geom_id);
   void add_grid(const PolyMesh& m, const QuadLattice& lat, uint32_t geom_id);
 };
 
@@ -209,6 +218,44 @@ void EmbreeScene::Impl::add_quads(const PolyMesh& m, uint32_t geom_id) {
   attach(g, geom_id);
 }
 
+// The triangle pairs of slimrt's pairing (the same as bvh8-pairs: slim::pair_quads with the
+// default options) as Embree quads, lone triangles as (v0, v1, v2, v2). The pairing's time is
+// part of the build time, as in bvh8-pairs.
+void EmbreeScene::Impl::add_quad_pairs(const PolyMesh& m, uint32_t geom_id) {
+  GeomInfo& info = geoms[geom_id];
+  info.kind = Kind::QuadPairs;
+  const std::vector<PairedQuad> quads = pair_quads(m);
+  if (quads.empty()) return;
+  std::vector<uint32_t> idx;
+  idx.reserve(4 * quads.size());
+  info.pair_faces.reserve(quads.size());
+  info.pair_corners.reserve(quads.size());
+  // Position of each quad corner in Embree's order of triangle h: (a0, a1, a3), (a2, a3, a1).
+  static constexpr int kPos[2][4] = {{0, 1, -1, 2}, {-1, 2, 0, 1}};
+  auto code = [](const PairedQuad& q, int h) {
+    const int d = (kPos[h][q.corner[h][1]] - kPos[h][q.corner[h][0]] + 3) % 3;
+    return uint8_t(q.corner[h][1] | q.corner[h][2] << 2 | (d == 1 ? 0 : 16));
+  };
+  for (const PairedQuad& q : quads) {
+    idx.insert(idx.end(), {q.v[0], q.v[1], q.v[2], q.v[3]});
+    info.pair_faces.push_back({q.face[0], q.face[1]});
+    info.pair_corners.push_back({code(q, 0), q.face[1] == kInvalidID ? uint8_t(0) : code(q, 1)});
+  }
+  mem.other_bytes += quads.size() * (sizeof(info.pair_faces[0]) + sizeof(info.pair_corners[0]));
+
+  std::vector<float>& vb = add_vertex_buffer(m.positions.size());
+  std::copy_n(&m.positions[0].x, 3 * m.positions.size(), vb.data());
+  index_buffers.push_back(std::move(idx));
+  mem.geometry_bytes += index_buffers.back().size() * sizeof(uint32_t);
+
+  RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD);
+  rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vb.data(), 0,
+                             3 * sizeof(float), m.positions.size());
+  rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4,
+                             index_buffers.back().data(), 0, 4 * sizeof(uint32_t), quads.size());
+  attach(g, geom_id);
+}
+
 void EmbreeScene::Impl::add_grid(const PolyMesh& m, const QuadLattice& lat, uint32_t geom_id) {
   GeomInfo& info = geoms[geom_id];
   info.kind = Kind::Grids;
@@ -294,7 +341,7 @@ QuadLattice detect_quad_lattice(const PolyMesh& m) {
 
 const std::vector<std::string>& EmbreeScene::config_names() {
   static const std::vector<std::string> names = {"embree-tri", "embree-tri-compact", "embree-quad",
-                                                 "embree-grid"};
+                                                 "embree-quad-pairs", "embree-grid"};
   return names;
 }
 
@@ -315,9 +362,10 @@ EmbreeScene::EmbreeScene(const std::vector<const PolyMesh*>& meshes, const std::
   if (!is_config(config)) throw Error("unknown Embree configuration '" + config + "'");
   auto impl = std::make_unique<Impl>();
   impl->config = config;
-  impl->kind = config == "embree-quad"   ? Kind::Quads
-               : config == "embree-grid" ? Kind::Grids
-                                         : Kind::Triangles;
+  impl->kind = config == "embree-quad"         ? Kind::Quads
+               : config == "embree-quad-pairs" ? Kind::QuadPairs
+               : config == "embree-grid"       ? Kind::Grids
+                                               : Kind::Triangles;
 
   // Applicability first: nothing is built for a configuration that does not apply.
   uint64_t triangles = 0;
@@ -379,6 +427,9 @@ EmbreeScene::EmbreeScene(const std::vector<const PolyMesh*>& meshes, const std::
         break;
       case Kind::Quads:
         impl->add_quads(*meshes[g], g);
+        break;
+      case Kind::QuadPairs:
+        impl->add_quad_pairs(*meshes[g], g);
         break;
       case Kind::Grids:
         impl->add_grid(*meshes[g], lattices[g], g);
@@ -457,6 +508,26 @@ Hit EmbreeScene::intersect(const Ray& ray) const {
       hit.kind = PrimKind::Quad;
       fan_uv(1.0f - rh.hit.v, rh.hit.u, hit);
       break;
+    case Kind::QuadPairs: {
+      // Embree splits quad (a0..a3) into (a0, a1, a3), where p = a0 + u (a1 - a0) + v (a3 - a0),
+      // and (a2, a3, a1), reported as u = 1 - (weight of a3), v = 1 - (weight of a1): the first
+      // triangle where u + v <= 1.
+      const int h = rh.hit.u + rh.hit.v > 1.0f;
+      float w[4];
+      if (h == 0) {
+        w[0] = 1.0f - rh.hit.u - rh.hit.v, w[1] = rh.hit.u, w[2] = 0.0f, w[3] = rh.hit.v;
+      } else {
+        w[0] = 0.0f, w[1] = 1.0f - rh.hit.v, w[2] = rh.hit.u + rh.hit.v - 1.0f,
+        w[3] = 1.0f - rh.hit.u;
+      }
+      const uint8_t c = g.pair_corners[prim][h];
+      hit.primID = g.pair_faces[prim][h];
+      hit.kind = g.pair_faces[prim][1] == kInvalidID ? PrimKind::Triangle : PrimKind::Pair;
+      hit.u = w[c & 3];
+      hit.v = w[(c >> 2) & 3];
+      if (c & 16) hit.Ng = -hit.Ng;
+      break;
+    }
     case Kind::Grids: {
       // u, v span the whole record; cell (cx, cy) of the record, then the mirrored lattice cell.
       const uint32_t tx = prim % g.tiles_x, ty = prim / g.tiles_x;

@@ -10,6 +10,9 @@
 //   embree-tri          triangle mesh, default scene flags, RTC_BUILD_QUALITY_MEDIUM
 //   embree-tri-compact  the same with RTC_SCENE_FLAG_COMPACT | RTC_SCENE_FLAG_ROBUST
 //   embree-quad         RTC_GEOMETRY_TYPE_QUAD; only when every face of every mesh is a quad
+//   embree-quad-pairs   RTC_GEOMETRY_TYPE_QUAD over slimrt's triangle pairs (slim::pair_quads, the
+//                       pairing of bvh8-pairs), unpaired triangles as (v0, v1, v2, v2): what
+//                       Embree's own quad leaves make of the same pairs; any mesh
 //   embree-grid         RTC_GEOMETRY_TYPE_GRID; only for "grid scenes" (see below)
 // A configuration that does not apply throws slim::Error("<config>: does not apply: <why>").
 //
@@ -36,7 +39,8 @@
 // rtcCommitScene (BVH nodes, Embree's own leaf/primitive copies, allocator blocks);
 // geometry_bytes = the shared vertex, index and RTCGrid buffers Embree reads (the monitor does not
 // see shared buffers), vertex buffers including their 16 bytes of end padding; other_bytes = the
-// Embree primID -> input face table (absent when the mapping is the identity).
+// Embree primID -> input face table (absent when the mapping is the identity; for
+// embree-quad-pairs the two faces and corner bytes of each quad).
 #pragma once
 
 #include <cstdint>
@@ -69,7 +73,7 @@ class EmbreeScene {
   double build_seconds() const;  // buffer set-up + rtcCommitScene (not device creation)
   Box3f bounds() const;          // Embree's scene bounds
 
-  // "embree-tri", "embree-tri-compact", "embree-quad", "embree-grid".
+  // "embree-tri", "embree-tri-compact", "embree-quad", "embree-quad-pairs", "embree-grid".
   static const std::vector<std::string>& config_names();
   static bool is_config(const std::string& name);
   // The widest kernels Embree selected on this CPU: "avx512" when it supports native 16-wide

@@ -14,6 +14,7 @@
 
 #include "bench_runner.h"
 #include "embree_scene.h"
+#include "slimrt/pairing.h"
 #include "test_util.h"
 
 using namespace slim;
@@ -176,6 +177,44 @@ TEST(BenchEmbree, QuadAndGridMatchTrianglesOnGridScenes) {
     EmbreeScene quad(ptrs(m), "embree-quad");
     EXPECT_EQ(quad.memory().geometry_bytes, m.positions.size() * 12 + 16 + m.face_count() * 16);
     EXPECT_EQ(quad.memory().other_bytes, 0u);
+  }
+}
+
+// embree-quad-pairs: Embree's quads over slimrt's pairs give bvh8-pairs' hits (same faces, t),
+// with u, v of the input fan triangle and its orientation (as bvh8-tri4v reports them), on a
+// sphere the heuristic pairs (some windings flipped: the second triangle's shared edge runs
+// either way) and on a terrain the pre-scan keeps in input order.
+TEST(BenchEmbree, QuadPairsMatchPairsAndTriangles) {
+  PolyMesh sphere = icosphere(5);
+  for (uint32_t f = 0; f < sphere.face_count(); f += 5)
+    std::swap(sphere.face_indices[3 * f + 1], sphere.face_indices[3 * f + 2]);
+  for (const PolyMesh& m : {sphere, load("terrain:64")}) {
+    EmbreeScene e(ptrs(m), "embree-quad-pairs");
+    Scene pairs = Scene::build(m, BuildOptions::from_config("bvh8-pairs"));
+    Comparison c = compare(e, pairs, m.bounds(), 20000, 256);
+    EXPECT_GT(c.both_hit, 15000u) << m.name;
+    EXPECT_LE(c.rays - c.agree, c.rays / 10000) << m.name;
+    EXPECT_GE(c.same_face, c.both_hit - c.both_hit / 1000) << m.name;
+    Scene tri = Scene::build(m, BuildOptions::from_config("bvh8-tri4v"));
+    Rng rng(5);
+    int checked = 0;
+    for (int i = 0; i < 20000; ++i) {
+      Ray r = random_ray(rng, m.bounds());
+      Hit a = e.intersect(r), b = tri.intersect(r);
+      if (!a.valid() || !b.valid() || a.primID != b.primID) continue;
+      if (std::min(std::min(a.u, a.v), std::min(b.u, b.v)) < 0.01f) continue;
+      ++checked;
+      EXPECT_GT(dot(a.Ng, b.Ng), 0.0f) << m.name;
+      EXPECT_NEAR(a.u, b.u, 1e-3f) << m.name;
+      EXPECT_NEAR(a.v, b.v, 1e-3f) << m.name;
+    }
+    EXPECT_GT(checked, 1000) << m.name;
+    // Memory: the vertices (+16 B), 16 B per quad, and 10 B per quad of face and corner tables.
+    const PairingStats ps = pairing_stats(m);
+    const uint64_t quads = ps.pairs + ps.unpaired;
+    EXPECT_EQ(e.memory().geometry_bytes, m.positions.size() * 12 + 16 + quads * 16) << m.name;
+    EXPECT_EQ(e.memory().other_bytes, quads * 10) << m.name;
+    EXPECT_GT(e.memory().bvh_bytes, 0u);
   }
 }
 

@@ -758,3 +758,64 @@ INSTANTIATE_TEST_SUITE_P(Pair, PairScans,
                                            "nefertiti.obj.xz", "koala.obj.xz", "ogre.obj.xz"));
 
 }  // namespace
+
+// pair_quads (the pairs as Embree-order quads): every fan triangle of the mesh in exactly one
+// quad, triangle 0 = (v0, v1, v3) and triangle 1 = (v2, v3, v1) holding the fan triangle's
+// vertices, corner[h][k] naming the quad corner of fan corner k; lone triangles have v2 == v3;
+// as many pairs as pairing_stats reports. On a jittered grid with a third of the triangles
+// flipped (inconsistent windings: b's shared edge runs either way) and on fans of n-gons.
+TEST(Pairing, PairQuadsCoverEveryFanTriangleOnce) {
+  PolyMesh flipped = jittered_grid(24, 5);
+  for (uint32_t f = 0; f < flipped.face_count(); f += 3)
+    std::swap(flipped.face_indices[3 * f + 1], flipped.face_indices[3 * f + 2]);
+  PolyMesh fans;
+  Rng rng(6);
+  for (int f = 0; f < 200; ++f) {
+    const int n = 3 + f % 4;
+    const Vec3f ctr(rng.uniform(), rng.uniform(), rng.uniform());
+    const uint32_t base = uint32_t(fans.positions.size());
+    for (int k = 0; k < n; ++k) {
+      const float ang = 6.2831853f * float(k) / float(n);
+      fans.positions.push_back(ctr + Vec3f(std::cos(ang), std::sin(ang), 0.2f * rng.uniform()));
+      fans.face_indices.push_back(base + uint32_t(k));
+    }
+    fans.face_sizes.push_back(uint32_t(n));
+  }
+  for (const PolyMesh* m : {&flipped, &fans}) {
+    std::vector<uint64_t> first(m->face_count() + 1, 0);
+    for (uint32_t f = 0; f < m->face_count(); ++f) first[f + 1] = first[f] + m->face_sizes[f];
+    std::set<std::pair<uint32_t, uint32_t>> seen;  // (face, fan)
+    uint64_t lone = 0;
+    const std::vector<PairedQuad> quads = pair_quads(*m);
+    for (const PairedQuad& q : quads) {
+      const uint32_t tri[2][3] = {{q.v[0], q.v[1], q.v[3]}, {q.v[2], q.v[3], q.v[1]}};
+      for (int h = 0; h < 2; ++h) {
+        if (h == 1 && q.face[1] == kInvalidID) {
+          EXPECT_EQ(q.v[2], q.v[3]);
+          ++lone;
+          continue;
+        }
+        ASSERT_LT(q.face[h], m->face_count());
+        ASSERT_LT(q.fan[h] + 2, m->face_sizes[q.face[h]]);
+        EXPECT_TRUE(seen.insert({q.face[h], q.fan[h]}).second) << "fan triangle in two quads";
+        const uint32_t* c = &m->face_indices[first[q.face[h]]];
+        const uint32_t fan[3] = {c[0], c[q.fan[h] + 1], c[q.fan[h] + 2]};
+        for (int k = 0; k < 3; ++k) {
+          ASSERT_LT(q.corner[h][k], 4);
+          EXPECT_EQ(q.v[q.corner[h][k]], fan[k]) << "face " << q.face[h] << " corner " << k;
+          // Quad corners of triangle h: the same three vertices.
+          EXPECT_TRUE(std::count(tri[h], tri[h] + 3, fan[k]) == 1);
+        }
+      }
+      if (q.face[1] != kInvalidID) {  // triangle 0 keeps its input winding
+        const int c1 = q.corner[0][1], c2 = q.corner[0][2];
+        const int pos1 = c1 == 0 ? 0 : c1 == 1 ? 1 : 2, pos2 = c2 == 0 ? 0 : c2 == 1 ? 1 : 2;
+        EXPECT_EQ((pos2 - pos1 + 3) % 3, 1);
+      }
+    }
+    EXPECT_EQ(seen.size(), m->fan_triangle_count());
+    const PairingStats s = pairing_stats(*m);
+    EXPECT_EQ(quads.size(), s.pairs + s.unpaired);
+    EXPECT_EQ(lone, s.unpaired);
+  }
+}

@@ -10,6 +10,7 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 #include "slimrt/mesh.h"
 
@@ -59,5 +60,26 @@ struct PairingStats {
 // mesh, see check_mesh) and returns the figures. The heuristic is always run once for
 // heuristic_paired_fraction; pairing_s times the path Scene::build takes.
 PairingStats pairing_stats(const PolyMesh& mesh, const PairingOptions& opt = {});
+
+// One triangle pair of the pairing as a quad, for renderers with quad primitives or dual-triangle
+// units. The corners are in the order of Embree's RTC_GEOMETRY_TYPE_QUAD: triangle 0 is
+// (v[0], v[1], v[3]) and triangle 1 is (v[2], v[3], v[1]), sharing the diagonal v[1]-v[3];
+// triangle 0 keeps its input winding, triangle 1 keeps it when the mesh is consistently oriented.
+// A triangle left unpaired is (v[0], v[1], v[2], v[2]) (triangle 1 degenerate, face[1] =
+// kInvalidID). face[h] is the input face of triangle h and fan[h] its fan triangle in that face
+// (input corners 0, fan + 1, fan + 2); corner[h][k] is the quad corner (0..3) holding that fan
+// triangle's corner k, so that a hit's weights can be returned for the input corners.
+struct PairedQuad {
+  uint32_t v[4];
+  uint32_t face[2];
+  uint32_t fan[2];
+  uint8_t corner[2][3];
+};
+
+// The pairs and unpaired triangles Scene::build uses for bvh8-pairs (the fan triangles of the
+// mesh paired with `opt`) as quads, pairs first (ascending by their first triangle), then the
+// unpaired triangles. Vertex indices are the mesh's; faces with a NaN/Inf vertex are skipped.
+// Throws slim::Error on a malformed mesh (check_mesh).
+std::vector<PairedQuad> pair_quads(const PolyMesh& mesh, const PairingOptions& opt = {});
 
 }  // namespace slim

@@ -47,6 +47,7 @@
 #include "core/simd_ext.h"
 #include "mesh/triangulate.h"
 #include "slimrt/error.h"
+#include "slimrt/scene.h"
 
 namespace slim {
 
@@ -1071,6 +1072,69 @@ PairingStats pairing_stats(const PolyMesh& mesh, const PairingOptions& opt) {
     s.window2_paired_fraction = in.tri_count ? double(2 * nw) / double(in.tri_count) : 0.0;
   }
   return s;
+}
+
+std::vector<PairedQuad> pair_quads(const PolyMesh& mesh, const PairingOptions& opt) {
+  check_mesh(mesh);
+  TriangleMesh tm = triangulate_fan({&mesh});
+  PairingInput in{tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(),
+                  tm.geom_ids.data()};
+  const PairingResult r = pair_triangles(in, opt);
+  // Fan index of each triangle: a face's fan triangles are consecutive (triangulate_fan).
+  const uint64_t T = tm.tri_count();
+  std::vector<uint32_t> fan(T);
+  for (uint64_t t = 0; t < T; ++t)
+    fan[t] = t > 0 && tm.prim_ids[t - 1] == tm.prim_ids[t] ? fan[t - 1] + 1 : 0;
+  std::vector<PairedQuad> out;
+  out.reserve(r.pairs.size() + r.unpaired.size());
+  // Quad corner of each of the triangle's input corners, the triangle's corners being at quad
+  // corners q[0..2] in its own order.
+  auto set_half = [&](PairedQuad& q, int h, uint32_t t, const int qc[3]) {
+    q.face[h] = tm.prim_ids[t];
+    q.fan[h] = fan[t];
+    for (int k = 0; k < 3; ++k) q.corner[h][k] = uint8_t(qc[k]);
+  };
+  for (const TrianglePair& p : r.pairs) {
+    const uint32_t* ta = &tm.tris[3 * size_t(p.a)];
+    const uint32_t* tb = &tm.tris[3 * size_t(p.b)];
+    PairedQuad q;
+    // Triangle 0 = (v0, v1, v3) = a's corners (ea + 2, ea, ea + 1): its own winding.
+    q.v[0] = ta[(p.ea + 2) % 3];
+    q.v[1] = ta[p.ea];
+    q.v[3] = ta[(p.ea + 1) % 3];
+    q.v[2] = tb[(p.eb + 2) % 3];
+    int qa[3];
+    qa[(p.ea + 2) % 3] = 0;
+    qa[p.ea] = 1;
+    qa[(p.ea + 1) % 3] = 3;
+    set_half(q, 0, p.a, qa);
+    // b's shared corners eb, eb + 1 lie on v1 and v3 (by index, or by position with weld or
+    // coordinate keys): the one equal to v1 (or at its position) is v1.
+    const uint32_t b0 = tb[p.eb];
+    const bool b0_is_v1 =
+        b0 == q.v[1] ||
+        (b0 != q.v[3] && std::memcmp(&tm.vertices[b0], &tm.vertices[q.v[1]], 12) == 0);
+    int qb[3];
+    qb[(p.eb + 2) % 3] = 2;
+    qb[p.eb] = b0_is_v1 ? 1 : 3;
+    qb[(p.eb + 1) % 3] = b0_is_v1 ? 3 : 1;
+    set_half(q, 1, p.b, qb);
+    out.push_back(q);
+  }
+  for (uint32_t t : r.unpaired) {
+    const uint32_t* tt = &tm.tris[3 * size_t(t)];
+    PairedQuad q;
+    q.v[0] = tt[0];
+    q.v[1] = tt[1];
+    q.v[2] = q.v[3] = tt[2];
+    const int qc[3] = {0, 1, 3};
+    set_half(q, 0, t, qc);
+    q.face[1] = kInvalidID;
+    q.fan[1] = 0;
+    for (int k = 0; k < 3; ++k) q.corner[1][k] = 0;
+    out.push_back(q);
+  }
+  return out;
 }
 
 }  // namespace slim

@@ -438,3 +438,27 @@ TEST(BenchCli, UnknownConfigFails) {
       std::string(SLIM_CLI_PATH) + " bench terrain:4 --config bvh9 > /dev/null 2>&1";
   EXPECT_NE(std::system(cmd.c_str()), 0);
 }
+
+// `slimrt info SCENE --pairs --json`: the top-level names other programs read (Issue 5), and
+// --repeat's later calls.
+TEST(InfoCli, PairsJsonNames) {
+  const std::string json_path = (std::filesystem::temp_directory_path() /
+                                 ("slimrt_info_pairs_" + std::to_string(getpid()) + ".json"))
+                                    .string();
+  const std::string cmd =
+      std::string(SLIM_CLI_PATH) + " info torus:16 --pairs --json --repeat 3 > " + json_path;
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  std::ifstream in(json_path);
+  const nlohmann::json j = nlohmann::json::parse(in);
+  std::filesystem::remove(json_path);
+  EXPECT_EQ(j["triangles"].get<uint64_t>(), 2u * 16 * 8);
+  EXPECT_DOUBLE_EQ(j["paired_fraction"].get<double>(), 1.0);  // quads, kept by the pre-scan
+  EXPECT_DOUBLE_EQ(j["window2_paired_fraction"].get<double>(), 1.0);
+  EXPECT_GE(j["pairing_s"].get<double>(), 0.0);
+  EXPECT_GE(j["pairing_later_s"].get<double>(), 0.0);
+  EXPECT_EQ(j["pairing_later_runs"].get<int>(), 2);
+  EXPECT_EQ(j["pairing"]["pairs"].get<uint64_t>(), 16u * 8);
+  const std::string bad =
+      std::string(SLIM_CLI_PATH) + " info torus:16 --pairs --repeat 0 2>/dev/null";
+  EXPECT_NE(std::system(bad.c_str()), 0);
+}

@@ -1,4 +1,4 @@
-// slimrt info SCENE [--json] [--accel CONFIG] [--pairs] [--costa] [--grids]
+// slimrt info SCENE [--json] [--accel CONFIG] [--pairs [--repeat K]] [--costa] [--grids]
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <nlohmann/json.hpp>
@@ -25,6 +25,11 @@ int cmd_info(int argc, char** argv) {
   app.add_flag("--json", json, "print one JSON object");
   app.add_option("--accel", accel, "build this configuration and print its statistics");
   app.add_flag("--pairs", pairs, "triangle pairing statistics (fast-triangle-pairing)");
+  int repeat = 1;
+  app.add_option("--repeat", repeat,
+                 "--pairs: run the pairing K times; pairing_s is the first call, "
+                 "pairing_later_s the median of the others")
+      ->check(CLI::Range(1, 1000));
   app.add_flag("--costa", costa, "quantized n-gon mesh sizes (Costa et al.)");
   app.add_flag("--grids", grids, "grid conversion and lossy grid error statistics");
   try {
@@ -84,10 +89,10 @@ int cmd_info(int argc, char** argv) {
     if (!json) {
       std::printf("\n%s: built in %.3f s over %llu primitives\n", opt.config_name().c_str(),
                   st.build_seconds, (unsigned long long)st.primitives);
-      std::printf("  memory: geometry %llu B, bvh %llu B, other %llu B, total %llu B = %.2f B/triangle\n",
-                  (unsigned long long)m.geometry_bytes, (unsigned long long)m.bvh_bytes,
-                  (unsigned long long)m.other_bytes, (unsigned long long)m.total(),
-                  m.bytes_per_triangle());
+      std::printf(
+          "  memory: geometry %llu B, bvh %llu B, other %llu B, total %llu B = %.2f B/triangle\n",
+          (unsigned long long)m.geometry_bytes, (unsigned long long)m.bvh_bytes,
+          (unsigned long long)m.other_bytes, (unsigned long long)m.total(), m.bytes_per_triangle());
       for (const auto& [k, v] : st.details) std::printf("  %-24s %.6g\n", k.c_str(), v);
       std::printf("  validate: %s%s\n", why.empty() ? "ok" : "FAILED: ", why.c_str());
     }
@@ -96,7 +101,7 @@ int cmd_info(int argc, char** argv) {
       return 1;
     }
   }
-  if (pairs) info_pairs(mesh, json, out);
+  if (pairs) info_pairs(mesh, json, repeat, out);
   if (costa) info_costa(mesh, json, out);
   if (grids) info_grids(mesh, json, out);
   if (json) std::printf("%s\n", out.dump(2).c_str());

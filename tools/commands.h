@@ -16,7 +16,8 @@ int cmd_verify(int argc, char** argv);  // cmd_verify.cpp
 
 // `slimrt info` sections of the technique issues, each in its own file (info_*.cpp). Each
 // prints a human-readable section to stdout, or fills `out` when json is true.
-void info_pairs(const PolyMesh& mesh, bool json, nlohmann::json& out);  // info_pairs.cpp
+// info_pairs.cpp; repeat >= 2 also times repeat - 1 later calls of the pairing
+void info_pairs(const PolyMesh& mesh, bool json, int repeat, nlohmann::json& out);
 void info_costa(const PolyMesh& mesh, bool json, nlohmann::json& out);  // info_costa.cpp
 void info_grids(const PolyMesh& mesh, bool json, nlohmann::json& out);  // info_grids.cpp
 

@@ -390,3 +390,37 @@ TEST(RobustLimits, RaysStartingOnASurface) {
     }
   }
 }
+
+// Tiny ray directions: t ~ distance / |dir| can reach 1e30 with coordinates within the supported
+// range, where the float T = U az + V bz + W cz of the watertight test overflows. Such a hit is
+// re-evaluated in double (src/core/watertight.h): every configuration reports the right finite t.
+// Directions below kMinDirection are zero directions (a miss).
+TEST(RobustLimits, TinyDirectionsGiveFiniteT) {
+  PolyMesh m;
+  m.name = "far wall";
+  const float x = 1e10f, e = 1e10f;
+  m.positions = {{x, -e, -e}, {x, e, -e}, {x, e, e}, {x, -e, e}};
+  m.face_sizes = {4};
+  m.face_indices = {0, 1, 2, 3};
+  int built = 0;
+  for (const std::string& c : all_config_names()) {
+    SCOPED_TRACE(c);
+    Scene s;
+    if (!build_or_skip(m, c, s)) continue;
+    ++built;
+    for (const Vec3f& o : {Vec3f(0, 0, 0), Vec3f(0, 1e9f, -3e9f)}) {
+      const Hit h = s.intersect(make_ray(o, {1e-17f, 0, 0}));
+      ASSERT_TRUE(h.valid());
+      EXPECT_TRUE(std::isfinite(h.t));
+      EXPECT_NEAR(h.t / 1e27f, 1.0f, 1e-4f);  // (1e10 - 0) / 1e-17; T ~ 1e48 overflows
+      EXPECT_TRUE(s.occluded(make_ray(o, {1e-17f, 0, 0})));
+      // 1e-30: below kMinDirection, a zero direction (a miss).
+      EXPECT_FALSE(s.intersect(make_ray(o, {1e-30f, 0, 0})).valid());
+      // Far away with the smallest direction: t = 2e12 / 1e-18 = 2e30, T ~ 1e55 overflows.
+      const Hit h2 = s.intersect(make_ray(o - Vec3f(1e12f, 0, 0), {kMinDirection, 0, 0}));
+      ASSERT_TRUE(h2.valid());
+      EXPECT_NEAR(h2.t / ((x - (o.x - 1e12f)) / kMinDirection), 1.0f, 1e-4f);
+    }
+  }
+  EXPECT_GE(built, 20);
+}

@@ -32,8 +32,14 @@ constexpr uint32_t kInvalidID = 0xffffffffu;
 constexpr float kMaxCoordinate = 1e12f;
 constexpr float kMinExtent = 1e-12f;
 
-// A ray segment [tnear, tfar]. Rays with a NaN or zero direction, a NaN origin or one beyond
-// +-kMaxCoordinate, or tnear > tfar (or NaN bounds) never hit anything.
+// Directions whose largest component is below kMinDirection in magnitude count as zero
+// directions: t = distance / |dir| would reach 1e30 and beyond, past what the float ray setup
+// resolves (the box test's reciprocals are clamped at 1 / kMinDirection).
+constexpr float kMinDirection = 1e-18f;
+
+// A ray segment [tnear, tfar]. Rays with a NaN or zero direction (below kMinDirection), a NaN
+// origin or one beyond +-kMaxCoordinate, or tnear > tfar (or NaN bounds) never hit anything. A
+// hit is reported with a finite t: one whose t would exceed the float range is no hit.
 struct Ray {
   Vec3f org;
   float tnear = 0.0f;

@@ -41,7 +41,8 @@ struct RaySetupBounds {
 };
 
 // Prepares a ray. Returns false for rays that cannot hit anything: NaN/Inf origin, NaN or zero
-// direction, NaN bounds or tnear > tfar (documented behaviour: a miss).
+// direction (every component below kMinDirection), NaN bounds or tnear > tfar (documented
+// behaviour: a miss).
 SLIM_INLINE bool make_trav_ray(const Ray& r, const RaySetupBounds& sb, TravRay& tr) {
   using namespace simd;
   static_assert(offsetof(Ray, tnear) == 12 && offsetof(Ray, dir) == 16 && offsetof(Ray, tfar) == 28,
@@ -54,7 +55,8 @@ SLIM_INLINE bool make_trav_ray(const Ray& r, const RaySetupBounds& sb, TravRay& 
       ((abs(o4) <= vfloat4(kMaxCoordinate)) & (abs(d4) <= vfloat4(3.4028235e38f))).mask();
   if ((ok & 7) != 7) return false;
   if (!(r.tnear <= r.tfar)) return false;  // also false for NaN bounds
-  if (((d4 == vfloat4(0.0f)).mask() & 7) == 7) return false;
+  // Zero (or all below kMinDirection, slimrt/scene.h): no direction.
+  if (((abs(d4) < vfloat4(kMinDirection)).mask() & 7) == 7) return false;
   tr.org = r.org;
   tr.dir = r.dir;
   tr.tnear = r.tnear > 0.0f ? r.tnear : 0.0f;
@@ -62,7 +64,7 @@ SLIM_INLINE bool make_trav_ray(const Ray& r, const RaySetupBounds& sb, TravRay& 
   if (!(tr.tnear <= tr.tfar)) return false;
   // Zero components become tiny ones so that 1/d stays finite (the planes parallel to the ray
   // then give huge |t|, the right answer); the error bound below covers the change.
-  const vfloat4 tiny(1e-18f);
+  const vfloat4 tiny(kMinDirection);
   const vfloat4 d = select(abs(d4) < tiny, signmsk(d4) ^ tiny, d4);
   const vfloat4 rd = vfloat4(1.0f) / d;
   const vfloat4 c = o4 * rd;

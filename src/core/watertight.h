@@ -15,6 +15,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include "core/simd.h"
 #include "slimrt/math.h"
@@ -104,6 +105,8 @@ inline bool watertight_fallback(float ax, float ay, float az, float bx, float by
   double T = U * az + V * bz + W * cz;
   double td = T / det;
   if (!(td > double(tnear) && td <= double(tfar))) return false;
+  // A hit beyond the float range (a tiny direction: t ~ distance / |dir|) is not reported.
+  if (!(td <= double(std::numeric_limits<float>::max()))) return false;
   t = float(td);
   u = float(V / det);
   v = float(W / det);
@@ -134,6 +137,9 @@ SLIM_INLINE bool intersect_triangle(const RayVertex<float>& a, const RayVertex<f
   t = T * rcp;
   u = V * rcp;
   v = W * rcp;
+  if (t == kInf)  // T overflowed (see intersect_triangles): exact in double, or no hit
+    return detail::watertight_fallback(a.x, a.y, a.z, b.x, b.y, b.z, c.x, c.y, c.z, tnear, tfar, t,
+                                       u, v);
   return t > tnear && t <= tfar;
 }
 
@@ -148,7 +154,7 @@ SLIM_INLINE uint32_t intersect_triangles(const RayVertex<VF>& a, const RayVertex
   VF U = c.x * b.y - c.y * b.x;
   VF V = a.x * c.y - a.y * c.x;
   VF W = b.x * a.y - b.y * a.x;
-  uint32_t zeros = ((U == zero) | (V == zero) | (W == zero)).mask() & valid;
+  uint32_t zeros = ((U == zero) | (V == zero) | (W == zero)).mask() & valid;  // and overflows
   uint32_t neg = ((U < zero) | (V < zero) | (W < zero)).mask();
   uint32_t pos = ((U > zero) | (V > zero) | (W > zero)).mask();
   uint32_t m = valid & ~zeros & ~(neg & pos);
@@ -164,9 +170,17 @@ SLIM_INLINE uint32_t intersect_triangles(const RayVertex<VF>& a, const RayVertex
       u = V * rcp;
       v = W * rcp;
       m &= ((t > VF(tnear)) & (t <= VF(tfar))).mask();
+      // T = U az + V bz + W cz overflows to +inf when the ray-space depths az = (pz - oz) / dz
+      // are huge: a far triangle and a tiny direction (t ~ distance / |dir| up to ~1e38, and
+      // tfar = +inf lets t = inf through). Those lanes are re-evaluated in double below: the
+      // right t, or no hit if t is beyond the float range.
+      const uint32_t over = m & (t == VF(kInf)).mask();
+      m &= ~over;
+      zeros |= over;
     }
   }
-  if (zeros) {  // rare: exact zeros in an edge function, re-evaluate those lanes in double
+  if (zeros) {  // rare: exact zeros in an edge function (or an overflowed T, above): re-evaluate
+                // those lanes in double
     constexpr int N = sizeof(VF) / sizeof(float);
     alignas(32) float ax[N], ay[N], az[N], bx[N], by[N], bz[N], cx[N], cy[N], cz[N];
     alignas(32) float tt[N], uu[N], vv[N];

@@ -218,9 +218,11 @@ void EmbreeScene::Impl::add_quads(const PolyMesh& m, uint32_t geom_id) {
   attach(g, geom_id);
 }
 
-// The triangle pairs of slimrt's pairing (the same as bvh8-pairs: slim::pair_quads with the
-// default options) as Embree quads, lone triangles as (v0, v1, v2, v2). The pairing's time is
-// part of the build time, as in bvh8-pairs.
+// The triangle pairs of slimrt's pairing (slim::pair_quads with the default options) as Embree
+// quads, lone triangles as (v0, v1, v2, v2). Each mesh is paired on its own; bvh8-pairs pairs all
+// meshes in one call (pairs never span two meshes, but its pre-scan decides for all of them at
+// once), so the pairs are bvh8-pairs' for a single mesh. The pairing's time is part of the build
+// time, as in bvh8-pairs.
 void EmbreeScene::Impl::add_quad_pairs(const PolyMesh& m, uint32_t geom_id) {
   GeomInfo& info = geoms[geom_id];
   info.kind = Kind::QuadPairs;

@@ -10,9 +10,10 @@
 //   embree-tri          triangle mesh, default scene flags, RTC_BUILD_QUALITY_MEDIUM
 //   embree-tri-compact  the same with RTC_SCENE_FLAG_COMPACT | RTC_SCENE_FLAG_ROBUST
 //   embree-quad         RTC_GEOMETRY_TYPE_QUAD; only when every face of every mesh is a quad
-//   embree-quad-pairs   RTC_GEOMETRY_TYPE_QUAD over slimrt's triangle pairs (slim::pair_quads, the
-//                       pairing of bvh8-pairs), unpaired triangles as (v0, v1, v2, v2): what
-//                       Embree's own quad leaves make of the same pairs; any mesh
+//   embree-quad-pairs   RTC_GEOMETRY_TYPE_QUAD over slimrt's triangle pairs (slim::pair_quads per
+//                       mesh: bvh8-pairs' pairs for a single mesh), unpaired triangles as
+//                       (v0, v1, v2, v2): what Embree's own quad leaves make of the same pairs;
+//                       any mesh
 //   embree-grid         RTC_GEOMETRY_TYPE_GRID; only for "grid scenes" (see below)
 // A configuration that does not apply throws slim::Error("<config>: does not apply: <why>").
 //

@@ -14,7 +14,8 @@
 //   - build either succeeds or throws slim::Error with a message (coordinates beyond
 //     kMaxCoordinate, a configuration that does not apply); validate() accepts what was built;
 //   - every hit names a face of the mesh, with tnear <= t <= tfar, finite t; occluded() is true
-//     exactly when intersect() hits; a ray with a NaN or zero direction or a NaN origin misses;
+//     exactly when intersect() hits; a ray with a NaN or zero direction (below kMinDirection) or a
+//     NaN origin misses;
 //   - lattice input, lossless configurations (all but lossy-grid* and costa*, which intersect
 //     their own decoded triangles): against a double-precision brute force over the fan
 //     triangles with margins relative to the scene's scale (away from edges, grazing angles and
@@ -173,6 +174,36 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     for (int a = 0; a < 3; ++a) S = std::max(S, double(std::fabs(r.org[a])));
   const double tol = 1e-3 * S;
 
+  // The reference of each ray, once for all configurations (it depends on the ray and the fan
+  // triangles only): the nearest robust hit, and the fan triangles a hit may land on.
+  struct Candidate {
+    uint32_t face;
+    bool any_t;
+    double dist;
+  };
+  struct RayRef {
+    bool dead = false;
+    double nearest = INFINITY;  // the nearest robust hit's distance along the ray
+    uint32_t nearest_face = 0;
+    std::vector<Candidate> possible;
+  };
+  std::vector<RayRef> refs(rays.size());
+  for (size_t i = 0; i < rays.size(); ++i) {
+    const Ray& ray = rays[i];
+    RayRef& rr = refs[i];
+    rr.dead = !is_finite(ray.org) || std::isnan(ray.dir.x) || std::isnan(ray.dir.y) ||
+              std::isnan(ray.dir.z) ||
+              (std::fabs(ray.dir.x) < kMinDirection && std::fabs(ray.dir.y) < kMinDirection &&
+               std::fabs(ray.dir.z) < kMinDirection);
+    if (raw || !all_finite || rr.dead) continue;
+    const D3 o = d3(ray.org), d = d3(ray.dir);
+    for (const Fan& f : fans) {
+      const RefTest r = ref_test(f.p, o, d, S);
+      if (r.robust && r.dist < rr.nearest) rr.nearest = r.dist, rr.nearest_face = f.face;
+      if (r.possible) rr.possible.push_back({f.face, r.any_t, r.dist});
+    }
+  }
+
   for (const std::string& config : all_config_names()) {
     const BuildOptions opt = BuildOptions::from_config(config);
     Scene scene;
@@ -191,9 +222,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       const Hit h = scene.intersect(ray);
       const bool occ = scene.occluded(ray);
       SLIM_FUZZ_CHECK(occ == h.valid(), what + ": occluded() != intersect().valid()");
-      const bool dead = !is_finite(ray.org) || std::isnan(ray.dir.x) || std::isnan(ray.dir.y) ||
-                        std::isnan(ray.dir.z) ||
-                        (ray.dir.x == 0 && ray.dir.y == 0 && ray.dir.z == 0);
+      const RayRef& rr = refs[i];
+      const bool dead = rr.dead;
       if (dead) SLIM_FUZZ_CHECK(!h.valid(), what + ": a NaN/zero-direction ray hit");
       if (!h.valid()) {
         SLIM_FUZZ_CHECK(h.primID == kInvalidID, what + ": miss with a primID");
@@ -203,20 +233,14 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                         what + ": t out of [tnear, tfar]");
       }
       if (!oracle || dead) continue;
-      const D3 o = d3(ray.org), d = d3(ray.dir);
-      const double dl = len(d);
-      const double got = h.valid() ? double(h.t) * dl : INFINITY;
+      const double got = h.valid() ? double(h.t) * len(d3(ray.dir)) : INFINITY;
+      SLIM_FUZZ_CHECK(got <= rr.nearest + tol,
+                      what + ": passed over face " + std::to_string(rr.nearest_face) + " at " +
+                          std::to_string(rr.nearest) + " (got " + std::to_string(got) + ")");
       bool face_ok = !h.valid();
-      for (const Fan& f : fans) {
-        const RefTest r = ref_test(f.p, o, d, S);
-        if (r.robust)
-          SLIM_FUZZ_CHECK(got <= r.dist + tol,
-                          what + ": passed over face " + std::to_string(f.face) + " at " +
-                              std::to_string(r.dist) + " (got " + std::to_string(got) + ")");
-        if (h.valid() && f.face == h.primID && r.possible &&
-            (r.any_t || std::fabs(r.dist - got) <= tol))
+      for (const Candidate& c : rr.possible)
+        if (h.valid() && c.face == h.primID && (c.any_t || std::fabs(c.dist - got) <= tol))
           face_ok = true;
-      }
       SLIM_FUZZ_CHECK(face_ok, what + ": no fan triangle of face " + std::to_string(h.primID) +
                                    " at distance " + std::to_string(got));
     }

@@ -461,4 +461,6 @@ TEST(InfoCli, PairsJsonNames) {
   const std::string bad =
       std::string(SLIM_CLI_PATH) + " info torus:16 --pairs --repeat 0 2>/dev/null";
   EXPECT_NE(std::system(bad.c_str()), 0);
+  const std::string no_pairs = std::string(SLIM_CLI_PATH) + " info torus:16 --repeat 3 2>/dev/null";
+  EXPECT_NE(std::system(no_pairs.c_str()), 0);
 }

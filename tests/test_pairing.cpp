@@ -801,17 +801,19 @@ TEST(Pairing, PairQuadsCoverEveryFanTriangleOnce) {
         const uint32_t* c = &m->face_indices[first[q.face[h]]];
         const uint32_t fan[3] = {c[0], c[q.fan[h] + 1], c[q.fan[h] + 2]};
         for (int k = 0; k < 3; ++k) {
+          // Triangle 0 lies on quad corners 0, 1, 3 and triangle 1 on 2, 3, 1.
+          ASSERT_NE(q.corner[h][k], h == 0 ? 2 : 0);
           ASSERT_LT(q.corner[h][k], 4);
           EXPECT_EQ(q.v[q.corner[h][k]], fan[k]) << "face " << q.face[h] << " corner " << k;
           // Quad corners of triangle h: the same three vertices.
           EXPECT_TRUE(std::count(tri[h], tri[h] + 3, fan[k]) == 1);
         }
       }
-      if (q.face[1] != kInvalidID) {  // triangle 0 keeps its input winding
-        const int c1 = q.corner[0][1], c2 = q.corner[0][2];
-        const int pos1 = c1 == 0 ? 0 : c1 == 1 ? 1 : 2, pos2 = c2 == 0 ? 0 : c2 == 1 ? 1 : 2;
-        EXPECT_EQ((pos2 - pos1 + 3) % 3, 1);
-      }
+      // Triangle 0 keeps its input winding; so does triangle 1 in the consistently oriented fans.
+      // Position of each quad corner in (v0, v1, v3) and in (v2, v3, v1):
+      static constexpr int kPos[2][4] = {{0, 1, -1, 2}, {-1, 2, 0, 1}};
+      for (int h = 0; h < (m == &fans && q.face[1] != kInvalidID ? 2 : 1); ++h)
+        EXPECT_EQ((kPos[h][q.corner[h][1]] - kPos[h][q.corner[h][0]] + 3) % 3, 1) << h;
     }
     EXPECT_EQ(seen.size(), m->fan_triangle_count());
     const PairingStats s = pairing_stats(*m);

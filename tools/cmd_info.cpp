@@ -29,7 +29,8 @@ int cmd_info(int argc, char** argv) {
   app.add_option("--repeat", repeat,
                  "--pairs: run the pairing K times; pairing_s is the first call, "
                  "pairing_later_s the median of the others")
-      ->check(CLI::Range(1, 1000));
+      ->check(CLI::Range(1, 1000))
+      ->needs("--pairs");
   app.add_flag("--costa", costa, "quantized n-gon mesh sizes (Costa et al.)");
   app.add_flag("--grids", grids, "grid conversion and lossy grid error statistics");
   try {

@@ -65,10 +65,12 @@ PairingStats pairing_stats(const PolyMesh& mesh, const PairingOptions& opt = {})
 // units. The corners are in the order of Embree's RTC_GEOMETRY_TYPE_QUAD: triangle 0 is
 // (v[0], v[1], v[3]) and triangle 1 is (v[2], v[3], v[1]), sharing the diagonal v[1]-v[3];
 // triangle 0 keeps its input winding, triangle 1 keeps it when the mesh is consistently oriented.
-// A triangle left unpaired is (v[0], v[1], v[2], v[2]) (triangle 1 degenerate, face[1] =
-// kInvalidID). face[h] is the input face of triangle h and fan[h] its fan triangle in that face
-// (input corners 0, fan + 1, fan + 2); corner[h][k] is the quad corner (0..3) holding that fan
-// triangle's corner k, so that a hit's weights can be returned for the input corners.
+// With weld or coordinate keys, v[1] and v[3] are the first triangle's vertex indices and the
+// second triangle's shared corners map to them by position. A triangle left unpaired is (v[0],
+// v[1], v[2], v[2]) (triangle 1 degenerate, face[1] = kInvalidID). face[h] is the input face of
+// triangle h and fan[h] its fan triangle in that face (input corners 0, fan + 1, fan + 2);
+// corner[h][k] is the quad corner (0..3) holding that fan triangle's corner k, so that a hit's
+// weights can be returned for the input corners.
 struct PairedQuad {
   uint32_t v[4];
   uint32_t face[2];

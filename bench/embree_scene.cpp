@@ -127,6 +127,24 @@ struct EmbreeScene::Impl {
     check("geometry set-up");
   }
 
+  // The mesh's vertices and `idx` (`per` = 3 indices per triangle, or 4 per quad) as shared
+  // buffers of an Embree triangle or quad geometry, attached as geom_id.
+  void add_indexed(const PolyMesh& m, std::vector<uint32_t>&& idx, unsigned per, uint32_t geom_id) {
+    std::vector<float>& vb = add_vertex_buffer(m.positions.size());
+    std::copy_n(&m.positions[0].x, 3 * m.positions.size(), vb.data());
+    const size_t prims = idx.size() / per;
+    index_buffers.push_back(std::move(idx));
+    mem.geometry_bytes += index_buffers.back().size() * sizeof(uint32_t);
+    RTCGeometry g =
+        rtcNewGeometry(device, per == 3 ? RTC_GEOMETRY_TYPE_TRIANGLE : RTC_GEOMETRY_TYPE_QUAD);
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vb.data(), 0,
+                               3 * sizeof(float), m.positions.size());
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0,
+                               per == 3 ? RTC_FORMAT_UINT3 : RTC_FORMAT_UINT4,
+                               index_buffers.back().data(), 0, per * sizeof(uint32_t), prims);
+    attach(g, geom_id);
+  }
+
   void add_triangles(const PolyMesh& m, uint32_t geom_id);
   void add_quads(const PolyMesh& m, uint32_t geom_id);
   void add_quad_pairs(const PolyMesh& m, uint32_t geom_id);
@@ -163,19 +181,7 @@ void EmbreeScene::Impl::add_triangles(const PolyMesh& m, uint32_t geom_id) {
     info.face_of_prim = std::move(faces);
     mem.other_bytes += info.face_of_prim.size() * sizeof(uint32_t);
   }
-  const size_t tris = idx.size() / 3;
-
-  std::vector<float>& vb = add_vertex_buffer(m.positions.size());
-  std::copy_n(&m.positions[0].x, 3 * m.positions.size(), vb.data());
-  index_buffers.push_back(std::move(idx));
-  mem.geometry_bytes += index_buffers.back().size() * sizeof(uint32_t);
-
-  RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vb.data(), 0,
-                             3 * sizeof(float), m.positions.size());
-  rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                             index_buffers.back().data(), 0, 3 * sizeof(uint32_t), tris);
-  attach(g, geom_id);
+  add_indexed(m, std::move(idx), 3, geom_id);
 }
 
 void EmbreeScene::Impl::add_quads(const PolyMesh& m, uint32_t geom_id) {
@@ -203,19 +209,7 @@ void EmbreeScene::Impl::add_quads(const PolyMesh& m, uint32_t geom_id) {
     info.face_of_prim = std::move(faces);
     mem.other_bytes += info.face_of_prim.size() * sizeof(uint32_t);
   }
-  const size_t quads = idx.size() / 4;
-
-  std::vector<float>& vb = add_vertex_buffer(m.positions.size());
-  std::copy_n(&m.positions[0].x, 3 * m.positions.size(), vb.data());
-  index_buffers.push_back(std::move(idx));
-  mem.geometry_bytes += index_buffers.back().size() * sizeof(uint32_t);
-
-  RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD);
-  rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vb.data(), 0,
-                             3 * sizeof(float), m.positions.size());
-  rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4,
-                             index_buffers.back().data(), 0, 4 * sizeof(uint32_t), quads);
-  attach(g, geom_id);
+  add_indexed(m, std::move(idx), 4, geom_id);
 }
 
 // The triangle pairs of slimrt's pairing (slim::pair_quads with the default options) as Embree
@@ -245,17 +239,7 @@ void EmbreeScene::Impl::add_quad_pairs(const PolyMesh& m, uint32_t geom_id) {
   }
   mem.other_bytes += quads.size() * (sizeof(info.pair_faces[0]) + sizeof(info.pair_corners[0]));
 
-  std::vector<float>& vb = add_vertex_buffer(m.positions.size());
-  std::copy_n(&m.positions[0].x, 3 * m.positions.size(), vb.data());
-  index_buffers.push_back(std::move(idx));
-  mem.geometry_bytes += index_buffers.back().size() * sizeof(uint32_t);
-
-  RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD);
-  rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vb.data(), 0,
-                             3 * sizeof(float), m.positions.size());
-  rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4,
-                             index_buffers.back().data(), 0, 4 * sizeof(uint32_t), quads.size());
-  attach(g, geom_id);
+  add_indexed(m, std::move(idx), 4, geom_id);
 }
 
 void EmbreeScene::Impl::add_grid(const PolyMesh& m, const QuadLattice& lat, uint32_t geom_id) {

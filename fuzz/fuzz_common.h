@@ -32,6 +32,17 @@ namespace slim::fuzz {
     if (!(cond)) ::slim::fuzz::fail(#cond, detail); \
   } while (0)
 
+// The fuzz input read byte by byte (the decoder and algorithm targets); zeros past its end.
+struct Reader {
+  const uint8_t* p;
+  size_t n;
+  uint8_t byte() { return n ? (--n, *p++) : 0; }
+  void bytes(void* out, size_t k) {
+    auto* o = static_cast<uint8_t*>(out);
+    for (size_t i = 0; i < k; ++i) o[i] = byte();
+  }
+};
+
 // A mesh a loader returned must pass check_mesh(); load() relies on it. The loaders document
 // that every result does, so a slim::Error here is a failure too.
 inline void check_loaded(const PolyMesh& m) {

@@ -29,15 +29,7 @@ namespace {
 
 using namespace slim;
 
-struct Reader {
-  const uint8_t* p;
-  size_t n;
-  uint8_t byte() { return n ? (--n, *p++) : 0; }
-  void bytes(void* out, size_t k) {
-    auto* o = static_cast<uint8_t*>(out);
-    for (size_t i = 0; i < k; ++i) o[i] = byte();
-  }
-};
+using fuzz::Reader;
 
 bool same_or_nan(float a, float b) {
   return fuzz::same_bits(a, b) || (std::isnan(a) && std::isnan(b));

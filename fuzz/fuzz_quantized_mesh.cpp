@@ -30,15 +30,7 @@ namespace {
 
 using namespace slim;
 
-struct Reader {
-  const uint8_t* p;
-  size_t n;
-  uint8_t byte() { return n ? (--n, *p++) : 0; }
-  void bytes(void* out, size_t k) {
-    auto* o = static_cast<uint8_t*>(out);
-    for (size_t i = 0; i < k; ++i) o[i] = byte();
-  }
-};
+using fuzz::Reader;
 
 void check_bit_array(Reader in) {
   const uint32_t width = in.byte() % 33;

@@ -36,14 +36,7 @@ namespace {
 
 using namespace slim;
 
-struct Reader {
-  const uint8_t* p;
-  size_t n;
-  uint8_t byte() { return n ? (--n, *p++) : 0; }
-  void bytes(void* out, size_t k) {
-    auto* o = static_cast<uint8_t*>(out);
-    for (size_t i = 0; i < k; ++i) o[i] = byte();
-  }
+struct Reader : fuzz::Reader {
   Vec3f lattice(float scale) {
     int8_t c[3];
     bytes(c, sizeof c);
@@ -126,7 +119,7 @@ bool own_geometry(const std::string& c) {
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  Reader rd{data, size};
+  Reader rd{{data, size}};
   const uint8_t flags = rd.byte();
   const bool raw = flags & 1;
   const float scale = std::ldexp(1.0f, int((flags >> 1) & 31) - 16);

@@ -6,7 +6,7 @@
 //
 // pairing_s is the process's first call (unless --accel built a configuration that pairs): its
 // scratch memory is fresh pages, whose first touch can cost more than the pairing itself on a VM
-// (measured here: 1.8-2.6 ms per MB of 2 MB pages the host has not backed yet, against 0.2 ms per
+// (measured here: 1.8-3.0 ms per MB of 2 MB pages the host has not backed yet, against 0.2 ms per
 // MB for pages the process freed a moment before). With --repeat K, pairing_later_s is the median
 // pairing time of K - 1 further calls, which run in memory the calls before have just freed (pages
 // the kernel recycles, no longer new to the host): the algorithm's throughput, page zeroing by the

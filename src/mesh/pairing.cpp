@@ -1108,12 +1108,8 @@ std::vector<PairedQuad> pair_quads(const PolyMesh& mesh, const PairingOptions& o
     qa[p.ea] = 1;
     qa[(p.ea + 1) % 3] = 3;
     set_half(q, 0, p.a, qa);
-    // b's shared corners eb, eb + 1 lie on v1 and v3 (by index, or by position with weld or
-    // coordinate keys): the one equal to v1 (or at its position) is v1.
-    const uint32_t b0 = tb[p.eb];
-    const bool b0_is_v1 =
-        b0 == q.v[1] ||
-        (b0 != q.v[3] && std::memcmp(&tm.vertices[b0], &tm.vertices[q.v[1]], 12) == 0);
+    // b's shared corners eb, eb + 1 lie on v1 = a's ea and v3 = a's ea + 1.
+    const bool b0_is_v1 = shared_edge_same_direction(tm.vertices.data(), ta, p.ea, tb, p.eb);
     int qb[3];
     qb[(p.eb + 2) % 3] = 2;
     qb[p.eb] = b0_is_v1 ? 1 : 3;

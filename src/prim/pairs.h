@@ -38,13 +38,13 @@
 #pragma once
 
 #include <cstdint>
-#include <cstring>
 #include <type_traits>
 
 #include "core/ray.h"
 #include "core/simd.h"
 #include "core/simd_ext.h"
 #include "core/watertight.h"
+#include "mesh/pairing.h"
 #include "prim/triangles.h"
 #include "slimrt/math.h"
 #include "slimrt/scene.h"
@@ -166,9 +166,7 @@ struct PairLeaf {
         const int eb = p.eb;
         q[3] = s.vertices[tb[(eb + 2) % 3]];
         // Does B's edge run q1 -> q2 (same direction as A's, an inconsistent winding) or back?
-        const uint32_t b0 = tb[eb];
-        const bool same_dir = b0 == ta[ea] || (b0 != ta[(ea + 1) % 3] &&
-                                               std::memcmp(&s.vertices[b0], &q[1], 12) == 0);
+        const bool same_dir = shared_edge_same_direction(s.vertices, ta, ea, tb, eb);
         const int pos_b0 = same_dir ? 0 : 1, pos_b1 = same_dir ? 1 : 0;
         order_b = uint8_t((pos_b0 << (2 * eb)) | (pos_b1 << (2 * ((eb + 1) % 3))) |
                           (2 << (2 * ((eb + 2) % 3))));

@@ -17,9 +17,7 @@
 #include <utility>
 
 #include "embree_scene.h"
-#include "slimrt/costa.h"
-#include "slimrt/grids.h"
-#include "slimrt/render.h"
+#include "slimrt/analysis.h"
 
 namespace slim::bench {
 
@@ -177,11 +175,6 @@ std::optional<double> detail(const SceneStats& st, const char* key) {
   return std::nullopt;
 }
 
-bool does_not_apply(const std::string& what) {
-  return what.find("does not apply") != std::string::npos ||
-         what.find("not implemented") != std::string::npos;
-}
-
 void progress(const BenchOptions& opt, const char* fmt, const std::string& a, const std::string& b,
               const std::string& c) {
   if (opt.progress) {
@@ -221,11 +214,9 @@ OwnGeometry own_geometry_from(const Tris& t) {
 std::optional<OwnGeometry> own_geometry(const std::vector<const PolyMesh*>& meshes,
                                         const std::string& config) {
   if (EmbreeScene::is_config(config)) return std::nullopt;  // Embree reads the input itself
-  BuildOptions bo = BuildOptions::from_config(config);
-  if (bo.geometry == Geometry::Quantized) return own_geometry_from(costa_triangles(meshes, bo));
-  if (bo.geometry == Geometry::Grids || bo.geometry == Geometry::LossyGrids ||
-      bo.geometry == Geometry::LossyGridsE2)
-    return own_geometry_from(grid_triangles(meshes, bo));
+  if (std::optional<DecodedTriangles> t =
+          decoded_triangles(meshes, BuildOptions::from_config(config)))
+    return own_geometry_from(*t);
   return std::nullopt;
 }
 
@@ -402,15 +393,18 @@ struct SceneRun {
         run_embree(row);
       else
         run_slim(row);
+    } catch (const NotApplicable& e) {
+      row = BenchRow{row.scene, row.config, row.triangles};
+      row.reason = e.what();
+      row.embree = EmbreeScene::is_config(config);
+      row.lossy = is_lossy_config(config);
     } catch (const Error& e) {
       row = BenchRow{row.scene, row.config, row.triangles};
       row.reason = e.what();
       row.embree = EmbreeScene::is_config(config);
       row.lossy = is_lossy_config(config);
-      if (!does_not_apply(row.reason)) {
-        row.build_failed = true;
-        error(row, row.reason);
-      }
+      row.build_failed = true;
+      error(row, row.reason);
     } catch (const std::exception& e) {
       row = BenchRow{row.scene, row.config, row.triangles};
       row.reason = std::string("failed: ") + e.what();
@@ -442,9 +436,8 @@ std::vector<std::string> default_configs() {
 }
 
 bool is_lossy_config(const std::string& name) {
-  if (name.rfind("lossy-grid", 0) == 0) return true;
-  if (name.rfind("costa-", 0) == 0) return name.find('V', 6) != std::string::npos;
-  return false;
+  const ConfigInfo* c = find_config(name);
+  return c && c->lossy;
 }
 
 void check_config_name(const std::string& name) {

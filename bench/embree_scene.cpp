@@ -365,19 +365,20 @@ EmbreeScene::EmbreeScene(const std::vector<const PolyMesh*>& meshes, const std::
       uint64_t non_quads = 0;
       for (uint32_t n : m.face_sizes) non_quads += n != 4;
       if (non_quads)
-        throw Error(config + ": does not apply: " + std::to_string(non_quads) + " non-quad faces" +
-                    (meshes.size() > 1 ? " in mesh " + std::to_string(g) : ""));
+        throw NotApplicable(config + ": does not apply: " + std::to_string(non_quads) +
+                            " non-quad faces" +
+                            (meshes.size() > 1 ? " in mesh " + std::to_string(g) : ""));
     } else if (impl->kind == Kind::Grids) {
       lattices[g] = detect_quad_lattice(m);
       if (!lattices[g].valid())
-        throw Error(config + ": does not apply: mesh " +
-                    (m.name.empty() ? std::to_string(g) : "'" + m.name + "'") +
-                    " is not a regular quad grid");
+        throw NotApplicable(config + ": does not apply: mesh " +
+                            (m.name.empty() ? std::to_string(g) : "'" + m.name + "'") +
+                            " is not a regular quad grid");
       uint64_t nonfinite = 0;
       for (const Vec3f& p : m.positions) nonfinite += !is_finite(p);
       if (nonfinite)
-        throw Error(config + ": does not apply: " + std::to_string(nonfinite) +
-                    " non-finite grid vertices");
+        throw NotApplicable(config + ": does not apply: " + std::to_string(nonfinite) +
+                            " non-finite grid vertices");
     }
   }
   if (meshes.size() > 0xffffffffull) throw Error("EmbreeScene: too many meshes");

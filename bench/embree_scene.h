@@ -15,7 +15,8 @@
 //                       (v0, v1, v2, v2): what Embree's own quad leaves make of the same pairs;
 //                       any mesh
 //   embree-grid         RTC_GEOMETRY_TYPE_GRID; only for "grid scenes" (see below)
-// A configuration that does not apply throws slim::Error("<config>: does not apply: <why>").
+// A configuration that does not apply throws slim::NotApplicable("<config>: does not apply:
+// <why>").
 //
 // Triangulation matches slimrt's fan (v0,v1,v2), (v0,v2,v3), ... per face; faces with a NaN/Inf
 // vertex are skipped. Quads are handed to Embree rotated to (v1,v2,v3,v0), because Embree splits a

@@ -112,10 +112,6 @@ RefTest ref_test(const Vec3f p[3], D3 o, D3 d, double S) {
   return r;
 }
 
-bool own_geometry(const std::string& c) {
-  return c.rfind("lossy-grid", 0) == 0 || c.rfind("costa", 0) == 0;
-}
-
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -208,7 +204,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     }
     std::string why;
     SLIM_FUZZ_CHECK(scene.validate(&why), config + ": validate: " + why);
-    const bool oracle = !raw && all_finite && !own_geometry(config);
+    const bool oracle = !raw && all_finite && !config_info(config).own_geometry;
     for (size_t i = 0; i < rays.size(); ++i) {
       const Ray& ray = rays[i];
       const std::string what = config + " ray " + std::to_string(i);

@@ -515,10 +515,10 @@ TEST_P(CostaConfigs, OtherNodeKindsAndLeafSizes) {
   const std::string combo = GetParam();
   PolyMesh a = mixed_mesh(700, 17);
   Decoded d = decode_geometry({&a}, combo);
-  for (Bvh bvh : {Bvh::Quantized8, Bvh::CompressedLeaf}) {
+  for (Nodes nodes : {Nodes::QBvh8, Nodes::CompressedLeaf}) {
     for (int leaf : {1, 4, 9}) {
       BuildOptions opt = BuildOptions::from_config(combo.empty() ? "costa" : "costa-" + combo);
-      opt.bvh = bvh;
+      opt.nodes = nodes;
       opt.max_leaf_size = leaf;
       Scene s = Scene::build(a, opt);
       std::string why;

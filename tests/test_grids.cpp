@@ -22,24 +22,27 @@ using namespace slim::test;
 
 namespace {
 
-// Every grid configuration: the uncompressed grid, both encodings of the Listing 1 layout, and
-// the shared-corner layout (selected by Bvh::CompressedLeafCompact).
+// Every grid configuration: the uncompressed grid and both encodings of the Listing 1 layout
+// under every node layout, and the shared-corner layout (compressed-leaf nodes only) with both
+// encodings.
 std::vector<BuildOptions> grid_configs() {
   std::vector<BuildOptions> v;
   for (const char* name : {"grid", "lossy-grid", "lossy-grid-e2"}) {
-    for (Bvh b : {Bvh::Bvh8, Bvh::Quantized8, Bvh::CompressedLeaf, Bvh::CompressedLeafCompact}) {
+    for (Nodes n : {Nodes::Bvh8, Nodes::QBvh8, Nodes::CompressedLeaf}) {
       BuildOptions o = BuildOptions::from_config(name);
-      o.bvh = b;
-      if (o.geometry == Geometry::Grids && b == Bvh::CompressedLeafCompact) continue;
+      o.nodes = n;
       v.push_back(o);
     }
+  }
+  for (GridEncoding e : {GridEncoding::Octahedral, GridEncoding::SharedExponent}) {
+    BuildOptions o = BuildOptions::from_config("lossy-grid-shared");
+    o.grid_encoding = e;
+    v.push_back(o);
   }
   return v;
 }
 
-std::string name_of(const BuildOptions& o) {
-  return o.config_name() + (o.bvh == Bvh::CompressedLeafCompact ? " (shared corners)" : "");
-}
+std::string name_of(const BuildOptions& o) { return o.config_name(); }
 
 // The decompressed triangles of a configuration as a triangle PolyMesh (face i = triangle i),
 // for the brute-force reference; face_map[i] = input face.
@@ -432,14 +435,11 @@ TEST(GridConversion, MixedMeshesLeftoversAndPairs) {
 
 // Hits of every grid configuration equal the brute-force reference run on its own decompressed
 // triangles (same face, same t); the lossless `grid` also equals the input's reference.
-// Both ways of storing leftovers (Scene::build picks one by memory; SLIM_GRID_LEFTOVERS forces).
-class GridLeftovers : public ::testing::TestWithParam<const char*> {
- protected:
-  void SetUp() override { setenv("SLIM_GRID_LEFTOVERS", GetParam(), 1); }
-  void TearDown() override { unsetenv("SLIM_GRID_LEFTOVERS"); }
-};
+// Both ways of storing leftovers (Scene::build picks one by memory; BuildOptions::grid_leftovers
+// forces one).
+class GridLeftoverPolicy : public ::testing::TestWithParam<slim::GridLeftovers> {};
 
-TEST_P(GridLeftovers, MatchReferenceOnDecompressedTriangles) {
+TEST_P(GridLeftoverPolicy, MatchReferenceOnDecompressedTriangles) {
   std::vector<PolyMesh> scenes;
   scenes.push_back(make_terrain(30));  // partial sub-grids: 31 = 4*7 + 3
   scenes.push_back(make_torus(22));
@@ -456,7 +456,8 @@ TEST_P(GridLeftovers, MatchReferenceOnDecompressedTriangles) {
   extra.positions.push_back({0.05f, 0.3f, 0.5f});
   for (uint32_t k = 0; k < 5; ++k) extra.face_indices.push_back(120 + k);
   extra.face_sizes.push_back(5);
-  for (const BuildOptions& opt : grid_configs()) {
+  for (BuildOptions opt : grid_configs()) {
+    opt.grid_leftovers = GetParam();
     for (size_t si = 0; si < scenes.size(); ++si) {
       std::vector<const PolyMesh*> meshes{&scenes[si]};
       if (si == 3) meshes.push_back(&extra);
@@ -491,7 +492,9 @@ TEST_P(GridLeftovers, MatchReferenceOnDecompressedTriangles) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Grid, GridLeftovers, ::testing::Values("grids", "triangles"));
+INSTANTIATE_TEST_SUITE_P(Grid, GridLeftoverPolicy,
+                         ::testing::Values(slim::GridLeftovers::Grids,
+                                           slim::GridLeftovers::Triangles));
 
 // Lossless grids intersect exactly the fan triangles of the input (same face, same t).
 TEST(GridHits, LosslessGridMatchesInputReference) {
@@ -624,9 +627,8 @@ TEST(GridWatertight, ClosedTorusNoLeaks) {
       GridTriangles t = grid_triangles({&m}, opt);
       Rng rng(uint32_t(101 + ti));
       uint64_t leaks = 0;
-      const int n = opt.geometry == Geometry::LossyGrids && opt.bvh == Bvh::CompressedLeaf
-                        ? kRays
-                        : kRays / 10;
+      const int n =
+          opt.leaf == Leaf::LossyGrids && opt.nodes == Nodes::CompressedLeaf ? kRays : kRays / 10;
       for (int i = 0; i < n; ++i) {
         const size_t tri = size_t(rng.next() % t.size());
         const Vec3f* v = &t.vertices[3 * tri];
@@ -661,13 +663,14 @@ TEST(GridWatertight, ClosedTorusNoLeaks) {
 // as 2x2 grids, one ray at each triangle's centroid. Both layouts decode to the same vertices, so
 // each hit must equal lossy-grid's bit for bit (t, u, v, face, mesh).
 TEST(GridHits, SharedLayoutFindsTheGridOfEveryBlock) {
-  setenv("SLIM_GRID_LEFTOVERS", "grids", 1);
   const PolyMesh soup = random_soup(3000, 11, 0.02f);
   PolyMesh terrain = make_terrain(9);
   std::vector<const PolyMesh*> meshes{&terrain, &soup};
-  Scene ref = Scene::build(meshes, BuildOptions::from_config("lossy-grid"));
-  Scene shared = Scene::build(meshes, BuildOptions::from_config("lossy-grid-shared"));
-  unsetenv("SLIM_GRID_LEFTOVERS");
+  BuildOptions lossy = BuildOptions::from_config("lossy-grid");
+  BuildOptions shared_opt = BuildOptions::from_config("lossy-grid-shared");
+  lossy.grid_leftovers = shared_opt.grid_leftovers = slim::GridLeftovers::Grids;
+  Scene ref = Scene::build(meshes, lossy);
+  Scene shared = Scene::build(meshes, shared_opt);
   std::string why;
   ASSERT_TRUE(shared.validate(&why)) << why;
   int hits = 0;
@@ -705,20 +708,19 @@ TEST(GridHits, SubGridPartChildrenMatchWholeSubGrids) {
   };
   for (const PolyMesh& m : meshes) {
     for (const char* config : {"lossy-grid", "lossy-grid-e2", "lossy-grid-shared"}) {
-      const BuildOptions opt = BuildOptions::from_config(config);
-      setenv("SLIM_GRID_PARTS", "1", 1);
+      BuildOptions opt = BuildOptions::from_config(config);
+      opt.grid_parts = 1;
       Scene whole = Scene::build(m, opt);
       ASSERT_EQ(detail(whole, "subgrid_parts"), 1.0) << config;
-      for (const char* parts : {"2", "4"}) {
-        setenv("SLIM_GRID_PARTS", parts, 1);
+      for (int parts : {2, 4}) {
+        opt.grid_parts = parts;
         Scene parted = Scene::build(m, opt);
-        unsetenv("SLIM_GRID_PARTS");
-        ASSERT_EQ(detail(parted, "subgrid_parts"), std::stod(parts)) << config;
+        ASSERT_EQ(detail(parted, "subgrid_parts"), double(parts)) << config;
         std::string why;
         EXPECT_TRUE(parted.validate(&why)) << config << " " << parts << ": " << why;
         const double ml = detail(parted, "multileaf_count");
         ASSERT_GT(ml, 0.0) << config;
-        EXPECT_LE(detail(parted, "leaves_in_multileaf"), 8.0 / std::stod(parts) * ml) << config;
+        EXPECT_LE(detail(parted, "leaves_in_multileaf"), 8.0 / parts * ml) << config;
         const Box3f box = parted.bounds();
         Rng rng(77);
         int hits = 0;

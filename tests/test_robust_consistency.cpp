@@ -52,15 +52,6 @@ int resolution() {
   return n > 0 && n <= 4096 ? n : 128;
 }
 
-bool own_geometry(const std::string& c) {
-  return c.rfind("lossy-grid", 0) == 0 || c.rfind("costa", 0) == 0;
-}
-
-bool does_not_apply(const std::string& what) {
-  return what.find("does not apply") != std::string::npos ||
-         what.find("not implemented") != std::string::npos;
-}
-
 // G as a triangle mesh plus the input face of each of its faces.
 struct RefGeometry {
   PolyMesh mesh;
@@ -72,15 +63,9 @@ RefGeometry decoded(const PolyMesh& input, const BuildOptions& opt) {
   const std::vector<const PolyMesh*> meshes{&input};
   std::vector<Vec3f> v;
   RefGeometry g;
-  if (opt.geometry == Geometry::Quantized) {
-    CostaTriangles t = costa_triangles(meshes, opt);
-    v = std::move(t.vertices);
-    g.face = std::move(t.face);
-  } else {
-    GridTriangles t = grid_triangles(meshes, opt);
-    v = std::move(t.vertices);
-    g.face = std::move(t.face);
-  }
+  DecodedTriangles t = *decoded_triangles(meshes, opt);
+  v = std::move(t.vertices);
+  g.face = std::move(t.face);
   g.mesh.name = input.name + " (" + opt.config_name() + " decoded)";
   g.mesh.positions = std::move(v);
   g.mesh.face_sizes.assign(g.mesh.positions.size() / 3, 3);
@@ -146,11 +131,10 @@ void check_mesh_file(const std::string& file, int mesh_index) {
     Scene s;
     try {
       s = Scene::build(mesh, opt);
+    } catch (const NotApplicable& e) {
+      std::printf("    %-14s n/a: %s\n", config.c_str(), e.what());
+      continue;
     } catch (const Error& e) {
-      if (does_not_apply(e.what())) {
-        std::printf("    %-14s n/a: %s\n", config.c_str(), e.what());
-        continue;
-      }
       ADD_FAILURE() << "build failed: " << e.what();
       continue;
     }
@@ -158,7 +142,7 @@ void check_mesh_file(const std::string& file, int mesh_index) {
     const RefGeometry* g = &input;
     OracleHits own_hits;
     const OracleHits* oracle = &input_hits;
-    if (own_geometry(config)) {
+    if (describe(opt).own_geometry) {
       own = std::make_unique<RefGeometry>(decoded(mesh, opt));
       own_hits = embree_hits(*own, rays);
       g = own.get();

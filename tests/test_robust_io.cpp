@@ -22,7 +22,7 @@
 #include "io/obj.h"
 #include "io/ply.h"
 #include "io/xz.h"
-#include "slimrt/slimrt.h"
+#include "slimrt/analysis.h"
 
 namespace fs = std::filesystem;
 using slim::PolyMesh;

@@ -12,7 +12,7 @@
 
 #include "bench_runner.h"
 #include "commands.h"
-#include "slimrt/slimrt.h"
+#include "slimrt/analysis.h"
 
 namespace slim::cli {
 

@@ -4,7 +4,7 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
-#include "slimrt/slimrt.h"
+#include "slimrt/analysis.h"
 
 namespace slim::cli {
 

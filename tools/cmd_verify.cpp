@@ -1,7 +1,7 @@
 // `slimrt verify SCENE [--config NAME...] [--rays N] [--threads N] [--seed S]`
 //
-// Watertightness and hit-distance checks of every slimrt configuration on a closed mesh (issue 8;
-// the idea of Embree's `verify` suite): rays start strictly inside the mesh and go
+// Watertightness and hit-distance checks of every slimrt configuration on a closed mesh (the idea
+// of Embree's `verify` suite): rays start strictly inside the mesh and go
 //   1/3 in random directions,
 //   1/3 exactly at mesh vertices     (direction = vertex - origin, not normalized),
 //   1/3 exactly at edge midpoints    (edges of the fan triangles, diagonals included),
@@ -19,12 +19,8 @@
 //     decoded vertices within e of the input ones, so the decoded surface lies within e of the
 //     input surface and, where it is locally flat, the crossing moves by at most e / |cos theta|
 //     along the ray; below |cos theta| = 0.05 (grazing by less than 3 degrees) the bound is held
-//     at 20 e. e is
-//       lossy-grid, lossy-grid-e2: the scene statistic "max_error" (largest |decoded - input| over
-//         all grid vertices; if absent, "diag_max_pct" / 100 * the box diagonal, which bounds it);
-//       costa-*V*: half a quantization step, |step| / 2 with step = (box size) / 65535 per axis
-//         (Costa et al., Listing 4: 16 bits per component in the scene box; codes round to
-//         nearest).
+//     at 20 e. e is Scene::error_bound(), the largest |decoded - input| over the vertices as the
+//     builder measured it.
 //
 // SCENE is anything slim::load() reads, or `sphere:L`: an icosahedron subdivided L times
 // (20 * 4^L triangles, 1 <= L <= 9) with vertices jittered radially by +-1%, closed and welded.
@@ -32,7 +28,7 @@
 // reference scene is odd along 2 of 3 directions. Exit code 0 when no configuration leaks or
 // misplaces a hit, 1 otherwise (also when a configuration fails to build or validate), 2 when
 // the mesh is not closed (boundary or non-manifold edges; --allow-open runs it anyway).
-// Configurations that throw "does not apply" or "not implemented" are listed as such.
+// Configurations that throw slim::NotApplicable are listed as such.
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -53,9 +49,7 @@
 #include <vector>
 
 #include "commands.h"
-#include "slimrt/costa.h"
-#include "slimrt/grids.h"
-#include "slimrt/slimrt.h"
+#include "slimrt/analysis.h"
 
 namespace slim::cli {
 
@@ -65,49 +59,12 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// Icosphere subdivided `levels` times, vertices jittered radially by +-1%; closed and welded.
-PolyMesh jittered_sphere(int levels, uint32_t seed) {
-  const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
-  std::vector<Vec3f> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
-                          {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
-                          {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
-  std::vector<uint32_t> f = {0, 11, 5,  0, 5,  1, 0, 1, 7, 0, 7,  10, 0, 10, 11, 1, 5, 9, 5, 11,
-                             4, 11, 10, 2, 10, 7, 6, 7, 1, 8, 3,  9,  4, 3,  4,  2, 3, 2, 6, 3,
-                             6, 8,  3,  8, 9,  4, 9, 5, 2, 4, 11, 6,  2, 10, 8,  6, 7, 9, 8, 1};
-  for (int l = 0; l < levels; ++l) {
-    std::unordered_map<uint64_t, uint32_t> mid;
-    auto midpoint = [&](uint32_t a, uint32_t b) {
-      const uint64_t key = uint64_t(std::min(a, b)) << 32 | std::max(a, b);
-      auto it = mid.find(key);
-      if (it != mid.end()) return it->second;
-      v.push_back((v[a] + v[b]) * 0.5f);
-      return mid[key] = uint32_t(v.size() - 1);
-    };
-    std::vector<uint32_t> nf;
-    nf.reserve(f.size() * 4);
-    for (size_t i = 0; i < f.size(); i += 3) {
-      const uint32_t a = f[i], b = f[i + 1], c = f[i + 2];
-      const uint32_t ab = midpoint(a, b), bc = midpoint(b, c), ca = midpoint(c, a);
-      nf.insert(nf.end(), {a, ab, ca, b, bc, ab, c, ca, bc, ab, bc, ca});
-    }
-    f.swap(nf);
-  }
-  Rng rng(seed);
-  for (Vec3f& p : v) p = normalize(p) * (1.0f + 0.02f * (rng.uniform() - 0.5f));
-  PolyMesh m;
-  m.name = "sphere:" + std::to_string(levels);
-  m.positions = std::move(v);
-  m.face_indices = std::move(f);
-  m.face_sizes.assign(m.face_indices.size() / 3, 3);
-  return m;
-}
-
 PolyMesh load_scene(const std::string& name) {
   if (name.rfind("sphere:", 0) == 0) {
     const std::string d = name.substr(7);
     const bool ok = d.size() == 1 && d[0] >= '1' && d[0] <= '9';
     if (!ok) throw Error(name + ": expected sphere:L with L a subdivision level from 1 to 9");
-    return jittered_sphere(d[0] - '0', 5);
+    return make_sphere(d[0] - '0', 0.01f, 5);  // radial jitter +-1%
   }
   return load(name);
 }
@@ -264,41 +221,6 @@ struct RaySource {
   }
 };
 
-// Formats whose leaves hold their own (decoded) triangles, exposed by grid_triangles() and
-// costa_triangles(): grids re-triangulate cells, costa tessellates 5+-gons with GLU and may
-// quantize vertices.
-bool uses_own_geometry(const std::string& name) {
-  return name == "grid" || name.rfind("lossy-grid", 0) == 0 || name.rfind("costa", 0) == 0;
-}
-
-// The decoded triangles of such a format as a triangle PolyMesh (face i = decoded triangle i).
-PolyMesh decoded_mesh(const PolyMesh& mesh, const BuildOptions& opt) {
-  const std::vector<const PolyMesh*> meshes{&mesh};
-  std::vector<Vec3f> v;
-  if (opt.geometry == Geometry::Quantized)
-    v = costa_triangles(meshes, opt).vertices;
-  else
-    v = grid_triangles(meshes, opt).vertices;
-  PolyMesh m;
-  m.name = "decoded";
-  m.positions = std::move(v);
-  m.face_sizes.assign(m.positions.size() / 3, 3);
-  m.face_indices.resize(m.face_sizes.size() * 3);
-  for (uint32_t i = 0; i < m.face_indices.size(); ++i) m.face_indices[i] = i;
-  return m;
-}
-
-bool lossy_config(const std::string& name) {
-  return name.rfind("lossy-grid", 0) == 0 ||
-         (name.rfind("costa", 0) == 0 && name.find('V') != std::string::npos);
-}
-
-double detail_of(const SceneStats& st, const char* key, double fallback) {
-  for (const auto& [k, v] : st.details)
-    if (k == key) return v;
-  return fallback;
-}
-
 struct Row {
   std::string config, status, note;
   uint64_t rays = 0, leaks = 0, occluded_leaks = 0, far = 0, near = 0;
@@ -431,17 +353,15 @@ int cmd_verify(int argc, char** argv) {
     const auto t_build = std::chrono::steady_clock::now();
     try {
       arena.execute([&] { s = Scene::build(mesh, opt); });
+    } catch (const NotApplicable& e) {
+      row.status = "n/a";
+      row.note = e.what();
     } catch (const Error& e) {
-      const std::string what = e.what();
-      if (what.find("does not apply") != std::string::npos ||
-          what.find("not implemented") != std::string::npos) {
-        row.status = "n/a";
-        row.note = what;
-      } else {
-        row.status = "BUILD ERROR";
-        row.note = what;
-        row.failed = true;
-      }
+      row.status = "BUILD ERROR";
+      row.note = e.what();
+      row.failed = true;
+    }
+    if (!row.status.empty()) {
       std::fprintf(stderr, " %s\n", row.status.c_str());
       any_failed |= row.failed;
       table.push_back(row);
@@ -453,16 +373,8 @@ int cmd_verify(int argc, char** argv) {
       row.failed = true;
       row.note = "validate(): " + why;
     }
-    const bool lossy = lossy_config(name);
-    if (lossy) {
-      if (name.rfind("lossy-grid", 0) == 0) {
-        row.error_bound = detail_of(s.stats(), "max_error",
-                                    detail_of(s.stats(), "diag_max_pct", 100.0) / 100.0 * diag);
-      } else {
-        const Vec3f step = box.size() * (1.0f / 65535.0f);
-        row.error_bound = 0.5 * length(step);
-      }
-    }
+    const bool lossy = s.is_lossy();
+    row.error_bound = s.error_bound();
     const double e = row.error_bound;
 
     // Formats that store their own triangles (grids, costa) are held to the first crossing of
@@ -472,9 +384,9 @@ int cmd_verify(int argc, char** argv) {
     // Origins that are inside the input but not inside the decoded surface (closer to the
     // surface than the format's error) cannot expect a hit: their rays are skipped.
     std::vector<char> origin_ok(inside.size(), 1);
-    if (uses_own_geometry(name)) {
+    if (describe(opt).own_geometry) {
       try {
-        const PolyMesh own = decoded_mesh(mesh, opt);
+        const PolyMesh own = to_mesh(*decoded_triangles({&mesh}, opt));
         Scene own_ref;
         arena.execute([&] {
           own_ref = Scene::build(own, ref_opt);

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "slimrt/decoded.h"
 #include "slimrt/mesh.h"
 #include "slimrt/scene.h"
 
@@ -53,15 +54,11 @@ CostaSizes costa_sizes(const PolyMesh& mesh);
 
 // The triangles a costa configuration (BuildOptions with geometry Quantized, any letters, any
 // Bvh) intersects, decoded from its store exactly as its leaves decode them, with the input face
-// of each: to check the format against a reference run on its own geometry (DESIGN.md "Baseline
-// and oracle"). Polygons of 5+ vertices are split by GLU's tessellator, not fanned, so even the
-// lossless letters (no V) differ from a fan-triangulated reference on non-planar or concave
-// n-gons. Throws slim::Error for other configurations and malformed meshes.
-struct CostaTriangles {
-  std::vector<Vec3f> vertices;  // 3 per triangle
-  std::vector<uint32_t> geom, face;
-  size_t size() const { return face.size(); }
-};
+// of each: to check the format against a reference run on its own geometry. Polygons of 5+ vertices
+// are split by GLU's tessellator, not fanned, so even the lossless letters (no V) differ from a
+// fan-triangulated reference on non-planar or concave n-gons. Throws slim::Error for other
+// configurations and malformed meshes.
+using CostaTriangles = DecodedTriangles;
 CostaTriangles costa_triangles(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt);
 
 }  // namespace slim

@@ -14,6 +14,13 @@ class Error : public std::runtime_error {
   explicit Error(const std::string& what) : std::runtime_error(what) {}
 };
 
+// A configuration that does not apply to the given meshes (for example Embree's quad geometry on
+// a mesh with triangles): not a malformed input, a combination to skip and report as such.
+class NotApplicable : public Error {
+ public:
+  explicit NotApplicable(const std::string& what) : Error(what) {}
+};
+
 // "file:line: message" for text formats.
 [[noreturn]] void throw_at_line(const std::string& file, uint64_t line, const std::string& msg);
 // "file: byte N: message" for binary formats.

@@ -1,5 +1,5 @@
 // slimrt grid statistics and grid attributes (C. Benthin, K. Vaidyanathan, S. Woop, "Ray Tracing
-// Lossy Compressed Grid Primitives", ../shared/papers/lossy-compressed-grid-primitives.txt).
+// Lossy Compressed Grid Primitives", HPG 2021).
 //
 //   slim::GridStats g = slim::grid_stats(meshes);                // how the meshes became grids
 //   slim::GridErrorStats e = slim::grid_error(meshes, 1);        // paper Table 3, encoding 1
@@ -19,12 +19,13 @@
 #include <string>
 #include <vector>
 
+#include "slimrt/decoded.h"
 #include "slimrt/mesh.h"
 #include "slimrt/scene.h"
 
 namespace slim {
 
-// Mesh -> grid conversion (paper section 3, DESIGN.md "Grids") as Scene::build does it.
+// Mesh -> grid conversion (paper section 3) as Scene::build does it.
 struct GridStats {
   uint64_t input_faces = 0, triangles = 0;  // triangles: fan triangles of the input
   uint64_t skipped_faces = 0;               // faces with a NaN/Inf vertex
@@ -58,14 +59,10 @@ GridErrorStats grid_error(const std::vector<const PolyMesh*>& meshes, int encodi
 
 // The triangles a grid configuration (`grid`, `lossy-grid`, `lossy-grid-e2`, any Bvh) intersects,
 // decoded exactly as its traversal decodes them, with the input face of each: to check a lossy
-// format against a reference run on its own decompressed geometry (DESIGN.md "Baseline and
-// oracle"). Grid cells give 2 triangles each (degenerate ones included); leftover triangles
-// follow. Throws slim::Error for other configurations.
-struct GridTriangles {
-  std::vector<Vec3f> vertices;  // 3 per triangle
-  std::vector<uint32_t> geom, face;
-  size_t size() const { return face.size(); }
-};
+// format against a reference run on its own decompressed geometry. Grid cells give 2 triangles each
+// (degenerate ones included); leftover triangles follow. Throws slim::Error for other
+// configurations.
+using GridTriangles = DecodedTriangles;
 GridTriangles grid_triangles(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt);
 
 // Per-vertex attributes of grid hits (paper section 6): attributes laid out in the same grid

@@ -13,10 +13,10 @@ namespace slim {
 // A polygon mesh exactly as its author made it: polygons are kept (not triangulated).
 // Face f has face_sizes[f] >= 3 corners, stored consecutively in face_indices.
 struct PolyMesh {
-  std::string name;                     // file name or procedural scene name
-  std::vector<Vec3f> positions;         // float3 positions
-  std::vector<uint32_t> face_sizes;     // corners per face
-  std::vector<uint32_t> face_indices;   // corner -> position index, all faces concatenated
+  std::string name;                    // file name or procedural scene name
+  std::vector<Vec3f> positions;        // float3 positions
+  std::vector<uint32_t> face_sizes;    // corners per face
+  std::vector<uint32_t> face_indices;  // corner -> position index, all faces concatenated
   // Optional attributes. normals/uvs are indexed per corner through normal_indices/uv_indices
   // (parallel to face_indices, as OBJ's v/t/n). If an index array is empty but the attribute array
   // has one entry per position, the attribute is per vertex (indexed by face_indices).
@@ -59,9 +59,12 @@ PolyMesh load(const std::string& path_or_scene);
 
 // True if the name is a procedural scene name (kind:N).
 bool is_procedural(const std::string& name);
-// Procedural scenes (BENCHMARK.md): deterministic in (n, seed), all quads.
+// Procedural scenes (the benchmark's): deterministic in (n, seed), all quads.
 PolyMesh make_terrain(int n, uint32_t seed = 1);  // n x n quads heightfield, fractal noise
 PolyMesh make_torus(int n, uint32_t seed = 1);    // n x n/2 quads displaced torus (closed)
 PolyMesh make_canyon(int n, uint32_t seed = 1);   // n x n quads, steep ridged noise
+// An icosahedron subdivided `levels` times (20 * 4^levels triangles, levels 0..10), its vertices
+// on the unit sphere moved radially by up to +-jitter; closed, welded, wound outward.
+PolyMesh make_sphere(int levels, float jitter = 0.0f, uint32_t seed = 1);
 
 }  // namespace slim

@@ -1,39 +1,21 @@
 // slimrt triangle pairing statistics (A. Aman, S. Fenney, "Fast Triangle Pairing for Ray
-// Tracing", Imagination Technologies; ../shared/papers/fast-triangle-pairing.txt).
+// Tracing", Imagination Technologies).
 //
 //   slim::PairingStats s = slim::pairing_stats(mesh);   // pairs the fan triangles of the mesh
 //   printf("%.1f%% paired (window-2: %.1f%%) in %.3f s\n", 100 * s.paired_fraction,
 //          100 * s.window2_paired_fraction, s.pairing_s);
 //
 // The pairing itself runs inside Scene::build for the `bvh8-pairs` / `clbvh-pairs` configurations
-// (with the default PairingOptions); this header only reports what it does.
+// (with BuildOptions::pairing_options); this header reports what it does.
 #pragma once
 
 #include <cstdint>
 #include <vector>
 
 #include "slimrt/mesh.h"
+#include "slimrt/scene.h"  // PairingOptions
 
 namespace slim {
-
-struct PairingOptions {
-  // Paper, "Edge key representation & compression": key the half-edges by the edge midpoint and
-  // the edge-box surface area, 24 bits each (16 B per half-edge), instead of by vertex indices.
-  // For meshes whose vertices are not welded. Default: vertex indices.
-  bool coordinate_keys = false;
-  // Merge bit-identical vertex positions before pairing (index keys then pair across duplicated
-  // vertices too). Geometry is unchanged; only the connectivity the pairing sees.
-  bool weld = false;
-  // After the paper's greedy scan, re-pair along augmenting paths of length 3 (an unpaired
-  // triangle t next to a pair (n, p) whose p has an unpaired neighbour u becomes (t, n) + (p, u)),
-  // preferring the largest edge boxes. Not in the paper: the greedy scan alone leaves 11-12% of
-  // the triangles of some scans unpaired (nefertiti, koala); this brings them above 89%.
-  bool augment = true;
-  // Pre-scan (paper, "Results"): if at least this fraction of the triangles pairs in input order
-  // (window N = 2, e.g. fan-triangulated quads), the input order is kept and the edge-heuristic
-  // pairing is skipped. > 1 disables the pre-scan.
-  double prescan_threshold = 0.99;
-};
 
 struct PairingStats {
   uint64_t triangles = 0;      // fan triangles that were paired over (faces with NaN/Inf skipped)

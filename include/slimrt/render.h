@@ -1,5 +1,5 @@
-// slimrt rendering: the benchmark camera, the diffuse path tracer (BENCHMARK.md workloads 1 and 2),
-// debug shadings and images. The path tracer is a template over any "tracer" with
+// slimrt rendering: the benchmark camera, the diffuse path tracer (the benchmark's workloads 1 and
+// 2), debug shadings and images. The path tracer is a template over any "tracer" with
 //   slim::Hit intersect(const slim::Ray&) const;
 // so that slimrt scenes and the Embree baseline run exactly the same rays.
 #pragma once
@@ -14,11 +14,12 @@
 
 namespace slim {
 
-// Pinhole camera. Rays start at `eye`; pixel (x, y) maps to eye + dir00 + du * (x+0.5) + dv * (y+0.5).
+// Pinhole camera. Rays start at `eye`; pixel (x, y) maps to eye + dir00 + du * (x+0.5) + dv *
+// (y+0.5).
 struct Camera {
   Vec3f eye;
-  Vec3f dir00;  // direction to the top-left image corner
-  Vec3f du, dv; // per-pixel steps
+  Vec3f dir00;   // direction to the top-left image corner
+  Vec3f du, dv;  // per-pixel steps
   int width = 1024, height = 1024;
 };
 
@@ -76,8 +77,8 @@ struct PathResult {
   Hit primary;        // the primary hit
 };
 
-// BENCHMARK.md workload 2: a primary ray and up to `max_bounces` cosine-weighted diffuse bounces,
-// albedo 0.7, lit by a white-blue sky; every ray traced is counted.
+// The benchmark's workload 2: a primary ray and up to `max_bounces` cosine-weighted diffuse
+// bounces, albedo 0.7, lit by a white-blue sky; every ray traced is counted.
 template <class Tracer>
 PathResult trace_path(const Tracer& tracer, Ray ray, Rng& rng, int max_bounces, float offset) {
   PathResult res;
@@ -105,7 +106,8 @@ PathResult trace_path(const Tracer& tracer, Ray ray, Rng& rng, int max_bounces, 
     float r1 = rng.uniform(), r2 = rng.uniform();
     float phi = 6.28318530718f * r1;
     float sr = std::sqrt(r2);
-    Vec3f d = t * (std::cos(phi) * sr) + b * (std::sin(phi) * sr) + n * std::sqrt(std::max(0.0f, 1.0f - r2));
+    Vec3f d = t * (std::cos(phi) * sr) + b * (std::sin(phi) * sr) +
+              n * std::sqrt(std::max(0.0f, 1.0f - r2));
     ray.org = p + n * eps;
     ray.dir = normalize(d);
     ray.tnear = 0.0f;

@@ -19,85 +19,131 @@
 #include "slimrt/error.h"
 #include "slimrt/math.h"
 #include "slimrt/mesh.h"
+#include "slimrt/ray.h"
 
 namespace slim {
 
-constexpr uint32_t kInvalidID = 0xffffffffu;
+// A configuration is a node layout, a leaf format and the options of that format. The named
+// configurations (bvh8-tri4v, clbvh-compact, lossy-grid, costa-PFV, ...) are the rows of one
+// registry (configs() below); BuildOptions::from_config(name) gives a row's options.
 
-// The coordinate range slimrt supports. Beyond it the float products of the watertight test
-// overflow (t = inf or a miss) or underflow (misses), as in every float ray tracer. So:
-// Scene::build throws slim::Error when a vertex used by a finite face lies beyond
-// +-kMaxCoordinate, or when the scene's extent (box diagonal) is nonzero and below kMinExtent;
-// rays whose origin lies beyond +-kMaxCoordinate miss.
-constexpr float kMaxCoordinate = 1e12f;
-constexpr float kMinExtent = 1e-12f;
-
-// Directions whose largest component is below kMinDirection in magnitude count as zero
-// directions: t = distance / |dir| would reach 1e30 and beyond, past what the float ray setup
-// resolves (the box test's reciprocals are clamped at 1 / kMinDirection).
-constexpr float kMinDirection = 1e-18f;
-
-// A ray segment [tnear, tfar]. Rays with a NaN or zero direction (below kMinDirection), a NaN
-// origin or one beyond +-kMaxCoordinate, or tnear > tfar (or NaN bounds) never hit anything. A
-// hit is reported with a finite t: one whose t would exceed the float range is no hit.
-struct Ray {
-  Vec3f org;
-  float tnear = 0.0f;
-  Vec3f dir;
-  float tfar = kInf;
+// Node layout of the BVH8.
+enum class Nodes : uint8_t {
+  Bvh8,            // 256-byte nodes: 8 float boxes + 8 child references
+  QBvh8,           // 136-byte nodes: 8 boxes quantized to 8 bits in the node's box
+  CompressedLeaf,  // BVH8 inner nodes + 72-byte multi-leaf nodes with the leaf data behind them
 };
 
-// Kind of primitive a hit landed on (for debug shading, paper "Costa" Table 4 colours).
-enum class PrimKind : uint8_t { Triangle = 0, Quad = 1, Fan = 2, Strip = 3, Pair = 4, Grid = 5 };
-
-struct Hit {
-  float t = kInf;
-  // Barycentric coordinates of the hit inside the triangle that was hit (weights of its 2nd and
-  // 3rd vertex); for grid formats, the per-grid u,v of the paper (grid_u, grid_v in [0,1]).
-  float u = 0.0f, v = 0.0f;
-  Vec3f Ng;                      // geometric normal of the triangle hit (not normalized)
-  uint32_t geomID = kInvalidID;  // index of the input mesh
-  uint32_t primID = kInvalidID;  // index of the face in the input mesh
-  PrimKind kind = PrimKind::Triangle;
-
-  bool valid() const { return geomID != kInvalidID; }
+// Leaf (primitive) format.
+enum class Leaf : uint8_t {
+  Triangles,         // "tri4v": 4 triangles with their vertices gathered into the leaf
+  IndexedTriangles,  // "tri4i": 4 triangles as indices into one shared vertex array
+  CompactTriangles,  // indices into a per-multi-leaf vertex dictionary (CompressedLeaf only)
+  Pairs,             // triangle pairs sharing an edge, 4 pairs per leaf
+  Grids,             // uncompressed 5x5 sub-grids over grid-ordered vertices
+  LossyGrids,        // 128-byte lossy sub-grids (bilinear patch + 21 quantized displacements)
+  SharedLossyGrids,  // 68-byte lossy sub-grids over shared corner lattices (CompressedLeaf only)
+  Costa,             // quantized n-gon mesh (letters in BuildOptions::costa)
 };
 
-// Geometry (leaf) formats. See BENCHMARK.md for the configuration names that combine them.
-enum class Geometry : uint8_t {
-  Triangles,         // leaves of up to 4 pre-gathered triangles ("tri4v")
-  IndexedTriangles,  // leaves of vertex indices into one shared vertex array ("tri4i")
-  Pairs,             // triangle pairs (fast triangle pairing)
-  Grids,             // uncompressed 5x5 sub-grids referencing grid-ordered vertices
-  LossyGrids,        // 128-byte lossy sub-grids, displacement encoding 1
-  LossyGridsE2,      // 128-byte lossy sub-grids, displacement encoding 2
-  Quantized,         // Costa quantized n-gon mesh (options in BuildOptions::costa)
-  PairsWindow2,      // triangle pairs of the paper's baseline: in-order window N = 2
+// Displacement encoding of the lossy sub-grids (Benthin et al., "Ray Tracing Lossy Compressed Grid
+// Primitives", section 4).
+enum class GridEncoding : uint8_t {
+  Octahedral = 1,      // 3-bit octant + 10-bit direction index + 11-bit length (the paper's)
+  SharedExponent = 2,  // 3 sign bits + shared 6-bit exponent + three 5-bit mantissas
 };
 
-// Node formats.
-enum class Bvh : uint8_t {
-  Bvh8,                   // 256-byte BVH8 nodes
-  Quantized8,             // 136-byte QBVH8 nodes everywhere
-  CompressedLeaf,         // BVH8 inner nodes + 72-byte compressed multi-leaf nodes
-  CompressedLeafCompact,  // the same, with per-multi-leaf vertex-index dictionaries
+// How the Pairs leaf pairs triangles.
+enum class PairingMethod : uint8_t {
+  EdgeHeuristic,  // the paper's edge-box surface-area heuristic (PairingOptions below)
+  Window2,        // the paper's baseline: consecutive triangles in input order (window N = 2)
+};
+
+// Options of the edge-heuristic pairing ("Fast Triangle Pairing for Ray Tracing").
+struct PairingOptions {
+  // Paper, "Edge key representation & compression": key the half-edges by the edge midpoint and
+  // the edge-box surface area, 24 bits each (16 B per half-edge), instead of by vertex indices.
+  // For meshes whose vertices are not welded. Default: vertex indices.
+  bool coordinate_keys = false;
+  // Merge bit-identical vertex positions before pairing (index keys then pair across duplicated
+  // vertices too). Geometry is unchanged; only the connectivity the pairing sees.
+  bool weld = false;
+  // After the paper's greedy scan, re-pair along augmenting paths of length 3 (an unpaired
+  // triangle t next to a pair (n, p) whose p has an unpaired neighbour u becomes (t, n) + (p, u)),
+  // preferring the largest edge boxes. Not in the paper: the greedy scan alone leaves 11-12% of
+  // the triangles of some scans unpaired (nefertiti, koala); this brings them above 89%.
+  bool augment = true;
+  // Pre-scan (paper, "Results"): if at least this fraction of the triangles pairs in input order
+  // (window N = 2, e.g. fan-triangulated quads), the input order is kept and the edge-heuristic
+  // pairing is skipped. > 1 disables the pre-scan.
+  double prescan_threshold = 0.99;
+};
+
+// How the binary BVH is collapsed into 8-wide nodes.
+enum class Collapse : uint8_t {
+  Auto,     // Optimal for Bvh8 and QBvh8, Slots for CompressedLeaf
+  Optimal,  // SAH-optimal choice of the up to 8 descendants each node takes
+  Slots,    // open the largest child until 8 slots are taken (spends fewer inner nodes around
+            // multi-leaves)
+};
+
+// Where the grid formats put the cells and triangles that form no grid of 2+ cells.
+enum class GridLeftovers : uint8_t {
+  Auto,       // whichever takes less memory (estimated per scene)
+  Grids,      // 2x2 sub-grids (a lone triangle as a degenerate quad)
+  Triangles,  // triangle leaves in a second BVH
 };
 
 struct BuildOptions {
-  Geometry geometry = Geometry::Triangles;
-  Bvh bvh = Bvh::Bvh8;
-  int sah_bins = 32;          // binned SAH: bins per axis
-  int max_leaf_size = 4;      // primitives per leaf (triangles; pairs and sub-grids use their own)
-  std::string costa = "PFV";  // Geometry::Quantized: any of the letters T, P, F, V
-  int threads = 0;            // build threads; 0 = all cores
+  Nodes nodes = Nodes::Bvh8;
+  Leaf leaf = Leaf::Triangles;
+  GridEncoding grid_encoding = GridEncoding::Octahedral;  // LossyGrids, SharedLossyGrids
+  std::string costa = "PFV";  // Costa: any of the letters T, P, F, V in that order
+  PairingMethod pairing = PairingMethod::EdgeHeuristic;  // Pairs
+  PairingOptions pairing_options;                        // Pairs with EdgeHeuristic
+  Collapse collapse = Collapse::Auto;
+  // Grid formats under CompressedLeaf nodes: each sub-grid is split into this many multi-leaf
+  // children (1, 2 or 4; 0 = 4 under CompressedLeaf, 1 otherwise).
+  int grid_parts = 0;
+  GridLeftovers grid_leftovers = GridLeftovers::Auto;
+  int sah_bins = 32;      // binned SAH: bins per axis (2..64)
+  int max_leaf_size = 4;  // primitives per leaf (triangles; pairs and sub-grids use their own)
+  int threads = 0;        // build threads; 0 = all cores
 
-  // Options for a configuration name of BENCHMARK.md ("bvh8-tri4v", "clbvh-compact",
-  // "lossy-grid", "costa-PFV", ...). Throws slim::Error for an unknown name.
+  // The options of a registry row ("bvh8-tri4v", "clbvh-compact", "lossy-grid", "costa-PFV",
+  // ...). Throws slim::Error for an unknown name, listing the known ones.
   static BuildOptions from_config(const std::string& name);
-  // The configuration name of these options ("bvh8-tri4v", ...).
+  // The name of the registry row with these nodes, leaf and encoding, or a descriptive name
+  // ("qbvh8-pairs") for a combination that has no row.
   std::string config_name() const;
+  // Throws slim::Error if the options are out of range or combine a leaf with nodes it cannot
+  // live in (CompactTriangles and SharedLossyGrids need CompressedLeaf nodes).
+  void check() const;
 };
-// Every slimrt configuration name, in the order of BENCHMARK.md.
+
+// One row of the registry: a named configuration and the properties of its format.
+struct ConfigInfo {
+  std::string name;
+  BuildOptions options;  // nodes, leaf, encoding, pairing
+  // Decoded positions may differ from the input's: Scene::error_bound() > 0 for such a scene.
+  bool lossy = false;
+  // Intersects other triangles than the input's fan triangulation (lossy positions, or another
+  // split of n-gons): checked against a reference run on its own decoded triangles
+  // (decoded_triangles() in slimrt/analysis.h), hits mapped back to the input faces.
+  bool own_geometry = false;
+  std::string error_bound;  // what Scene::error_bound() reports for it ("0" when lossless)
+  std::string summary;      // one line for tables and --help
+};
+// Every configuration, triangles first (costa: its 16 letter combinations last).
+const std::vector<ConfigInfo>& configs();
+// The row of a name; throws slim::Error for an unknown name, listing the known ones.
+const ConfigInfo& config_info(const std::string& name);
+// The row of a name, or nullptr.
+const ConfigInfo* find_config(const std::string& name);
+// The properties of any options' format: their registry row (with these options) when they have
+// one, else the same properties derived for the combination.
+ConfigInfo describe(const BuildOptions& opt);
+// Every configuration name, in the order of configs().
 std::vector<std::string> all_config_names();
 
 // The SIMD path slimrt was compiled for: "avx512", "avx2" or "scalar" (CMake option SLIM_ISA).
@@ -114,18 +160,6 @@ struct MemoryStats {
   uint64_t triangles = 0;  // input triangles after fan triangulation (the per-triangle divisor)
   uint64_t total() const { return geometry_bytes + bvh_bytes + other_bytes; }
   double bytes_per_triangle() const { return triangles ? double(total()) / double(triangles) : 0; }
-};
-
-// Counters of one traversal (box tests = individual child boxes tested, prim tests = triangles
-// tested, including the triangles of pairs, grids and fans).
-struct TraversalCounters {
-  uint64_t rays = 0;
-  uint64_t node_visits = 0;
-  uint64_t box_tests = 0;
-  uint64_t prim_tests = 0;
-  // Primitive records tested, a triangle pair counting once (the paper's dual triangle test
-  // unit, "Fast Triangle Pairing", Results); equals prim_tests for formats without pairs.
-  uint64_t prim_records = 0;
 };
 
 struct SceneStats {
@@ -163,6 +197,13 @@ class Scene {
   const SceneStats& stats() const;
   Box3f bounds() const;
   const BuildOptions& options() const;
+
+  // The scene's format may decode positions that differ from the input (describe(options())).
+  bool is_lossy() const;
+  // Largest distance between a decoded vertex and its input vertex, in scene units, measured at
+  // build; 0 for the formats that store positions exactly (and for a lossy format whose every
+  // vertex happened to be encoded exactly).
+  double error_bound() const;
 
   // Walks the whole structure and checks every invariant (every primitive referenced exactly
   // once, child boxes inside parents, quantized boxes conservative). Returns false and fills

@@ -1,11 +1,16 @@
-// slimrt: compact CPU ray tracing of huge triangle and quad meshes. Umbrella header.
+// slimrt: compact CPU ray tracing of huge triangle and quad meshes. The user's API:
+//
+//   slim::PolyMesh mesh = slim::load("statue.ply");                     // slimrt/mesh.h
+//   slim::Scene scene = slim::Scene::build(mesh, slim::BuildOptions::from_config("clbvh-compact"));
+//   slim::Hit hit = scene.intersect({org, 0.0f, dir, slim::kInf});      // slimrt/ray.h
+//   slim::MemoryStats m = scene.memory();                                // slimrt/scene.h
+//
+// Errors are slim::Error (slimrt/error.h). Measurement hooks (grid and pairing statistics, Costa
+// sizes, the benchmark's path tracer and PSNR) are in slimrt/analysis.h.
 #pragma once
 
-#include "slimrt/costa.h"
 #include "slimrt/error.h"
-#include "slimrt/grids.h"
 #include "slimrt/math.h"
 #include "slimrt/mesh.h"
-#include "slimrt/pairing.h"
-#include "slimrt/render.h"
+#include "slimrt/ray.h"
 #include "slimrt/scene.h"

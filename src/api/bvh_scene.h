@@ -36,15 +36,28 @@ struct Fingerprint {
   }
 };
 
-inline NodeKind node_kind(Bvh b) {
-  switch (b) {
-    case Bvh::Bvh8:
+inline NodeKind node_kind(Nodes n) {
+  switch (n) {
+    case Nodes::Bvh8:
       return NodeKind::Bvh8;
-    case Bvh::Quantized8:
+    case Nodes::QBvh8:
       return NodeKind::QBvh8;
-    default:
+    case Nodes::CompressedLeaf:
       return NodeKind::CompressedLeaf;
   }
+  return NodeKind::Bvh8;
+}
+
+inline CollapseRule collapse_rule(const BuildOptions& opt) {
+  switch (opt.collapse) {
+    case Collapse::Optimal:
+      return CollapseRule::Optimal;
+    case Collapse::Slots:
+      return CollapseRule::Slots;
+    case Collapse::Auto:
+      break;
+  }
+  return default_collapse_rule(node_kind(opt.nodes));
 }
 
 template <class Leaf>
@@ -145,7 +158,7 @@ class BvhScene : public Scene::Impl {
       if (enc.parts_per_block > 1)
         enc.part_bounds = [&](uint32_t prim, Box3f* boxes) { Leaf::part_bounds(src, prim, boxes); };
     }
-    bvh = collapse_bvh8(b2, node_kind(opt.bvh), enc);
+    bvh = collapse_bvh8(b2, node_kind(opt.nodes), enc, collapse_rule(opt));
     double collapse_s = secs(t0);
     bounds = bvh.bounds;
     mem.bvh_bytes = bvh.node_bytes + bvh.multileaf_bytes;

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <string>
 
+#include "api/registry.h"
 #include "api/scene_impl.h"
 #include "core/large_array.h"
 #include "mesh/triangulate.h"
@@ -107,27 +108,8 @@ std::unique_ptr<Scene::Impl> build_impl(const std::vector<const PolyMesh*>& mesh
     check_mesh(*m);
   }
   check_coordinate_range(meshes);
-  if (opt.sah_bins < 2 || opt.sah_bins > 64) throw Error("BuildOptions: sah_bins must be 2..64");
-  if (opt.max_leaf_size < 1) throw Error("BuildOptions: max_leaf_size must be >= 1");
-  std::unique_ptr<Scene::Impl> impl;
-  switch (opt.geometry) {
-    case Geometry::Triangles:
-    case Geometry::IndexedTriangles:
-      impl = build_triangle_scene(meshes, opt);
-      break;
-    case Geometry::Pairs:
-    case Geometry::PairsWindow2:
-      impl = build_pair_scene(meshes, opt);
-      break;
-    case Geometry::Grids:
-    case Geometry::LossyGrids:
-    case Geometry::LossyGridsE2:
-      impl = build_grid_scene(meshes, opt);
-      break;
-    case Geometry::Quantized:
-      impl = build_costa_scene(meshes, opt);
-      break;
-  }
+  opt.check();
+  std::unique_ptr<Scene::Impl> impl = builder_of(opt.leaf)(meshes, opt);
   impl->opt = opt;
   impl->ray_setup = RaySetupBounds(impl->bounds);
   return impl;
@@ -200,6 +182,10 @@ const BuildOptions& Scene::options() const {
   static const BuildOptions def;
   return impl_ ? impl_->opt : def;
 }
+
+bool Scene::is_lossy() const { return impl_ && describe(impl_->opt).lossy; }
+
+double Scene::error_bound() const { return impl_ ? impl_->error_bound : 0.0; }
 
 bool Scene::validate(std::string* why) const {
   if (!impl_) {

@@ -253,11 +253,17 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
 
   // The BVH, the leaves and the validation keys all see the vertices as the store decodes them.
   std::vector<Vec3f> decoded = loaded.vertices;
+  double max_error = 0;  // Scene::error_bound(): the largest |decoded - input|
   if (flags.V) {
     VertexQuantizer q = make_vertex_quantizer(loaded.vertices);
     for (Vec3f& p : decoded) {
+      const Vec3f in = p;
       uint16_t c[3] = {q.encode(p.x, 0), q.encode(p.y, 1), q.encode(p.z, 2)};
       p = q.decode(c);
+      if (!is_finite(in)) continue;
+      double e2 = 0;
+      for (int a = 0; a < 3; ++a) e2 += (double(p[a]) - in[a]) * (double(p[a]) - in[a]);
+      max_error = std::max(max_error, std::sqrt(e2));
     }
   }
 
@@ -298,7 +304,7 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
         throw std::logic_error("costa: a leaf block is not a range of the leaf order");
     std::memcpy(out, &b, sizeof(b));
   };
-  Bvh8 bvh = collapse_bvh8(b2, node_kind(opt.bvh), enc);
+  Bvh8 bvh = collapse_bvh8(b2, node_kind(opt.nodes), enc, collapse_rule(opt));
 
   const uint64_t node_bytes = bvh.node_bytes, multileaf_bytes = bvh.multileaf_bytes;
   const uint64_t leaf_data_bytes = bvh.leaf_data_bytes;
@@ -306,6 +312,7 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
   const Box3f bounds = bvh.bounds;
   std::unique_ptr<Scene::Impl> s = make_scene(flags, data, std::move(bvh), expected);
   s->bounds = bounds;
+  s->error_bound = max_error;
   const QuantizedMesh& q = data->store;
   MemoryStats& mem = s->mem;  // everything the scene keeps
   mem.bvh_bytes = node_bytes + multileaf_bytes;
@@ -399,8 +406,9 @@ CostaSizes costa_sizes(const std::vector<const PolyMesh*>& meshes) {
 
 CostaTriangles costa_triangles(const std::vector<const PolyMesh*>& meshes,
                                const BuildOptions& opt) {
-  if (opt.geometry != Geometry::Quantized)
+  if (opt.leaf != Leaf::Costa)
     throw Error("costa_triangles: " + opt.config_name() + " is not a costa configuration");
+  opt.check();
   for (const PolyMesh* m : meshes) {
     if (!m) throw Error("costa_triangles: null mesh");
     check_mesh(*m);

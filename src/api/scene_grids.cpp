@@ -8,13 +8,13 @@
 //   grid           SubGridRef (16 B) referencing grid-ordered float vertices (prim/subgrid.h)
 //   lossy-grid     lossy sub-grids (prim/lossy_subgrid.h), displacement encoding 1
 //   lossy-grid-e2  the same with encoding 2
-// The lossy layout follows the BVH option: Bvh::CompressedLeafCompact selects the 68-byte
-// shared-corner sub-grid (section 9), every other node kind the 128-byte Listing 1 sub-grid.
+//   lossy-grid-shared  68-byte shared-corner sub-grids (section 9, Leaf::SharedLossyGrids)
+// Leaf::LossyGrids is the 128-byte Listing 1 sub-grid under any node layout.
 // Leftovers (lone quads, unpaired triangles) are stored either as 2x2 sub-grids in the same BVH
 // or as Tri4v triangle leaves in a second BVH traversed after the first, whichever the estimate
 // below says is smaller (SceneStats detail `leftover_triangle_leaves`). With the layouts above the
 // triangle leaves always win (a lone quad costs ~116 B as triangles, 140-180 B as a sub-grid);
-// the environment variable SLIM_GRID_LEFTOVERS=grids|triangles forces one (tests, experiments).
+// BuildOptions::grid_leftovers forces one.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -23,6 +23,8 @@
 #include <cmath>
 #include <cstdlib>
 #include <string>
+
+#include "api/scene_grids.h"
 
 #include "api/bvh_scene.h"
 #include "mesh/grids.h"
@@ -43,8 +45,8 @@ double seconds_since(Clock::time_point t0) {
 enum class Layout { Uncompressed, Listing1, Shared };
 
 Layout layout_of(const BuildOptions& opt) {
-  if (opt.geometry == Geometry::Grids) return Layout::Uncompressed;
-  return opt.bvh == Bvh::CompressedLeafCompact ? Layout::Shared : Layout::Listing1;
+  if (opt.leaf == Leaf::Grids) return Layout::Uncompressed;
+  return opt.leaf == Leaf::SharedLossyGrids ? Layout::Shared : Layout::Listing1;
 }
 
 uint32_t block_bytes(Layout l) {
@@ -58,10 +60,6 @@ uint32_t block_bytes(Layout l) {
   }
 }
 
-SLIM_INLINE uint32_t subgrids_along(uint32_t res) {
-  return (res - 1 + kSubGridCells - 1) / kSubGridCells;
-}
-
 // The conversion and the leftover decision, shared by every grid format and the statistics.
 struct Prepared {
   GridSet gs;
@@ -71,26 +69,8 @@ struct Prepared {
   double seconds = 0;
 };
 
-// Appends the leftover triangles of gs as 2x2 grids (a, b / c, c): A = (a, b, c), B = (a, c, c)
-// degenerate; with_corners also extends gs.corner_of_vertex.
-void append_triangle_grids(GridSet& gs, bool with_corners) {
-  for (const LeftoverTriangle& t : gs.triangles) {
-    VertexGrid g;
-    g.geom = t.geom;
-    g.res_x = g.res_y = 2;
-    g.vertex_offset = gs.vertices.size();
-    g.cell_offset = gs.cell_faces.size() / 2;
-    gs.vertices.insert(gs.vertices.end(), {t.v[0], t.v[1], t.v[2], t.v[2]});
-    if (with_corners)
-      gs.corner_of_vertex.insert(gs.corner_of_vertex.end(),
-                                 {t.corner[0], t.corner[1], t.corner[2], t.corner[2]});
-    gs.cell_faces.insert(gs.cell_faces.end(), {t.face, t.face});
-    gs.cell_flip.push_back(0);
-    gs.grids.push_back(g);
-  }
-}
-
-Prepared prepare(const std::vector<const PolyMesh*>& meshes, Layout layout) {
+Prepared prepare(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
+  const Layout layout = layout_of(opt);
   auto t0 = Clock::now();
   Prepared p;
   p.gs = make_grids(meshes);
@@ -105,10 +85,8 @@ Prepared prepare(const std::vector<const PolyMesh*>& meshes, Layout layout) {
   const double as_tri = 176.0 / 4 + 8;
   p.tri_leaves = double(2 * p.leftover_cells + p.leftover_tris) * as_tri <
                  double(p.leftover_cells + p.leftover_tris) * as_grid;
-  if (const char* force = std::getenv("SLIM_GRID_LEFTOVERS")) {
-    if (std::string(force) == "grids") p.tri_leaves = false;
-    if (std::string(force) == "triangles") p.tri_leaves = true;
-  }
+  if (opt.grid_leftovers == GridLeftovers::Grids) p.tri_leaves = false;
+  if (opt.grid_leftovers == GridLeftovers::Triangles) p.tri_leaves = true;
   if (p.tri_leaves) {
     // 1-cell grids -> their two triangles A = (c00, c10, c11), B = (c00, c11, c01).
     for (size_t gi = gs.multi_cell_grids; gi < gs.grids.size(); ++gi) {
@@ -269,9 +247,7 @@ std::unique_ptr<BvhScene<Tri4v>> build_leftover_triangles(
   }
   auto s = std::make_unique<BvhScene<Tri4v>>();
   TriangleSource src{v.data(), idx.data(), geom.data(), prim.data()};
-  BuildOptions o = opt;
-  if (o.bvh == Bvh::CompressedLeafCompact) o.bvh = Bvh::CompressedLeaf;
-  s->build(src, uint32_t(n), o);
+  s->build(src, uint32_t(n), opt);
   return s;
 }
 
@@ -602,20 +578,11 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
   std::vector<Block> blocks(n);
   std::vector<Box3f> bounds(n);
   // Sub-grid parts as multi-leaf children under the compressed-leaf BVH (prim/subgrid.h):
-  // quarters, for both layouts. The shared layout took halves while its blocks were 72 bytes
-  // (quarters: 4.47-4.52 bytes/triangle on terrain, torus, canyon at 1024, the target is < 4.5);
-  // at 68 bytes quarters fit, and they are faster: W2 / embree-tri torus:1024 0.96 against
-  // 0.81 with halves, terrain 1.18 / 1.14, canyon 1.02 / 1.00 (3 runs each, AMD Zen 5 VM).
-  // SLIM_GRID_PARTS=1|2|4 forces one (measurements).
+  // quarters by default, for both layouts. Quarters are faster than halves (W2 / embree-tri on
+  // torus:1024 0.96 against 0.81, terrain 1.18 / 1.14, canyon 1.02 / 1.00) and keep the 68-byte
+  // layout at 4.4 bytes/triangle. BuildOptions::grid_parts sets another split.
   uint32_t parts = 1;
-  if (opt.bvh == Bvh::CompressedLeaf || opt.bvh == Bvh::CompressedLeafCompact) {
-    parts = 4;
-    if (const char* env = std::getenv("SLIM_GRID_PARTS")) {
-      const std::string v(env);
-      if (v != "1" && v != "2" && v != "4") throw Error("SLIM_GRID_PARTS must be 1, 2 or 4");
-      parts = uint32_t(std::stoi(v));
-    }
-  }
+  if (opt.nodes == Nodes::CompressedLeaf) parts = opt.grid_parts ? uint32_t(opt.grid_parts) : 4;
   std::vector<Box3f> part_bounds(parts > 1 ? parts * n : 0);
   s->ctx.parts = parts;
   std::vector<SubGridError> errs(n);
@@ -681,6 +648,7 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
   d.emplace_back("displacement_bias", double(bias));
   d.emplace_back("block_bytes", double(sizeof(Block)));
   d.emplace_back("subgrid_parts", double(parts));
+  s->error_bound = et.max_error;
   finish_scene(*s, p, meshes, opt);
   return s;
 }
@@ -703,51 +671,30 @@ std::unique_ptr<Scene::Impl> build_lossy_any(Prepared& p,
 std::unique_ptr<Scene::Impl> build_grid_scene(const std::vector<const PolyMesh*>& meshes,
                                               const BuildOptions& opt) {
   const Layout layout = layout_of(opt);
-  Prepared p = prepare(meshes, layout);
+  Prepared p = prepare(meshes, opt);
   if (layout == Layout::Uncompressed) return build_uncompressed(p, meshes, opt);
-  return build_lossy_any(p, meshes, opt, opt.geometry == Geometry::LossyGridsE2 ? 2 : 1, layout);
+  return build_lossy_any(p, meshes, opt, int(opt.grid_encoding), layout);
 }
 
-// ---- public statistics (slimrt/grids.h) -------------------------------------------------------
-
-GridStats grid_stats(const std::vector<const PolyMesh*>& meshes) {
-  for (const PolyMesh* m : meshes) check_mesh(*m);
-  auto t0 = Clock::now();
-  GridSet gs = make_grids(meshes);
-  GridStats s;
-  const GridConversionFigures& f = gs.figures;
-  s.input_faces = f.input_faces;
-  s.triangles = f.triangles;
-  s.skipped_faces = f.skipped_faces;
-  s.cells = f.cells;
-  s.paired_cells = f.paired_cells;
-  s.grids = f.grids;
-  s.grid_cells = f.grid_cells;
-  s.mean_grid_cells = f.grids ? double(f.grid_cells) / double(f.grids) : 0.0;
-  s.largest_grid_cells = f.largest_grid_cells;
-  for (size_t gi = 0; gi < gs.multi_cell_grids; ++gi) {
-    const VertexGrid& g = gs.grids[gi];
-    s.subgrids += uint64_t(subgrids_along(g.res_x)) * subgrids_along(g.res_y);
-    s.full_subgrids += uint64_t((g.res_x - 1) / kSubGridCells) * ((g.res_y - 1) / kSubGridCells);
+GridExtraction extract_grid_scene(const std::vector<const PolyMesh*>& meshes,
+                                  const BuildOptions& opt, DecodedTriangles* triangles) {
+  for (const PolyMesh* m : meshes) {
+    if (!m) throw Error("grid statistics: null mesh");
+    check_mesh(*m);
   }
-  s.full_subgrid_triangle_pct =
-      s.triangles ? 100.0 * double(s.full_subgrids) * 32.0 / double(s.triangles) : 0.0;
-  s.single_cells = f.single_cells;
-  s.leftover_triangles = f.leftover_triangles;
-  s.seconds = seconds_since(t0);
-  return s;
-}
-
-GridErrorStats grid_error(const std::vector<const PolyMesh*>& meshes, int encoding) {
-  for (const PolyMesh* m : meshes) check_mesh(*m);
-  if (encoding != 1 && encoding != 2) throw Error("grid_error: encoding must be 1 or 2");
-  BuildOptions opt = BuildOptions::from_config(encoding == 1 ? "lossy-grid" : "lossy-grid-e2");
+  if (opt.leaf != Leaf::Grids && opt.leaf != Leaf::LossyGrids && opt.leaf != Leaf::SharedLossyGrids)
+    throw Error("grid statistics: " + opt.config_name() + " is not a grid configuration");
+  opt.check();
   const Layout layout = layout_of(opt);
-  Prepared p = prepare(meshes, layout);
+  Prepared p = prepare(meshes, opt);
   Extract x;
-  build_lossy_any(p, meshes, opt, encoding, layout, &x);
+  x.triangles = triangles;
+  if (layout == Layout::Uncompressed)
+    build_uncompressed(p, meshes, opt, &x);
+  else
+    build_lossy_any(p, meshes, opt, int(opt.grid_encoding), layout, &x);
+  GridExtraction e;
   const ErrorTotals& et = x.errors;
-  GridErrorStats e;
   e.rms = et.rms;
   e.max_error = et.max_error;
   e.diag_avg_pct = et.diag_avg_pct;
@@ -759,175 +706,6 @@ GridErrorStats grid_error(const std::vector<const PolyMesh*>& meshes, int encodi
                 : p.tri_leaves                          ? "triangles"
                                                         : "grids";
   return e;
-}
-
-GridTriangles grid_triangles(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
-  for (const PolyMesh* m : meshes) check_mesh(*m);
-  if (opt.geometry != Geometry::Grids && opt.geometry != Geometry::LossyGrids &&
-      opt.geometry != Geometry::LossyGridsE2)
-    throw Error("grid_triangles: " + opt.config_name() + " is not a grid configuration");
-  const Layout layout = layout_of(opt);
-  Prepared p = prepare(meshes, layout);
-  GridTriangles t;
-  Extract x;
-  x.triangles = &t;
-  if (layout == Layout::Uncompressed)
-    build_uncompressed(p, meshes, opt, &x);
-  else
-    build_lossy_any(p, meshes, opt, opt.geometry == Geometry::LossyGridsE2 ? 2 : 1, layout, &x);
-  return t;
-}
-
-// ---- grid attributes (section 6) --------------------------------------------------------------
-
-struct GridAttributes::Impl {
-  GridSet gs;
-  // Per mesh, per face: the cells of that face as (grid, x, y) in a CSR layout.
-  struct CellRef {
-    uint32_t grid, x, y;
-  };
-  std::vector<std::vector<uint64_t>> face_start;  // [geom][face] -> first entry in cells[geom]
-  std::vector<std::vector<CellRef>> cells;
-};
-
-GridAttributes::GridAttributes() = default;
-GridAttributes::~GridAttributes() = default;
-GridAttributes::GridAttributes(GridAttributes&&) noexcept = default;
-GridAttributes& GridAttributes::operator=(GridAttributes&&) noexcept = default;
-
-GridAttributes GridAttributes::build(const std::vector<const PolyMesh*>& meshes) {
-  for (const PolyMesh* m : meshes) check_mesh(*m);
-  GridAttributes a;
-  a.impl_ = std::make_unique<Impl>();
-  Impl& im = *a.impl_;
-  GridBuildOptions gopt;
-  gopt.corners = true;
-  im.gs = make_grids(meshes, gopt);
-  GridSet& gs = im.gs;
-  // Leftover triangles as the 2x2 grids (a, b / c, c) Scene::build makes of them in its 2x2 mode.
-  append_triangle_grids(gs, /*with_corners=*/true);
-  im.face_start.resize(meshes.size());
-  im.cells.resize(meshes.size());
-  for (size_t g = 0; g < meshes.size(); ++g)
-    im.face_start[g].assign(meshes[g]->face_count() + 1, 0);
-  auto for_each_cell = [&](auto&& fn) {
-    for (size_t gi = 0; gi < gs.grids.size(); ++gi) {
-      const VertexGrid& g = gs.grids[gi];
-      for (uint32_t y = 0; y + 1 < g.res_y; ++y)
-        for (uint32_t x = 0; x + 1 < g.res_x; ++x) {
-          const uint32_t fa = gs.cell_face(g, x, y, 0), fb = gs.cell_face(g, x, y, 1);
-          fn(g.geom, fa, uint32_t(gi), x, y);
-          if (fb != fa) fn(g.geom, fb, uint32_t(gi), x, y);
-        }
-    }
-  };
-  for_each_cell([&](uint32_t geom, uint32_t f, uint32_t, uint32_t, uint32_t) {
-    im.face_start[geom][f + 1]++;
-  });
-  for (size_t g = 0; g < meshes.size(); ++g) {
-    auto& fs = im.face_start[g];
-    for (size_t f = 0; f + 1 < fs.size(); ++f) fs[f + 1] += fs[f];
-    im.cells[g].resize(fs.back());
-  }
-  std::vector<std::vector<uint64_t>> fill(meshes.size());
-  for (size_t g = 0; g < meshes.size(); ++g)
-    fill[g].assign(im.face_start[g].begin(), im.face_start[g].end() - 1);
-  for_each_cell([&](uint32_t geom, uint32_t f, uint32_t gi, uint32_t x, uint32_t y) {
-    im.cells[geom][fill[geom][f]++] = {gi, x, y};
-  });
-  return a;
-}
-
-uint64_t GridAttributes::grid_vertex_count() const { return impl_ ? impl_->gs.vertices.size() : 0; }
-
-namespace {
-
-template <class T>
-std::vector<T> grid_ordered_impl(const GridSet& gs, uint32_t geom, const std::vector<T>& values,
-                                 const std::vector<uint32_t>& indices, const PolyMesh* /*unused*/) {
-  std::vector<T> out(gs.vertices.size());
-  for (const VertexGrid& g : gs.grids) {
-    if (g.geom != geom) continue;
-    for (uint64_t i = 0; i < uint64_t(g.res_x) * g.res_y; ++i) {
-      const uint64_t at = g.vertex_offset + i;
-      const uint64_t idx = indices.empty() ? gs.vertices[at] : indices[gs.corner_of_vertex[at]];
-      if (idx < values.size()) out[at] = values[idx];
-    }
-  }
-  return out;
-}
-
-template <class T>
-T lerp3(const T& a, const T& b, const T& c, float u, float v);
-template <>
-Vec2f lerp3(const Vec2f& a, const Vec2f& b, const Vec2f& c, float u, float v) {
-  const float w = 1.0f - u - v;
-  return {w * a.x + u * b.x + v * c.x, w * a.y + u * b.y + v * c.y};
-}
-template <>
-Vec3f lerp3(const Vec3f& a, const Vec3f& b, const Vec3f& c, float u, float v) {
-  return a * (1.0f - u - v) + b * u + c * v;
-}
-
-template <class T>
-bool interpolate_impl(const GridAttributes::Impl& im, const std::vector<T>& values, const Hit& hit,
-                      T& out) {
-  if (!hit.valid() || hit.kind != PrimKind::Grid || hit.geomID >= im.cells.size()) return false;
-  const auto& fs = im.face_start[hit.geomID];
-  if (hit.primID + 1 >= fs.size()) return false;
-  const GridSet& gs = im.gs;
-  for (uint64_t e = fs[hit.primID]; e < fs[hit.primID + 1]; ++e) {
-    const GridAttributes::Impl::CellRef& c = im.cells[hit.geomID][e];
-    const VertexGrid& g = gs.grids[c.grid];
-    const float gu = hit.u * float(g.res_x - 1), gv = hit.v * float(g.res_y - 1);
-    const float cu = gu - float(c.x), cv = gv - float(c.y);
-    // The hit's cell (allowing for rounding at the cell's borders).
-    const float tol = 1e-3f;
-    if (cu < -tol || cu > 1 + tol || cv < -tol || cv > 1 + tol) continue;
-    const float u = std::clamp(cu, 0.0f, 1.0f), v = std::clamp(cv, 0.0f, 1.0f);
-    if (values.size() < g.vertex_offset + uint64_t(g.res_x) * g.res_y) return false;
-    auto at = [&](uint32_t dx, uint32_t dy) {
-      return values[g.vertex_offset + uint64_t(c.y + dy) * g.res_x + c.x + dx];
-    };
-    if (gs.flipped(g, c.x, c.y)) {
-      // A = (p00, p10, p01) holds u + v <= 1: p = p00 + u (p10 - p00) + v (p01 - p00);
-      // B = (p11, p01, p10): p = p11 + (1 - u)(p01 - p11) + (1 - v)(p10 - p11).
-      if (u + v <= 1.0f)
-        out = lerp3(at(0, 0), at(1, 0), at(0, 1), u, v);
-      else
-        out = lerp3(at(1, 1), at(0, 1), at(1, 0), 1.0f - u, 1.0f - v);
-    } else {
-      // A = (p00, p10, p11) holds v <= u: p = p00 + (u - v)(p10 - p00) + v (p11 - p00);
-      // B = (p00, p11, p01): p = p00 + u (p11 - p00) + (v - u)(p01 - p00).
-      if (v <= u)
-        out = lerp3(at(0, 0), at(1, 0), at(1, 1), u - v, v);
-      else
-        out = lerp3(at(0, 0), at(1, 1), at(0, 1), u, v - u);
-    }
-    return true;
-  }
-  return false;
-}
-
-}  // namespace
-
-std::vector<Vec2f> GridAttributes::grid_ordered(uint32_t geom, const std::vector<Vec2f>& values,
-                                                const std::vector<uint32_t>& indices) const {
-  if (!impl_) return {};
-  return grid_ordered_impl(impl_->gs, geom, values, indices, nullptr);
-}
-std::vector<Vec3f> GridAttributes::grid_ordered(uint32_t geom, const std::vector<Vec3f>& values,
-                                                const std::vector<uint32_t>& indices) const {
-  if (!impl_) return {};
-  return grid_ordered_impl(impl_->gs, geom, values, indices, nullptr);
-}
-bool GridAttributes::interpolate(const std::vector<Vec2f>& grid_values, const Hit& hit,
-                                 Vec2f& out) const {
-  return impl_ && interpolate_impl(*impl_, grid_values, hit, out);
-}
-bool GridAttributes::interpolate(const std::vector<Vec3f>& grid_values, const Hit& hit,
-                                 Vec3f& out) const {
-  return impl_ && interpolate_impl(*impl_, grid_values, hit, out);
 }
 
 }  // namespace slim

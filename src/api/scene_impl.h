@@ -17,6 +17,9 @@ struct Scene::Impl {
   MemoryStats mem;
   Box3f bounds;
   RaySetupBounds ray_setup;  // from bounds, set by Scene::build
+  // Largest |decoded - input| over the vertices, measured by the builder of a lossy format
+  // (Scene::error_bound()); 0 for formats that store positions exactly.
+  double error_bound = 0;
 
   virtual ~Impl() = default;
   virtual void intersect(TravRay& ray, HitRecord& hit) const = 0;
@@ -26,7 +29,6 @@ struct Scene::Impl {
 };
 
 // Format builders (one per file under api/). Each fills stats/mem/bounds except build time.
-// Throw slim::Error("<config>: does not apply: <reason>") when the input does not suit the format.
 std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMesh*>& meshes,
                                                   const BuildOptions& opt);  // scene_triangles.cpp
 std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>& meshes,

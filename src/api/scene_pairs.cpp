@@ -2,8 +2,8 @@
 // leaves over the paper's baseline pairing, in-order window N = 2). A. Aman, S. Fenney, "Fast
 // Triangle Pairing for Ray Tracing", Imagination Technologies
 // (../shared/papers/fast-triangle-pairing.txt): the fan triangles of the input are paired with the
-// edge-box surface-area heuristic (mesh/pairing.h, default PairingOptions), and the BVH is built
-// over pairs stored in Pair4 leaves (prim/pairs.h).
+// edge-box surface-area heuristic (mesh/pairing.h, BuildOptions::pairing_options), and the BVH is
+// built over pairs stored in Pair4 leaves (prim/pairs.h).
 //
 // Choices, measured single-threaded (diffuse paths, 160 x 160 pixels, thread CPU time, best of
 // 5-7 interleaved runs, AVX2, on the shared 2-core build VM):
@@ -28,16 +28,13 @@ namespace slim {
 
 std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>& meshes,
                                               const BuildOptions& opt) {
-  if (opt.bvh == Bvh::CompressedLeafCompact)
-    throw Error(opt.config_name() +
-                ": does not apply: pair leaves store their vertices, there are no vertex indices "
-                "for a per-multi-leaf dictionary");
   TriangleMesh tm = triangulate_fan(meshes);
   PairingInput in{tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(),
                   tm.geom_ids.data()};
   // bvh8-pairs-w2: the paper's baseline ("Old #pairs").
-  PairingResult pr = opt.geometry == Geometry::PairsWindow2 ? window_pairs(in)
-                                                            : pair_triangles(in, PairingOptions{});
+  PairingResult pr = opt.pairing == PairingMethod::Window2
+                         ? window_pairs(in)
+                         : pair_triangles(in, opt.pairing_options);
 
   LargeVector<PairRef> refs;  // huge pages: ~12 B per triangle, filled once
   refs.reserve(pr.pairs.size() + pr.unpaired.size());
@@ -62,7 +59,8 @@ std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>
   d.emplace_back("pairing_s", ps.pairing_s);
   d.emplace_back("pairs", double(ps.pairs));
   d.emplace_back("unpaired_triangles", double(ps.unpaired));
-  if (opt.geometry == Geometry::Pairs) {  // pair_triangles: the pre-scan, then maybe the heuristic
+  if (opt.pairing ==
+      PairingMethod::EdgeHeuristic) {  // pair_triangles: the pre-scan, then maybe the heuristic
     if (!ps.prescan_skipped) {
       d.emplace_back("heuristic_paired_fraction", ps.heuristic_paired_fraction);
       d.emplace_back("augmented_pairs", double(ps.augmented_pairs));

@@ -30,14 +30,10 @@ std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMe
                                                   const BuildOptions& opt) {
   TriangleMesh tm = triangulate_fan(meshes);
   std::unique_ptr<Scene::Impl> s;
-  if (opt.geometry == Geometry::IndexedTriangles && opt.bvh == Bvh::CompressedLeafCompact)
+  if (opt.leaf == Leaf::CompactTriangles)
     s = build_with<Tri4iCompact>(tm, opt);
-  else if (opt.geometry == Geometry::IndexedTriangles)
+  else if (opt.leaf == Leaf::IndexedTriangles)
     s = build_with<Tri4i>(tm, opt);
-  else if (opt.bvh == Bvh::CompressedLeafCompact)
-    throw Error(opt.config_name() +
-                ": does not apply: the compact layout stores vertex indices "
-                "(use clbvh-compact)");
   else
     s = build_with<Tri4v>(tm, opt);
   s->stats.input_faces = tm.input_faces;

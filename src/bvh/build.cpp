@@ -38,10 +38,10 @@ constexpr int kSahDepth = 64;                          // deeper: object median 
 // hi.x, hi.y, hi.z, idhi]. With the lower corner negated, growing a box by another is a single
 // 8-wide max (Embree keeps its bins the same way), and a whole reference is one aligned load.
 // Lanes 3 and 7 hold no coordinate and are ignored by every result, but the 8-wide arithmetic
-// still runs on them: they carry the id's two 16-bit halves as quiet-NaN payloads. The raw id bits
-// (as before) are a denormal float for every id below 2^23, and a denormal operand costs this CPU
-// a microcode assist per operation: binning terrain/torus references took 17-21 TSC cycles each
-// instead of 8-11 (rdtsc per node class, microbenchmark on torus:1024). NaN operands cost nothing.
+// still runs on them: they carry the id's two 16-bit halves as quiet-NaN payloads. Raw id bits
+// would be a denormal float for every id below 2^23, and a denormal operand costs x86 CPUs a
+// microcode assist per operation (binning terrain/torus references: 17-21 TSC cycles each instead
+// of 8-11, rdtsc per node class on torus:1024). NaN operands cost nothing.
 constexpr uint32_t kNanBox = 0x7FC00000u;
 struct alignas(32) Ref {
   float v[8];
@@ -52,7 +52,7 @@ struct alignas(32) Ref {
     std::memcpy(&hi, &v[7], 4);
     return (lo & 0xFFFFu) | (hi & 0xFFFFu) << 16;
   }
-  // Twice the centroid on axis a (lo + hi, rounded once as before).
+  // Twice the centroid on axis a (lo + hi, rounded once).
   SLIM_INLINE float c2(int a) const { return v[4 + a] - v[a]; }
 };
 static_assert(sizeof(Ref) == 32);

@@ -135,8 +135,8 @@ struct SubtreeStats {
 // depth-first in both arenas (a node's children follow it), identical to a serial collapse.
 class Collapser {
  public:
-  Collapser(const Bvh2& b2, NodeKind kind, const LeafEncoder& enc, Bvh8& out)
-      : b2_(b2), kind_(kind), enc_(enc), out_(out) {}
+  Collapser(const Bvh2& b2, NodeKind kind, const LeafEncoder& enc, CollapseRule rule, Bvh8& out)
+      : b2_(b2), kind_(kind), enc_(enc), rule_(rule), out_(out) {}
 
   void run() {
     out_.block_bytes = enc_.block_bytes;
@@ -162,13 +162,7 @@ class Collapser {
         max_leaf_[i] = std::max(max_leaf_[n.first], max_leaf_[n.first + 1]);
       }
     }
-    // The SAH-optimal collapse for BVH8 and QBVH8 (fewer box tests per ray: torus:1024 W1 38.8
-    // -> 34.1, canyon:1024 53.3 -> 47.3, ogre 26.1 -> 20.9); the compressed-leaf BVH keeps the
-    // slot rule, which spends fewer inner nodes around its multi-leaves (node memory 0.59x the
-    // BVH8's on terrain:128 against 0.61x; no speed difference measured). SLIM_COLLAPSE=slots or
-    // =optimal forces one rule for every kind (measurements).
-    const char* how = std::getenv("SLIM_COLLAPSE");
-    optimal_ = how ? std::string(how) == "optimal" : kind_ != NodeKind::CompressedLeaf;
+    optimal_ = rule_ == CollapseRule::Optimal;
     out_.bounds = b2_.nodes[0].box;
     root_area_ = std::max(out_.bounds.half_area(), 1e-30f);
     if (optimal_) {
@@ -545,6 +539,7 @@ class Collapser {
   const Bvh2& b2_;
   NodeKind kind_;
   const LeafEncoder& enc_;
+  CollapseRule rule_;
   Bvh8& out_;
   LargeArray<uint32_t> prims_, leaves_, max_leaf_, slots_;
   bool optimal_ = true;
@@ -557,9 +552,9 @@ class Collapser {
 
 }  // namespace
 
-Bvh8 collapse_bvh8(const Bvh2& bvh2, NodeKind kind, const LeafEncoder& enc) {
+Bvh8 collapse_bvh8(const Bvh2& bvh2, NodeKind kind, const LeafEncoder& enc, CollapseRule rule) {
   Bvh8 out;
-  Collapser(bvh2, kind, enc, out).run();
+  Collapser(bvh2, kind, enc, rule, out).run();
   return out;
 }
 

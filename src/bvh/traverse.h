@@ -1,23 +1,38 @@
 // Single-ray BVH8 traversal: one template over (leaf format, closest/any hit, statistics).
 // Node formats (Node8, QNode8, MultiLeaf8) are told apart by the tag of the child reference, so
-// one loop serves BVH8, QBVH8 and the compressed-leaf BVH.
-//
-// A leaf format L provides:
-//   struct L::Context;                          // scene data the leaves refer to (may be empty)
-//   template <bool kAny, class Stats>
-//   static bool intersect(const L::Context&, const uint8_t* block, TravRay&, HitRecord&, Stats&);
-// intersect() tests one block; for closest hit it lowers ray.tfar and fills the hit record when it
-// finds a closer hit and returns true; for any hit it returns true on the first hit.
+// one loop serves BVH8, QBVH8 and the compressed-leaf BVH. The leaf format is a parameter that
+// satisfies the LeafFormat concept below (the leaf contract, written once).
 #pragma once
 
+#include <concepts>
 #include <cstdint>
 
 #include "bvh/bvh8.h"
 #include "core/ray.h"
 #include "core/simd.h"
-#include "slimrt/scene.h"
+#include "slimrt/ray.h"
 
 namespace slim {
+
+// The leaf contract. A leaf format L provides
+//   L::Context             scene data the leaves refer to (may be empty), passed to every call;
+//   L::kBlockPrims         primitives per leaf block (the builder's unit);
+//   L::kBlockBytes         bytes per block (a leaf is up to kMaxLeafBlocks blocks back to back);
+//   L::intersect<kAny>(ctx, block, ray, hit, stats) -> bool
+//                          tests one block. Closest hit (kAny = false): lowers ray.tfar and fills
+//                          the hit record when it finds a closer hit, and returns true then. Any
+//                          hit (kAny = true): returns true on the first hit. It reports the tests
+//                          it makes to `stats` (NoStats or CountStats, core/ray.h).
+// The optional multi-leaf layouts are the HasMultiLeaf* concepts below.
+template <class L>
+concept LeafFormat = requires(const typename L::Context& ctx, const uint8_t* block, TravRay& ray,
+                              HitRecord& hit, NoStats& none, CountStats& counted) {
+  { L::kBlockPrims } -> std::convertible_to<uint32_t>;
+  { L::kBlockBytes } -> std::convertible_to<uint32_t>;
+  { L::template intersect<false>(ctx, block, ray, hit, none) } -> std::same_as<bool>;
+  { L::template intersect<true>(ctx, block, ray, hit, none) } -> std::same_as<bool>;
+  { L::template intersect<false>(ctx, block, ray, hit, counted) } -> std::same_as<bool>;
+};
 
 namespace detail {
 
@@ -63,7 +78,7 @@ SLIM_INLINE uint32_t intersect_quant8(const QuantBoxes8* q, const TravRay& r, si
 // BVH8 node pushes at most 7 entries per level.
 constexpr int kTraversalStackSize = 7 * 96 + 8;
 
-template <class Leaf, bool kAny, class Stats>
+template <LeafFormat Leaf, bool kAny, class Stats>
 SLIM_INLINE bool intersect_leaf_blocks(const typename Leaf::Context& ctx, const uint8_t* p,
                                        uint32_t blocks, uint32_t block_bytes, TravRay& ray,
                                        HitRecord& hit, Stats& st) {
@@ -105,7 +120,7 @@ concept HasMultiLeafParts = requires(const typename L::Source& s) {
 // far and stop at the first whose entry distance lies beyond the closest hit so far (with up to 8
 // sub-grid halves or quarters per multi-leaf, a ray often enters several children that a hit
 // then hides).
-template <class Leaf, bool kAny, class Stats>
+template <LeafFormat Leaf, bool kAny, class Stats>
 SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const uint8_t* p,
                                      uint32_t children, uint32_t block_bytes, TravRay& ray,
                                      HitRecord& hit, Stats& st) {
@@ -154,7 +169,7 @@ SLIM_INLINE void prefetch_ref(const uint8_t* nodes, const uint8_t* leaves, uint6
 
 // Traverses the BVH from bvh.root. Closest hit: returns true if `hit` was filled (ray.tfar = t).
 // Any hit: returns true as soon as one primitive is hit.
-template <class Leaf, bool kAny, class Stats>
+template <LeafFormat Leaf, bool kAny, class Stats>
 bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& ray, HitRecord& hit,
                    Stats& st) {
   struct Entry {

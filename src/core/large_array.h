@@ -1,9 +1,9 @@
 // Big buffers (tens to hundreds of MB for millions of primitives) backed by transparent huge pages
 // where the system offers them (Linux, THP "madvise" mode, Debian's default), as Embree's own
-// allocator does. The first touch of fresh memory costs a page fault per page, which on the VMs
-// this project runs on is a large part of a build: a fresh 256 MB buffer took 1.0 s to fill with
-// 4 KB pages and 0.05-0.6 s with 2 MB pages on the AMD VM of stop 14 (an earlier build VM: 100 MB
-// in 55 ms vs 18 ms). The random accesses of the builders and the pairing miss the TLB less, too.
+// allocator does. The first touch of fresh memory costs a page fault per page, which on virtual
+// machines is a large part of a build: a fresh 256 MB buffer took 1.0 s to fill with 4 KB pages
+// and 0.05-0.6 s with 2 MB pages on a 2-core AMD VM. The random accesses of the builders and the
+// pairing miss the TLB less, too.
 #pragma once
 
 #if defined(__linux__)

@@ -8,7 +8,7 @@
 
 #include "core/watertight.h"
 #include "slimrt/math.h"
-#include "slimrt/scene.h"
+#include "slimrt/ray.h"
 
 namespace slim {
 

@@ -635,4 +635,23 @@ ExactPositions find_exact_positions(const GridSet& gs, const std::vector<const P
   return ex;
 }
 
+// Appends the leftover triangles of gs as 2x2 grids (a, b / c, c): A = (a, b, c), B = (a, c, c)
+// degenerate; with_corners also extends gs.corner_of_vertex.
+void append_triangle_grids(GridSet& gs, bool with_corners) {
+  for (const LeftoverTriangle& t : gs.triangles) {
+    VertexGrid g;
+    g.geom = t.geom;
+    g.res_x = g.res_y = 2;
+    g.vertex_offset = gs.vertices.size();
+    g.cell_offset = gs.cell_faces.size() / 2;
+    gs.vertices.insert(gs.vertices.end(), {t.v[0], t.v[1], t.v[2], t.v[2]});
+    if (with_corners)
+      gs.corner_of_vertex.insert(gs.corner_of_vertex.end(),
+                                 {t.corner[0], t.corner[1], t.corner[2], t.corner[2]});
+    gs.cell_faces.insert(gs.cell_faces.end(), {t.face, t.face});
+    gs.cell_flip.push_back(0);
+    gs.grids.push_back(g);
+  }
+}
+
 }  // namespace slim

@@ -121,4 +121,8 @@ struct ExactPositions {
 };
 ExactPositions find_exact_positions(const GridSet& gs, const std::vector<const PolyMesh*>& meshes);
 
+// Appends the leftover triangles of gs as 2x2 grids (a, b / c, c): A = (a, b, c), B = (a, c, c)
+// degenerate; with_corners also extends gs.corner_of_vertex.
+void append_triangle_grids(GridSet& gs, bool with_corners);
+
 }  // namespace slim

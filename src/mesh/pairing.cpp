@@ -28,10 +28,9 @@
 //   fg_terrain_hawaii (2M triangles, TIN):      TwinSort 7.3 M triangles/s (~8.5-9 whole
 //   pair_triangles, cold or warm, after the memory diet of find_twins/sorted_scan), Local 6.5,
 //   FullTable 2.4 jittered grid, 2M / 8M triangles (coherent): TwinSort 5.7 / 6.2, Local 6.8 / 8.6
-// so TwinSort (the paper's sort) is the default and Local is kept for very large meshes.
-// Since then (rank-sorted twin buckets, prefetched augmenting pass, pre-scan that stops once
-// decided) the whole pair_triangles on hawaii: 8.9 -> 10.2 M triangles/s (best of 4 warm calls in
-// one process; a process's first call pays the VM's first touch of fresh pages, 2x slower).
+// so TwinSort (the paper's sort) is the default and Local is kept for very large meshes. The
+// whole pair_triangles on hawaii runs at 10.2 M triangles/s (best of 4 warm calls in one process;
+// a process's first call pays the first touch of fresh pages, 2x slower).
 #include "mesh/pairing.h"
 
 #include <algorithm>
@@ -46,6 +45,7 @@
 #include "core/large_array.h"
 #include "core/simd_ext.h"
 #include "mesh/triangulate.h"
+#include "prim/pairs.h"
 #include "slimrt/error.h"
 #include "slimrt/scene.h"
 

@@ -13,7 +13,6 @@
 #pragma once
 
 #include <cstdint>
-#include <cstring>
 #include <vector>
 
 #include "core/large_array.h"
@@ -77,14 +76,5 @@ uint64_t weld_positions(const Vec3f* vertices, uint64_t vertex_count, std::vecto
 // True if triangles a and b share the edge (a corner ea, ea+1) = (b corner eb, eb+1) (either
 // direction) by vertex index, or by position when `by_position`; the edge must not be degenerate.
 bool pair_shares_edge(const PairingInput& in, const TrianglePair& p, bool by_position);
-
-// For a pair sharing the edge (a's corners ea, ea+1) = (b's corners eb, eb+1): true if b's corner
-// eb is a's corner ea (by index, or with weld or coordinate keys by position), i.e. both triangles
-// run the shared edge the same way (inconsistent windings); false if it is a's corner ea+1.
-inline bool shared_edge_same_direction(const Vec3f* vertices, const uint32_t* ta, int ea,
-                                       const uint32_t* tb, int eb) {
-  const uint32_t b0 = tb[eb], a0 = ta[ea], a1 = ta[(ea + 1) % 3];
-  return b0 == a0 || (b0 != a1 && std::memcmp(&vertices[b0], &vertices[a0], 12) == 0);
-}
 
 }  // namespace slim

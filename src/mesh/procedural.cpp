@@ -28,7 +28,10 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <unordered_map>
+#include <vector>
 
+#include "slimrt/error.h"
 #include "slimrt/mesh.h"
 
 namespace slim {
@@ -337,6 +340,49 @@ PolyMesh make_torus(int n, uint32_t seed) {
     }
   });
   grid_faces(m, nu, nv, nu, true, true);
+  return m;
+}
+
+PolyMesh make_sphere(int levels, float jitter, uint32_t seed) {
+  if (levels < 0 || levels > 10)
+    throw Error("sphere: " + std::to_string(levels) + " subdivision levels, expected 0 to 10");
+  // The icosahedron, its 20 faces wound outward.
+  const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
+  std::vector<Vec3f> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
+                          {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
+                          {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<uint32_t> f = {0, 11, 5,  0, 5,  1, 0, 1, 7, 0, 7,  10, 0, 10, 11, 1, 5, 9, 5, 11,
+                             4, 11, 10, 2, 10, 7, 6, 7, 1, 8, 3,  9,  4, 3,  4,  2, 3, 2, 6, 3,
+                             6, 8,  3,  8, 9,  4, 9, 5, 2, 4, 11, 6,  2, 10, 8,  6, 7, 9, 8, 1};
+  // Each level splits every triangle into 4 at its edge midpoints, shared by both neighbours.
+  for (int l = 0; l < levels; ++l) {
+    std::unordered_map<uint64_t, uint32_t> mid;
+    auto midpoint = [&](uint32_t a, uint32_t b) {
+      const uint64_t key = uint64_t(std::min(a, b)) << 32 | std::max(a, b);
+      auto it = mid.find(key);
+      if (it != mid.end()) return it->second;
+      v.push_back((v[a] + v[b]) * 0.5f);
+      return mid[key] = uint32_t(v.size() - 1);
+    };
+    std::vector<uint32_t> nf;
+    nf.reserve(f.size() * 4);
+    for (size_t i = 0; i < f.size(); i += 3) {
+      const uint32_t a = f[i], b = f[i + 1], c = f[i + 2];
+      const uint32_t ab = midpoint(a, b), bc = midpoint(b, c), ca = midpoint(c, a);
+      nf.insert(nf.end(), {a, ab, ca, b, bc, ab, c, ca, bc, ab, bc, ca});
+    }
+    f.swap(nf);
+  }
+  PolyMesh m;
+  m.name = "sphere:" + std::to_string(levels);
+  m.positions.resize(v.size());
+  for (size_t i = 0; i < v.size(); ++i) {
+    // Radial jitter in [-jitter, +jitter) from the vertex index (deterministic).
+    const float r = float(mix32(uint32_t(i) * 0x9E3779B9u ^ seed) >> 8) * (1.0f / 16777216.0f);
+    m.positions[i] = normalize(v[i]) * (1.0f + jitter * (2.0f * r - 1.0f));
+  }
+  m.face_indices = std::move(f);
+  m.face_sizes.assign(m.face_indices.size() / 3, 3);
   return m;
 }
 

@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "prim/quantized_mesh.h"
 #include "slimrt/mesh.h"
 
 namespace slim {
@@ -90,10 +91,6 @@ class PolygonTessellator {
 
 // ---- the regular data structure (paper Figures 2 and 6) -----------------------------------------
 
-// Primitive kinds follow from the vertex count alone (paper Listing 5): 3 = triangle, 4 = quad
-// (a 4-vertex fan), 5+ = fan or strip, told apart by the flag bit in the first face entry.
-constexpr uint32_t kFanStripFlagMin = 5;
-
 // Primitive i has vertices faces[prim_offsets[i] .. prim_offsets[i+1]). For a primitive of 5+
 // vertices, its first face entry is (vertex << 1) | flag, flag 0 = fan, 1 = strip (paper section
 // 3.2: "shifted to the left one bit to accommodate a flag"); all other entries are plain vertex
@@ -118,6 +115,8 @@ struct NgonMesh {
   uint32_t prim_size(size_t i) const { return prim_offsets[i + 1] - prim_offsets[i]; }
   // Triangles the primitives hold (a primitive of k vertices holds k - 2).
   uint64_t triangle_count() const { return faces.size() - 2 * uint64_t(prim_count()); }
+  // The arrays the Costa store encodes (prim/quantized_mesh.h).
+  operator NgonArrays() const { return {vertices, prim_offsets, faces}; }
 };
 
 // Loads the meshes as the paper's section 3.1 does (see the top of this file). Faces with a

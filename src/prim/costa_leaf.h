@@ -25,7 +25,7 @@
 #include "core/simd.h"
 #include "core/watertight.h"
 #include "prim/quantized_mesh.h"
-#include "slimrt/scene.h"
+#include "slimrt/ray.h"
 
 namespace slim {
 

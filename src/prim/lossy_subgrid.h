@@ -43,7 +43,7 @@
 #include "core/simd_ext.h"
 #include "prim/subgrid.h"
 #include "slimrt/math.h"
-#include "slimrt/scene.h"
+#include "slimrt/ray.h"
 
 namespace slim {
 

@@ -38,20 +38,29 @@
 #pragma once
 
 #include <cstdint>
+#include <cstring>
 #include <type_traits>
 
 #include "core/ray.h"
 #include "core/simd.h"
 #include "core/simd_ext.h"
 #include "core/watertight.h"
-#include "mesh/pairing.h"
 #include "prim/triangles.h"
 #include "slimrt/math.h"
-#include "slimrt/scene.h"
+#include "slimrt/ray.h"
 
 namespace slim {
 
 constexpr uint32_t kLoneTriangle = 0xffffffffu;
+
+// For a pair sharing the edge (a's corners ea, ea+1) = (b's corners eb, eb+1): true if b's corner
+// eb is a's corner ea (by index, or with weld or coordinate keys by position), i.e. both triangles
+// run the shared edge the same way (inconsistent windings); false if it is a's corner ea+1.
+inline bool shared_edge_same_direction(const Vec3f* vertices, const uint32_t* ta, int ea,
+                                       const uint32_t* tb, int eb) {
+  const uint32_t b0 = tb[eb], a0 = ta[ea], a1 = ta[(ea + 1) % 3];
+  return b0 == a0 || (b0 != a1 && std::memcmp(&vertices[b0], &vertices[a0], 12) == 0);
+}
 
 // One pair primitive of the build-time source: triangles a and b (b = kLoneTriangle for a triangle
 // left unpaired) sharing a's corners (ea, ea+1 mod 3) = b's corners (eb, eb+1 mod 3), in either

@@ -2,6 +2,8 @@
 // array packing (Listing 2), face packing (Listing 3), vertex quantization (Listing 4).
 #include "prim/quantized_mesh.h"
 
+#include "slimrt/error.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -95,7 +97,7 @@ std::string CostaFlags::letters() const {
 // ---- the store
 // -------------------------------------------------------------------------------------
 
-QuantizedMesh::QuantizedMesh(const NgonMesh& m, bool P, bool F, bool V) : P_(P), F_(F), V_(V) {
+QuantizedMesh::QuantizedMesh(const NgonArrays& m, bool P, bool F, bool V) : P_(P), F_(F), V_(V) {
   const uint64_t n = m.prim_count();
   if (n >= 0xffffffffull) throw Error("costa: too many primitives");
   prim_count_ = uint32_t(n);

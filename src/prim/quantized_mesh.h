@@ -10,7 +10,7 @@
 //                    F:     the same entries bit-packed, leading zeros dropped (Listing 3)
 //   vertex array     plain: float3
 //                    V:     uint16 x 3 in the scene box (Listing 4; lossy)
-// T (triangulate first) acts on the input (mesh/tessellate.h), not on the store.
+// T (triangulate first) acts on the input (mesh/tessellate.h), before the store.
 // Every combination gives O(1) access to primitive i: two offset reads, then its face entries.
 #pragma once
 
@@ -20,7 +20,6 @@
 #include <string>
 #include <vector>
 
-#include "mesh/tessellate.h"
 #include "slimrt/math.h"
 
 namespace slim {
@@ -94,13 +93,28 @@ struct CostaFlags {
   std::string letters() const;
 };
 
+// Primitive kinds follow from the vertex count alone (paper Listing 5): 3 = triangle, 4 = quad
+// (a 4-vertex fan), 5+ = fan or strip, told apart by the flag bit in the first face entry.
+constexpr uint32_t kFanStripFlagMin = 5;
+
+// The regular data structure the store encodes (paper Figures 2 and 6): primitive i has vertices
+// faces[prim_offsets[i] .. prim_offsets[i+1]); for a primitive of kFanStripFlagMin+ vertices the
+// first face entry is (vertex << 1) | flag (0 = fan, 1 = strip). mesh/tessellate.h's NgonMesh
+// converts to it.
+struct NgonArrays {
+  const std::vector<Vec3f>& vertices;
+  const std::vector<uint32_t>& prim_offsets;
+  const std::vector<uint32_t>& faces;
+  size_t prim_count() const { return prim_offsets.empty() ? 0 : prim_offsets.size() - 1; }
+};
+
 // The store of one NgonMesh under P, F, V (T is applied before, to the NgonMesh).
 class QuantizedMesh {
  public:
   QuantizedMesh() = default;
   // Encodes the primitives, faces and vertices of `mesh` (the side tables prim_face, face_base
   // are not part of the store). V quantizes in the box of the finite vertices.
-  QuantizedMesh(const NgonMesh& mesh, bool P, bool F, bool V);
+  QuantizedMesh(const NgonArrays& mesh, bool P, bool F, bool V);
 
   uint32_t prim_count() const { return prim_count_; }
   uint64_t face_count() const { return face_count_; }

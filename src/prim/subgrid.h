@@ -23,13 +23,18 @@
 #include "core/simd_ext.h"
 #include "core/watertight.h"
 #include "slimrt/math.h"
-#include "slimrt/scene.h"
+#include "slimrt/ray.h"
 
 namespace slim {
 
 // Sub-grid resolution in vertices (section 3: 5x5 vertices = 4x4 quads = 32 triangles).
 constexpr uint32_t kSubGridRes = 5;
 constexpr uint32_t kSubGridCells = kSubGridRes - 1;
+// Sub-grids along a grid side of `res` vertices (the last one partial when res - 1 is not a
+// multiple of kSubGridCells).
+SLIM_INLINE uint32_t subgrids_along(uint32_t res) {
+  return (res - 1 + kSubGridCells - 1) / kSubGridCells;
+}
 
 // ---- per-grid side table ---------------------------------------------------------------------
 
@@ -248,8 +253,7 @@ inline Box3f subgrid_bounds(const SubGridVerts& w, uint32_t res_x, uint32_t res_
 // ---- half and quarter sub-grids ---------------------------------------------------------------
 // Under the compressed-leaf BVH, a multi-leaf may give each of its sub-grids 2 or 4 child boxes
 // (its parts), all referring to the same block, so that a ray decodes and tests only the part
-// whose box it enters (not in the paper, whose section 5 gives each BVH leaf one whole sub-grid;
-// issue 7):
+// whose box it enters (not in the paper, whose section 5 gives each BVH leaf one whole sub-grid):
 //   halves:   half h = cell rows 2h, 2h+1 (vertex rows 2h .. 2h+2): 2 of the 3 code groups,
 //             2-3 of the 4 ray-space groups, 2 of the 4 rows;
 //   quarters: quarter q = cells (2qx .. 2qx+1, 2qy .. 2qy+1), qx = q & 1, qy = q >> 1: its 3x3

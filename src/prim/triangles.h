@@ -17,7 +17,7 @@
 #include "core/simd.h"
 #include "core/watertight.h"
 #include "slimrt/math.h"
-#include "slimrt/scene.h"
+#include "slimrt/ray.h"
 
 namespace slim {
 

@@ -1,0 +1,32 @@
+// slimrt analysis: the measurement and paper-reproduction hooks that the CLI, the benchmark and
+// the tests use beside the user API of slimrt/slimrt.h: how a mesh becomes grids and what the
+// lossy grids lose (grids.h), the Costa store sizes (costa.h), the pairing figures (pairing.h),
+// the benchmark camera, path tracer, RNG and PSNR (render.h), and the decoded triangles of the
+// formats that intersect their own geometry.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "slimrt/costa.h"
+#include "slimrt/decoded.h"
+#include "slimrt/grids.h"
+#include "slimrt/pairing.h"
+#include "slimrt/render.h"
+#include "slimrt/slimrt.h"
+
+namespace slim {
+
+// The triangles the format of `opt` intersects when it has its own geometry
+// (describe(opt).own_geometry: lossy grids, costa), decoded exactly as its leaves decode them and
+// built by the same deterministic conversion as Scene::build; std::nullopt for the formats that
+// intersect the input's fan triangles. Throws slim::Error on malformed meshes.
+std::optional<DecodedTriangles> decoded_triangles(const std::vector<const PolyMesh*>& meshes,
+                                                  const BuildOptions& opt);
+
+// The decoded triangles as a triangle mesh (face i = decoded triangle i; t.face maps it back to
+// the input face), for a reference that reads meshes (Embree, a brute force).
+PolyMesh to_mesh(const DecodedTriangles& t, const std::string& name = "decoded");
+
+}  // namespace slim

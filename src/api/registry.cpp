@@ -1,0 +1,292 @@
+// The registry of configurations (DESIGN.md "One registry of configurations"): one row per named
+// configuration with the properties of its format, and the builder of each leaf format. Every
+// other part of slimrt (the CLI, the benchmark, the tests, the fuzz targets) asks a row or a built
+// scene for a format's properties; nothing re-derives them from the name.
+#include "api/registry.h"
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/simd.h"
+#include "slimrt/analysis.h"
+#include "slimrt/scene.h"
+
+namespace slim {
+
+namespace {
+
+// The properties of a format: the one place that knows which formats are lossy and which
+// intersect their own triangles.
+void describe_format(ConfigInfo& c) {
+  const BuildOptions& o = c.options;
+  c.lossy = o.leaf == Leaf::LossyGrids || o.leaf == Leaf::SharedLossyGrids ||
+            (o.leaf == Leaf::Costa && o.costa.find('V') != std::string::npos);
+  // Costa splits n-gons of 5+ corners with GLU's tessellator, not into fans. Every grid triangle
+  // is a fan triangle of the input (cells keep the fan's diagonal, mesh/grids.h).
+  c.own_geometry = c.lossy || o.leaf == Leaf::Costa;
+  if (!c.lossy)
+    c.error_bound = "0 (positions are stored exactly)";
+  else if (o.leaf == Leaf::Costa)
+    c.error_bound =
+        "the largest |decoded - input| over the vertices, measured at build (16 bits per "
+        "component in the scene box: half a step per axis plus float rounding)";
+  else
+    c.error_bound =
+        "the largest |decoded - input| over the grid vertices, measured by the encoder "
+        "(displacements are quantized; corners and vertices shared with other grids are exact)";
+}
+
+ConfigInfo row(const char* name, Nodes nodes, Leaf leaf, const char* summary) {
+  ConfigInfo c;
+  c.name = name;
+  c.options.nodes = nodes;
+  c.options.leaf = leaf;
+  c.summary = summary;
+  describe_format(c);
+  return c;
+}
+
+ConfigInfo pairs_row(const char* name, Nodes nodes, PairingMethod m, const char* summary) {
+  ConfigInfo c = row(name, nodes, Leaf::Pairs, summary);
+  c.options.pairing = m;
+  return c;
+}
+
+ConfigInfo lossy_grid_row(const char* name, Nodes nodes, Leaf leaf, GridEncoding e,
+                          const char* summary) {
+  ConfigInfo c = row(name, nodes, leaf, summary);
+  c.options.grid_encoding = e;
+  return c;
+}
+
+ConfigInfo costa_row(const std::string& letters) {
+  ConfigInfo c;
+  c.name = letters.empty() ? "costa" : "costa-" + letters;
+  c.options.leaf = Leaf::Costa;
+  c.options.costa = letters;
+  c.summary = "quantized n-gon mesh (Costa et al.)" +
+              std::string(letters.empty() ? "" : ", options " + letters);
+  describe_format(c);
+  return c;
+}
+
+std::vector<ConfigInfo> make_rows() {
+  std::vector<ConfigInfo> v = {
+      row("bvh8-tri4v", Nodes::Bvh8, Leaf::Triangles, "BVH8, leaves of 4 gathered triangles"),
+      row("bvh8-tri4i", Nodes::Bvh8, Leaf::IndexedTriangles,
+          "BVH8, leaves of 4 triangles indexing one vertex array"),
+      row("qbvh8-tri4v", Nodes::QBvh8, Leaf::Triangles, "quantized BVH8, gathered triangles"),
+      row("qbvh8-tri4i", Nodes::QBvh8, Leaf::IndexedTriangles, "quantized BVH8, indexed triangles"),
+      row("clbvh-tri4v", Nodes::CompressedLeaf, Leaf::Triangles,
+          "compressed-leaf BVH, gathered triangles"),
+      row("clbvh-tri4i", Nodes::CompressedLeaf, Leaf::IndexedTriangles,
+          "compressed-leaf BVH, indexed triangles"),
+      row("clbvh-compact", Nodes::CompressedLeaf, Leaf::CompactTriangles,
+          "compressed-leaf BVH, per-multi-leaf vertex dictionaries"),
+      pairs_row("bvh8-pairs", Nodes::Bvh8, PairingMethod::EdgeHeuristic,
+                "BVH8, triangle pairs (edge heuristic)"),
+      pairs_row("clbvh-pairs", Nodes::CompressedLeaf, PairingMethod::EdgeHeuristic,
+                "compressed-leaf BVH, triangle pairs (edge heuristic)"),
+      pairs_row("bvh8-pairs-w2", Nodes::Bvh8, PairingMethod::Window2,
+                "BVH8, triangle pairs of the paper's baseline (input order, window 2)"),
+      row("grid", Nodes::QBvh8, Leaf::Grids, "uncompressed 5x5 sub-grids over grid vertices"),
+      lossy_grid_row("lossy-grid", Nodes::CompressedLeaf, Leaf::LossyGrids,
+                     GridEncoding::Octahedral, "128-byte lossy sub-grids, encoding 1"),
+      lossy_grid_row("lossy-grid-e2", Nodes::CompressedLeaf, Leaf::LossyGrids,
+                     GridEncoding::SharedExponent, "128-byte lossy sub-grids, encoding 2"),
+      lossy_grid_row("lossy-grid-qbvh8", Nodes::QBvh8, Leaf::LossyGrids, GridEncoding::Octahedral,
+                     "128-byte lossy sub-grids under the quantized BVH8"),
+      lossy_grid_row("lossy-grid-shared", Nodes::CompressedLeaf, Leaf::SharedLossyGrids,
+                     GridEncoding::Octahedral, "68-byte lossy sub-grids over shared corners"),
+  };
+  for (const char* t : {"", "T"})
+    for (const char* c : {"", "P", "F", "V", "PF", "PV", "FV", "PFV"})
+      v.push_back(costa_row(std::string(t) + c));
+  return v;
+}
+
+// Any subset of T, P, F, V in that order (may be empty).
+bool valid_costa(const std::string& o) {
+  const char* order = "TPFV";
+  size_t k = 0;
+  for (char c : o) {
+    while (order[k] && order[k] != c) ++k;
+    if (!order[k]) return false;
+    ++k;
+  }
+  return true;
+}
+
+bool same_format(const BuildOptions& a, const BuildOptions& b) {
+  if (a.nodes != b.nodes || a.leaf != b.leaf) return false;
+  switch (a.leaf) {
+    case Leaf::Pairs:
+      return a.pairing == b.pairing;
+    case Leaf::LossyGrids:
+    case Leaf::SharedLossyGrids:
+      return a.grid_encoding == b.grid_encoding;
+    case Leaf::Costa:
+      return a.costa == b.costa;
+    default:
+      return true;
+  }
+}
+
+const char* nodes_name(Nodes n) {
+  switch (n) {
+    case Nodes::Bvh8:
+      return "bvh8";
+    case Nodes::QBvh8:
+      return "qbvh8";
+    case Nodes::CompressedLeaf:
+      return "clbvh";
+  }
+  return "?";
+}
+
+const char* leaf_name(Leaf l) {
+  switch (l) {
+    case Leaf::Triangles:
+      return "tri4v";
+    case Leaf::IndexedTriangles:
+      return "tri4i";
+    case Leaf::CompactTriangles:
+      return "compact";
+    case Leaf::Pairs:
+      return "pairs";
+    case Leaf::Grids:
+      return "grid";
+    case Leaf::LossyGrids:
+      return "lossy-grid";
+    case Leaf::SharedLossyGrids:
+      return "lossy-grid-shared";
+    case Leaf::Costa:
+      return "costa";
+  }
+  return "?";
+}
+
+}  // namespace
+
+const std::vector<ConfigInfo>& configs() {
+  static const std::vector<ConfigInfo> rows = make_rows();
+  return rows;
+}
+
+const ConfigInfo* find_config(const std::string& name) {
+  for (const ConfigInfo& c : configs())
+    if (c.name == name) return &c;
+  return nullptr;
+}
+
+const ConfigInfo& config_info(const std::string& name) {
+  if (const ConfigInfo* c = find_config(name)) return *c;
+  std::string list;
+  for (const ConfigInfo& c : configs())
+    if (c.options.leaf != Leaf::Costa) list += (list.empty() ? "" : ", ") + c.name;
+  throw Error("unknown configuration '" + name + "' (known: " + list +
+              ", costa-<any of T,P,F,V in that order>)");
+}
+
+BuildOptions BuildOptions::from_config(const std::string& name) {
+  return config_info(name).options;
+}
+
+std::string BuildOptions::config_name() const {
+  for (const ConfigInfo& c : configs())
+    if (same_format(c.options, *this)) return c.name;
+  // Combinations without a row: nodes and leaf (and encoding).
+  std::string n = std::string(nodes_name(nodes)) + "-" + leaf_name(leaf);
+  if (leaf == Leaf::Costa && !costa.empty()) n += "-" + costa;
+  if ((leaf == Leaf::LossyGrids || leaf == Leaf::SharedLossyGrids) &&
+      grid_encoding == GridEncoding::SharedExponent)
+    n += "-e2";
+  if (leaf == Leaf::Pairs && pairing == PairingMethod::Window2) n += "-w2";
+  return n;
+}
+
+void BuildOptions::check() const {
+  if (sah_bins < 2 || sah_bins > 64) throw Error("BuildOptions: sah_bins must be 2..64");
+  if (max_leaf_size < 1) throw Error("BuildOptions: max_leaf_size must be >= 1");
+  if (threads < 0) throw Error("BuildOptions: threads must be >= 0 (0 = all cores)");
+  if (grid_parts != 0 && grid_parts != 1 && grid_parts != 2 && grid_parts != 4)
+    throw Error("BuildOptions: grid_parts must be 0 (automatic), 1, 2 or 4");
+  if (grid_parts > 1 && nodes != Nodes::CompressedLeaf)
+    throw Error(
+        "BuildOptions: grid_parts above 1 needs CompressedLeaf nodes (parts are "
+        "multi-leaf children)");
+  if ((leaf == Leaf::CompactTriangles || leaf == Leaf::SharedLossyGrids) &&
+      nodes != Nodes::CompressedLeaf)
+    throw Error("BuildOptions: leaf " + std::string(leaf_name(leaf)) +
+                " lives in multi-leaf nodes: it needs nodes = CompressedLeaf");
+  if (leaf == Leaf::Costa && !valid_costa(costa))
+    throw Error("BuildOptions: costa letters '" + costa +
+                "' are not a subset of T, P, F, V in that order");
+}
+
+ConfigInfo describe(const BuildOptions& opt) {
+  for (const ConfigInfo& c : configs())
+    if (same_format(c.options, opt)) {
+      ConfigInfo r = c;
+      r.options = opt;
+      return r;
+    }
+  ConfigInfo c;
+  c.options = opt;
+  c.name = opt.config_name();
+  c.summary = "a combination without a registry row";
+  describe_format(c);
+  return c;
+}
+
+std::vector<std::string> all_config_names() {
+  std::vector<std::string> v;
+  for (const ConfigInfo& c : configs()) v.push_back(c.name);
+  return v;
+}
+
+SceneBuilder builder_of(Leaf leaf) {
+  switch (leaf) {
+    case Leaf::Triangles:
+    case Leaf::IndexedTriangles:
+    case Leaf::CompactTriangles:
+      return build_triangle_scene;
+    case Leaf::Pairs:
+      return build_pair_scene;
+    case Leaf::Grids:
+    case Leaf::LossyGrids:
+    case Leaf::SharedLossyGrids:
+      return build_grid_scene;
+    case Leaf::Costa:
+      return build_costa_scene;
+  }
+  throw Error("BuildOptions: unknown leaf format " + std::to_string(int(leaf)));
+}
+
+std::optional<DecodedTriangles> decoded_triangles(const std::vector<const PolyMesh*>& meshes,
+                                                  const BuildOptions& opt) {
+  if (!describe(opt).own_geometry) {
+    for (const PolyMesh* m : meshes) {
+      if (!m) throw Error("decoded_triangles: null mesh");
+      check_mesh(*m);
+    }
+    return std::nullopt;
+  }
+  if (opt.leaf == Leaf::Costa) return costa_triangles(meshes, opt);
+  return grid_triangles(meshes, opt);
+}
+
+PolyMesh to_mesh(const DecodedTriangles& t, const std::string& name) {
+  PolyMesh m;
+  m.name = name;
+  m.positions = t.vertices;
+  m.face_sizes.assign(t.size(), 3);
+  m.face_indices.resize(3 * t.size());
+  for (size_t i = 0; i < m.face_indices.size(); ++i) m.face_indices[i] = uint32_t(i);
+  return m;
+}
+
+const char* simd_isa() { return simd::isa_name(); }
+
+}  // namespace slim

@@ -144,8 +144,9 @@ inline bool load_ray(const float* p, slim::Ray& r) {
 class RaycastingScene {
  public:
   RaycastingScene(const std::string& config, int threads) : threads_(threads) {
-    if (threads < 0) throw py::value_error("threads: expected 0 (all cores) or more, got " +
-                                           std::to_string(threads));
+    if (threads < 0)
+      throw py::value_error("threads: expected 0 (all cores) or more, got " +
+                            std::to_string(threads));
     try {
       options_ = slim::BuildOptions::from_config(config);
     } catch (const slim::Error& e) {
@@ -173,13 +174,14 @@ class RaycastingScene {
     mesh.name = "geometry " + std::to_string(meshes_.size());
     mesh.positions.resize(nv);
     static_assert(sizeof(slim::Vec3f) == 3 * sizeof(float));
-    if (nv) std::memcpy(mesh.positions.data(), v.data(), nv * sizeof(slim::Vec3f));
+    if (nv)
+      std::memcpy(static_cast<void*>(mesh.positions.data()), v.data(), nv * sizeof(slim::Vec3f));
     for (size_t i = 0; i < nv; ++i) {
       const slim::Vec3f& p = mesh.positions[i];
       if (!(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z)))
-        throw py::value_error("vertices: expected finite coordinates, vertex " +
-                              std::to_string(i) + " is [" + std::to_string(p.x) + ", " +
-                              std::to_string(p.y) + ", " + std::to_string(p.z) + "]");
+        throw py::value_error("vertices: expected finite coordinates, vertex " + std::to_string(i) +
+                              " is [" + std::to_string(p.x) + ", " + std::to_string(p.y) + ", " +
+                              std::to_string(p.z) + "]");
     }
     // Indices: any integer dtype, each checked against the vertex count.
     auto idx = py::array_t<int64_t, py::array::c_style | py::array::forcecast>::ensure(t);
@@ -198,8 +200,7 @@ class RaycastingScene {
       int64_t k = src[i];
       if (k < 0 || uint64_t(k) >= nv)
         throw py::value_error("triangles: expected indices in [0, " + std::to_string(nv) +
-                              "), triangle " + std::to_string(i / 3) + " has " +
-                              std::to_string(k));
+                              "), triangle " + std::to_string(i / 3) + " has " + std::to_string(k));
       mesh.face_indices[i] = uint32_t(k);
     }
     mesh.face_sizes.assign(nt, 3);
@@ -305,7 +306,8 @@ class RaycastingScene {
     Rays rays = get_rays(rays_obj);
     auto out = output<int32_t>(rays.shape);
     int32_t* po = out.mutable_data();
-    const uint32_t limit = std::min<uint32_t>(max_hits, uint32_t(std::numeric_limits<int32_t>::max()));
+    const uint32_t limit =
+        std::min<uint32_t>(max_hits, uint32_t(std::numeric_limits<int32_t>::max()));
     BadRay bad;
     const int nt = threads(nthreads);
     {
@@ -393,7 +395,7 @@ class RaycastingScene {
   int threads(int nthreads) const {
     if (nthreads < 0)
       throw py::value_error("nthreads: expected 0 (all cores) or more, got " +
-                          std::to_string(nthreads));
+                            std::to_string(nthreads));
     return nthreads > 0 ? nthreads : threads_;
   }
 
@@ -437,8 +439,9 @@ py::array_t<float> rays_pinhole(const double K[9], const double E[16], int width
                           std::to_string(width) + " and " + std::to_string(height));
   const double fx = K[0], s = K[1], cx = K[2], fy = K[4], cy = K[5];
   if (!(fx != 0 && fy != 0) || !std::isfinite(fx) || !std::isfinite(fy))
-    throw py::value_error("create_rays_pinhole: expected nonzero finite focal lengths in the "
-                          "intrinsic matrix");
+    throw py::value_error(
+        "create_rays_pinhole: expected nonzero finite focal lengths in the "
+        "intrinsic matrix");
   double R[3][3], t[3];
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) R[i][j] = E[i * 4 + j];
@@ -475,8 +478,7 @@ std::vector<double> doubles(py::handle obj, size_t n, const char* what, const ch
                           shape_str(a));
   std::vector<double> v(d.data(), d.data() + n);
   for (double x : v)
-    if (!std::isfinite(x))
-      throw py::value_error(std::string(what) + ": expected finite numbers");
+    if (!std::isfinite(x)) throw py::value_error(std::string(what) + ": expected finite numbers");
   return v;
 }
 
@@ -514,7 +516,8 @@ py::array_t<float> rays_pinhole_fov(double fov_deg, py::handle center_obj, py::h
     E[1 * 4 + j] = u[j];
     E[2 * 4 + j] = f[j];
   }
-  for (int i = 0; i < 3; ++i) E[i * 4 + 3] = -(E[i * 4] * e[0] + E[i * 4 + 1] * e[1] + E[i * 4 + 2] * e[2]);
+  for (int i = 0; i < 3; ++i)
+    E[i * 4 + 3] = -(E[i * 4] * e[0] + E[i * 4 + 1] * e[1] + E[i * 4 + 2] * e[2]);
   E[15] = 1;
   return rays_pinhole(K, E, width, height);
 }
@@ -559,8 +562,9 @@ PYBIND11_MODULE(slimrt, m) {
   m.attr("INVALID_ID") = kInvalid;
   m.attr("__version__") = SLIMRT_VERSION;
   m.def("configs", &slim::all_config_names, "Every configuration name, in BENCHMARK.md order.");
-  m.def("simd_isa", [] { return std::string(slim::simd_isa()); },
-        "The SIMD path slimrt was compiled for.");
+  m.def(
+      "simd_isa", [] { return std::string(slim::simd_isa()); },
+      "The SIMD path slimrt was compiled for.");
   m.def("load_triangles", &load_triangles, py::arg("path"),
         "Loads a mesh file (.obj .ply .gltf .glb, optionally .xz) or a procedural scene "
         "(terrain:N, torus:N, canyon:N) as (vertices [N,3] float32, triangles [M,3] uint32, "
@@ -613,9 +617,8 @@ PYBIND11_MODULE(slimrt, m) {
           py::arg("height_px"),
           "Rays [height_px, width_px, 6] of a pinhole camera: intrinsic K (3x3), world-to-camera "
           "extrinsic (4x4); directions R^T K^-1 (x + 0.5, y + 0.5, 1), not normalized.")
-      .def_static("create_rays_pinhole", &rays_pinhole_fov, py::arg("fov_deg"),
-                  py::arg("center"), py::arg("eye"), py::arg("up"), py::arg("width_px"),
-                  py::arg("height_px"),
+      .def_static("create_rays_pinhole", &rays_pinhole_fov, py::arg("fov_deg"), py::arg("center"),
+                  py::arg("eye"), py::arg("up"), py::arg("width_px"), py::arg("height_px"),
                   "Rays [height_px, width_px, 6] of a pinhole camera at eye looking at center, "
                   "horizontal field of view fov_deg (Open3D's convention).");
 }

@@ -127,7 +127,8 @@ TEST(Camera, WholeCoordinateRange) {
       {{-big, -big, -big}, {big, big, big}, "spanning +-9e11"},
       {{big - 1e10f, big - 1e10f, big - 1e10f}, {big, big, big}, "at +9e11"},
       {{-big, -big, -big}, {-big + 1e10f, -big + 1e10f, -big + 1e10f}, "at -9e11"},
-      {{4e6f - 1e3f, 4e6f - 1e3f, 4e6f - 1e3f}, {4e6f + 1e3f, 4e6f + 1e3f, 4e6f + 1e3f},
+      {{4e6f - 1e3f, 4e6f - 1e3f, 4e6f - 1e3f},
+       {4e6f + 1e3f, 4e6f + 1e3f, 4e6f + 1e3f},
        "at 4e6, radius 1e3"},
       {{4e6f, 4e6f, 4e6f}, {4e6f + 4, 4e6f + 4, 4e6f + 4}, "at 4e6, size 4"},
   };

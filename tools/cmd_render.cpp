@@ -12,8 +12,8 @@
 #include <CLI/CLI.hpp>
 #include <cctype>
 #include <chrono>
-#include <cstdint>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -136,11 +136,13 @@ int cmd_render(int argc, char** argv) {
   };
   app.add_option("--up", up, "the scene's up axis (default: y for glTF, z otherwise)")
       ->check(CLI::IsMember({"x", "y", "z"}));
-  app.add_option("--eye", eye, "camera position X,Y,Z (default: backed off until the model fills "
-                               "the image)")
+  app.add_option("--eye", eye,
+                 "camera position X,Y,Z (default: backed off until the model fills "
+                 "the image)")
       ->check(point_check, "X,Y,Z");
-  app.add_option("--look-at", look_at, "point the camera looks at X,Y,Z (default: the model's "
-                                       "centre)")
+  app.add_option("--look-at", look_at,
+                 "point the camera looks at X,Y,Z (default: the model's "
+                 "centre)")
       ->check(point_check, "X,Y,Z");
   app.add_option("--fov", fov, "vertical field of view, degrees")
       ->check(CLI::Range(0.01f, 179.0f))
@@ -158,15 +160,20 @@ int cmd_render(int argc, char** argv) {
   ropt.max_bounces = bounces;
   ropt.threads = threads;
   ropt.shade = shade == "normals" ? Shade::Normals
-                : shade == "kind"  ? Shade::Kind
-                : shade == "sun"   ? Shade::Sun
-                                   : Shade::Diffuse;
+               : shade == "kind"  ? Shade::Kind
+               : shade == "sun"   ? Shade::Sun
+                                  : Shade::Diffuse;
   const bool show_progress = !quiet && isatty(fileno(stderr)) != 0;
   ropt.progress = show_progress;
   ViewOptions view;
-  view.up = up.empty() ? default_up(scene_name) : up == "x" ? Axis::X : up == "y" ? Axis::Y : Axis::Z;
+  view.up = up.empty()  ? default_up(scene_name)
+            : up == "x" ? Axis::X
+            : up == "y" ? Axis::Y
+                        : Axis::Z;
   view.fov_deg = fov;
-  ropt.up = view.up == Axis::X ? Vec3f(1, 0, 0) : view.up == Axis::Y ? Vec3f(0, 1, 0) : Vec3f(0, 0, 1);
+  ropt.up = view.up == Axis::X   ? Vec3f(1, 0, 0)
+            : view.up == Axis::Y ? Vec3f(0, 1, 0)
+                                 : Vec3f(0, 0, 1);
   view.has_eye = !eye.empty() && parse_point(eye, view.eye);
   view.has_look_at = !look_at.empty() && parse_point(look_at, view.look_at);
 
@@ -204,8 +211,8 @@ int cmd_render(int argc, char** argv) {
       "%s: %llu faces, %llu triangles | load %.3f s | build %.3f s (%s) | render %.3f s "
       "(%dx%d, %d spp, %s) | %.2f MRays/s%s | %s\n",
       scene_name.c_str(), (unsigned long long)faces, (unsigned long long)triangles, load_s, build_s,
-      config.c_str(), render_s, ropt.width, ropt.height, ropt.spp, shade.c_str(), mrays,
-      "", output.c_str());
+      config.c_str(), render_s, ropt.width, ropt.height, ropt.spp, shade.c_str(), mrays, "",
+      output.c_str());
   return 0;
 }
 

@@ -54,7 +54,7 @@ def main():
     view = np.cos(np.radians(35)) * (np.cos(np.radians(30)) * np.array(front, float)
                                      + np.sin(np.radians(30)) * side) + np.sin(np.radians(35)) * up
     fov = 45.0  # horizontal, as Open3D's create_rays_pinhole takes it
-    eye = center + view * radius / np.sin(np.radians(fov / 2)) * 0.9
+    eye = center + view * radius / np.sin(np.radians(fov / 2))
     # Open3D's convention: the image's rows run along the up vector given (row 0 on the side of
     # -up), so -up gives an upright picture.
     rays = slimrt.RaycastingScene.create_rays_pinhole(fov, center, eye, -up, w, h)
@@ -77,7 +77,7 @@ def main():
     lambert = np.clip(np.sum(n * sun, axis=-1), 0, None) * lit
     sky = 0.5 + 0.5 * (n @ up)  # hemisphere ambient
     albedo = np.array([0.75, 0.62, 0.48])
-    color = albedo * (1.6 * lambert[..., None] + 0.35 * sky[..., None] * np.array([0.6, 0.7, 1.0]))
+    color = albedo * (1.0 * lambert[..., None] + 0.3 * sky[..., None] * np.array([0.6, 0.7, 1.0]))
     bg = np.array([0.55, 0.7, 0.95]) * (0.6 + 0.4 * np.linspace(1, 0, h))[:, None, None]
     color = np.where(valid[..., None], color, bg)
     srgb = np.where(color <= 0.0031308, 12.92 * color, 1.055 * np.power(np.clip(color, 0, None),

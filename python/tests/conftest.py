@@ -60,10 +60,11 @@ def brute_force(vertices, triangles, rays, tnear=0.0, tfar=np.inf, edge_eps=1e-6
             qvec = np.cross(tvec, e1[None])
             w = np.einsum("rtk,rtk->rt", d, qvec) * inv
             t = np.einsum("rtk,tk->rt", qvec, e2) * inv
-        valid = (det != 0) & np.isfinite(t) & (t >= tnear) & (t <= tfar)
-        inside = valid & (u >= 0) & (w >= 0) & (u + w <= 1)
-        near_edge = valid & (u >= -edge_eps) & (w >= -edge_eps) & (u + w <= 1 + edge_eps) & \
-            ((np.abs(u) <= edge_eps) | (np.abs(w) <= edge_eps) | (np.abs(1 - u - w) <= edge_eps))
+            valid = (det != 0) & np.isfinite(t) & (t >= tnear) & (t <= tfar)
+            inside = valid & (u >= 0) & (w >= 0) & (u + w <= 1)
+            near_edge = valid & (u >= -edge_eps) & (w >= -edge_eps) & \
+                (u + w <= 1 + edge_eps) & ((np.abs(u) <= edge_eps) | (np.abs(w) <= edge_eps) |
+                                           (np.abs(1 - u - w) <= edge_eps))
         tt = np.where(inside, t, np.inf)
         i = np.argmin(tt, axis=1)
         rows = np.arange(len(i))
@@ -78,7 +79,8 @@ def brute_force(vertices, triangles, rays, tnear=0.0, tfar=np.inf, edge_eps=1e-6
         best_v[b:b + chunk] = np.where(hit, w[rows, i], 0)
         # An edge-grazing candidate no farther than the closest hit can change the answer.
         graze_t = np.where(near_edge, t, np.inf).min(axis=1)
-        ambiguous[b:b + chunk] = graze_t <= np.where(hit, bt * (1 + 1e-5) + 1e-30, np.inf)
+        ambiguous[b:b + chunk] = np.isfinite(graze_t) & \
+            (graze_t <= np.where(hit, bt * (1 + 1e-5) + 1e-30, np.inf))
     tie = np.isfinite(best_t) & (second_t <= best_t * (1 + 1e-5) + 1e-30)
     return best_t, best_i, best_u, best_v, ambiguous | tie
 
@@ -101,11 +103,11 @@ def brute_force_counts(vertices, triangles, rays, rel=1e-6):
         qvec = np.cross(tvec, e1[None])
         w = np.einsum("rtk,rtk->rt", d, qvec) * inv
         t = np.einsum("rtk,tk->rt", qvec, e2) * inv
-    eps = 1e-6
-    valid = (det != 0) & np.isfinite(t) & (t >= 0)
-    inside = valid & (u >= 0) & (w >= 0) & (u + w <= 1)
-    grazing = valid & (u >= -eps) & (w >= -eps) & (u + w <= 1 + eps) & \
-        ((np.abs(u) <= eps) | (np.abs(w) <= eps) | (np.abs(1 - u - w) <= eps))
+        eps = 1e-6
+        valid = (det != 0) & np.isfinite(t) & (t >= 0)
+        inside = valid & (u >= 0) & (w >= 0) & (u + w <= 1)
+        grazing = valid & (u >= -eps) & (w >= -eps) & (u + w <= 1 + eps) & \
+            ((np.abs(u) <= eps) | (np.abs(w) <= eps) | (np.abs(1 - u - w) <= eps))
     counts = np.zeros(len(r), np.int64)
     for k in range(len(r)):
         ts = np.sort(t[k][inside[k]])

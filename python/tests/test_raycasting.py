@@ -197,11 +197,13 @@ def test_every_configuration_equals_reference(mesh):
         if is_lossy(config):
             # Positions move by at most a small fraction of the scene: hit/miss may differ only
             # near silhouettes, distances by about the error.
-            assert (hit == rhit).mean() > 0.97, config
+            # (bunny: median 2e-6, largest 9e-4 of the diagonal for the lossy grids)
+            assert (hit == rhit).mean() > 0.99, config
             both = hit & rhit
             err = np.abs(r["t_hit"][both] - ref["t_hit"][both]) * \
                 np.linalg.norm(rays[both, 3:], axis=1)
-            assert np.median(err) < 1e-3 * diag, config
+            assert np.median(err) < 1e-4 * diag, config
+            assert err.max() < 1e-2 * diag, config
         else:
             # Lossless: the same hits, up to ties (another triangle at the same distance).
             assert (hit == rhit).mean() > 0.999, config
@@ -218,7 +220,7 @@ def test_every_configuration_equals_reference(mesh):
 def test_shared_meshes_equal_brute_force(mesh):
     v, t, _ = slimrt.load_triangles(shared_mesh(mesh))
     rng = np.random.default_rng(6)
-    rays = random_rays(rng, v.min(0), v.max(0), 48)
+    rays = random_rays(rng, v.min(0), v.max(0), 32)
     s = build("clbvh-compact", v, t)
     r, bt, amb = check_against_brute_force(s, v, t, rays)
     assert np.isfinite(bt).sum() >= 10

@@ -93,7 +93,8 @@ std::array<Vec3f, 8> frame_corners(const Box3f& box) {
   Vec3f half = max((b.hi - b.lo) * 0.5f, Vec3f(floor_half));
   std::array<Vec3f, 8> out;
   for (int i = 0; i < 8; ++i)
-    out[i] = c + Vec3f(i & 1 ? half.x : -half.x, i & 2 ? half.y : -half.y, i & 4 ? half.z : -half.z);
+    out[i] =
+        c + Vec3f(i & 1 ? half.x : -half.x, i & 2 ? half.y : -half.y, i & 4 ? half.z : -half.z);
   return out;
 }
 
@@ -167,16 +168,16 @@ Camera view_camera(const Box3f& box, const ViewOptions& view, int width, int hei
         xlo = std::min(xlo, x / depth), xhi = std::max(xhi, x / depth);
         ylo = std::min(ylo, y / depth), yhi = std::max(yhi, y / depth);
       }
-      target = add(target, add(mul(right, 0.5 * (xlo + xhi) * dist),
-                               mul(up, 0.5 * (ylo + yhi) * dist)));
+      target =
+          add(target, add(mul(right, 0.5 * (xlo + xhi) * dist), mul(up, 0.5 * (ylo + yhi) * dist)));
     }
     eye = sub(target, mul(forward, dist));
   }
 
   cam.eye = Vec3f(float(eye[0]), float(eye[1]), float(eye[2]));
-  const Vec3f f(float(forward[0]), float(forward[1]), float(forward[2]));
-  const Vec3f r(float(right[0]), float(right[1]), float(right[2]));
-  const Vec3f u(float(up[0]), float(up[1]), float(up[2]));
+  const Vec3f f{float(forward[0]), float(forward[1]), float(forward[2])};
+  const Vec3f r{float(right[0]), float(right[1]), float(right[2])};
+  const Vec3f u{float(up[0]), float(up[1]), float(up[2])};
   cam.du = r * float(2.0 * tan_h / cam.width);
   cam.dv = u * float(-2.0 * tan_v / cam.height);  // top row first
   cam.dir00 = f - r * float(tan_h) + u * float(tan_v);

@@ -121,18 +121,18 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
   img.height = height;
   img.rgb.assign(size_t(width) * size_t(height) * 3, 0.0f);
 
-  // Shade::Sun: the sun comes from the camera's left and a little from behind the scene, 30
+  // Shade::Sun: the sun comes from the camera's left and a little from behind the scene, 25
   // degrees above the horizon, so that slopes facing it are bright and ridges cast shadows.
   Vec3f sun(0.0f, 0.0f, 1.0f);
   if (opt.shade == Shade::Sun) {
     const Vec3f up = sun_up(opt.up);
     Vec3f right = safe_normalize(cam.du - up * dot(cam.du, up));
     Vec3f fwd = safe_normalize(cross(up, right));  // horizontal, into the picture
-    Vec3f h = safe_normalize(right * -0.8f + fwd * 0.6f);
-    sun = safe_normalize(h * 0.866f + up * 0.5f);
+    Vec3f h = safe_normalize(right * -0.9f + fwd * 0.45f);
+    sun = safe_normalize(h * 0.906f + up * 0.423f);
     if (h.x == 0.0f && h.y == 0.0f && h.z == 0.0f) sun = up;
   }
-  const Vec3f sun_colour(2.2f, 2.0f, 1.7f);
+  const Vec3f sun_colour(1.6f, 1.42f, 1.15f);
 
   std::atomic<uint64_t> rays_traced{0};
   auto shade_sample = [&](int x, int y, int s, uint64_t& rays) -> Vec3f {
@@ -160,12 +160,12 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
         Hit h = scene.intersect(ray);
         auto sky = [&](Vec3f d) {
           float a = 0.5f + 0.5f * dot(d, sun_up(opt.up));
-          return Vec3f(0.9f, 0.93f, 1.0f) * (1.0f - a) + Vec3f(0.35f, 0.55f, 0.95f) * a;
+          return Vec3f(0.75f, 0.8f, 0.88f) * (1.0f - a) + Vec3f(0.25f, 0.42f, 0.8f) * a;
         };
         if (!h.valid()) return sky(ray.dir);
         Vec3f n = safe_normalize(h.Ng);
         if (dot(n, ray.dir) > 0.0f) n = -n;
-        const Vec3f albedo(0.72f, 0.58f, 0.45f);
+        const Vec3f albedo(0.7f, 0.5f, 0.36f);
         Vec3f p = ray.org + ray.dir * h.t;
         float eps = offset + 1e-6f * reduce_max(abs(p));
         Vec3f o = p + n * eps;
@@ -187,7 +187,7 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
         Ray bounce{o, 0.0f, d, kInf};
         rays++;
         Hit hb = scene.intersect(bounce);
-        c += hb.valid() ? sun_colour * (0.12f * albedo.x) : sky(d) * 0.9f;
+        c += hb.valid() ? sun_colour * (0.1f * albedo.x) : sky(d) * 0.6f;
         return albedo * c;
       }
       case Shade::Kind: {

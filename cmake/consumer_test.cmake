@@ -29,4 +29,22 @@ message(STATUS "consumer says: ${last_output}")
 if(NOT last_output MATCHES "hit triangle 1 at t = 2")
   message(FATAL_ERROR "consumer: unexpected output '${last_output}'")
 endif()
+# The installed Python module, when it was built, imports from the prefix alone.
+file(GLOB py_module "${prefix}/lib/python3/dist-packages/slimrt*.so")
+if(py_module AND PYTHON)
+  file(WRITE "${work}/check.py" [=[
+import numpy as np
+import slimrt
+s = slimrt.RaycastingScene()
+s.add_triangles(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32),
+                np.array([[0, 1, 2]], np.uint32))
+print(s.cast_rays(np.array([[0.2, 0.2, 1, 0, 0, -1]], np.float32))["t_hit"][0], slimrt.__file__)
+]=])
+  run("import installed Python module" ${CMAKE_COMMAND} -E env
+      "PYTHONPATH=${prefix}/lib/python3/dist-packages" ${PYTHON} "${work}/check.py")
+  message(STATUS "python says: ${last_output}")
+  if(NOT last_output MATCHES "^1.0 ${prefix}")
+    message(FATAL_ERROR "installed Python module: unexpected output '${last_output}'")
+  endif()
+endif()
 file(REMOVE_RECURSE "${work}")

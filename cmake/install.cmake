@@ -26,5 +26,5 @@ install(FILES "${CMAKE_BINARY_DIR}/slimrtConfig.cmake" "${CMAKE_BINARY_DIR}/slim
 # The consumer test: install into a fresh prefix, configure, build and run tests/consumer.
 add_test(NAME install_consumer
   COMMAND ${CMAKE_COMMAND} -DBUILD_DIR=${CMAKE_BINARY_DIR} -DSOURCE_DIR=${CMAKE_SOURCE_DIR}
-          -DCXX=${CMAKE_CXX_COMPILER} -P ${CMAKE_SOURCE_DIR}/cmake/consumer_test.cmake)
+          -DCXX=${CMAKE_CXX_COMPILER} -DPYTHON=${SLIM_PYTHON_EXECUTABLE} -P ${CMAKE_SOURCE_DIR}/cmake/consumer_test.cmake)
 set_tests_properties(install_consumer PROPERTIES TIMEOUT 600)

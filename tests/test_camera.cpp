@@ -2,8 +2,13 @@
 // the whole supported coordinate range (meshes near +-1e12 and far from the origin are found in
 // the image, with nonzero normals).
 #include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
 #include <vector>
 
 #include "slimrt/slimrt.h"
@@ -165,6 +170,31 @@ TEST(Camera, SafeNormalizeLargeVectors) {
   EXPECT_EQ(n.x, 0.0f);
   n = slim::safe_normalize({1e-30f, 0, 0});
   EXPECT_NEAR(n.x, 1.0f, 1e-6f);
+}
+
+// The CLI's camera options: values it refuses (exit code 2 for options, 1 for a camera that
+// cannot be set up) and a render that uses them all.
+TEST(Camera, CliOptions) {
+  namespace fs = std::filesystem;
+  const fs::path out =
+      fs::temp_directory_path() / ("slimrt_camera_" + std::to_string(getpid()) + ".png");
+  auto run = [&](const std::string& args) {
+    std::string cmd = std::string(SLIM_CLI_PATH) + " render terrain:8 -o " + out.string() +
+                      " --res 16x16 --quiet " + args + " >/dev/null 2>&1";
+    int rc = std::system(cmd.c_str());
+    return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+  };
+  EXPECT_NE(run("--up w"), 0);
+  EXPECT_NE(run("--eye 1,2"), 0);
+  EXPECT_NE(run("--eye 1,2,nan"), 0);
+  EXPECT_NE(run("--look-at 1,,2"), 0);
+  EXPECT_NE(run("--fov 0"), 0);
+  EXPECT_NE(run("--fov 180"), 0);
+  EXPECT_EQ(run("--up y --eye 0.5,5,0.5 --look-at 0.5,0,0.5"), 1);  // looking along the up axis
+  fs::remove(out);
+  EXPECT_EQ(run("--up y --eye 2,3,4 --look-at 0,0,0 --fov 30 --shade sun"), 0);
+  EXPECT_TRUE(fs::exists(out));
+  fs::remove(out);
 }
 
 }  // namespace

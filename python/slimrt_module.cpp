@@ -247,11 +247,10 @@ class RaycastingScene {
             pp[i] = h.primID;
             puv[2 * i] = h.u;
             puv[2 * i + 1] = h.v;
-            float len = slim::length(h.Ng);
-            float s = len > 0.0f && std::isfinite(len) ? 1.0f / len : 0.0f;
-            pn[3 * i] = h.Ng.x * s;
-            pn[3 * i + 1] = h.Ng.y * s;
-            pn[3 * i + 2] = h.Ng.z * s;
+            const slim::Vec3f n = slim::safe_normalize(h.Ng);  // no overflow for huge triangles
+            pn[3 * i] = n.x;
+            pn[3 * i + 1] = n.y;
+            pn[3 * i + 2] = n.z;
           } else {  // Open3D's miss values
             pt[i] = slim::kInf;
             pg[i] = kInvalid;
@@ -561,7 +560,7 @@ PYBIND11_MODULE(slimrt, m) {
   py::register_exception<slim::Error>(m, "Error", PyExc_RuntimeError);
   m.attr("INVALID_ID") = kInvalid;
   m.attr("__version__") = SLIMRT_VERSION;
-  m.def("configs", &slim::all_config_names, "Every configuration name, in BENCHMARK.md order.");
+  m.def("configs", &slim::all_config_names, "Every configuration name (the formats of the README).");
   m.def(
       "simd_isa", [] { return std::string(slim::simd_isa()); },
       "The SIMD path slimrt was compiled for.");

@@ -226,6 +226,21 @@ def test_shared_meshes_equal_brute_force(mesh):
     assert np.isfinite(bt).sum() >= 10
 
 
+def test_far_and_huge_geometry():
+    # Near the supported limit (+-1e12) hits are found and normals are unit length; far from the
+    # origin too.
+    for scale, offset in ((9e11, 0.0), (1e3, 4e6), (1.0, 4e6)):
+        v, t = unit_box()
+        v = (v.astype(np.float64) * 2 - 1) * scale + offset
+        s = build("clbvh-compact", v.astype(np.float32), t)
+        org = np.array([offset, offset, offset + 3 * scale])
+        rays = np.array([[*org, 0, 0, -1]], np.float32)
+        r = s.cast_rays(rays)
+        assert np.isfinite(r["t_hit"][0]), (scale, offset)
+        np.testing.assert_allclose(r["t_hit"][0], 2 * scale, rtol=1e-5)
+        np.testing.assert_allclose(r["primitive_normals"][0], [0, 0, 1], atol=1e-6)
+
+
 def test_add_mesh_and_lazy_rebuild():
     s = slimrt.RaycastingScene("bvh8-tri4v")
     rays = np.array([[0.5, 0.5, 3, 0, 0, -1]], np.float32)

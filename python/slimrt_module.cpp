@@ -560,7 +560,8 @@ PYBIND11_MODULE(slimrt, m) {
   py::register_exception<slim::Error>(m, "Error", PyExc_RuntimeError);
   m.attr("INVALID_ID") = kInvalid;
   m.attr("__version__") = SLIMRT_VERSION;
-  m.def("configs", &slim::all_config_names, "Every configuration name (the formats of the README).");
+  m.def("configs", &slim::all_config_names,
+        "Every configuration name (the formats of the README).");
   m.def(
       "simd_isa", [] { return std::string(slim::simd_isa()); },
       "The SIMD path slimrt was compiled for.");

@@ -121,7 +121,8 @@ int cmd_render(int argc, char** argv) {
           },
           "WxH")
       ->capture_default_str();
-  app.add_option("--config", config, "the format (bvh8-tri4v, clbvh-compact, lossy-grid, ...; see the README)")
+  app.add_option("--config", config,
+                 "the format (bvh8-tri4v, clbvh-compact, lossy-grid, ...; see the README)")
       ->capture_default_str();
   app.add_option("--threads", threads, "threads for build and render, 0 = all cores")
       ->check(CLI::Range(0, 4096))

@@ -197,13 +197,14 @@ def test_every_configuration_equals_reference(mesh):
         if is_lossy(config):
             # Positions move by at most a small fraction of the scene: hit/miss may differ only
             # near silhouettes, distances by about the error.
-            # (bunny: median 2e-6, largest 9e-4 of the diagonal for the lossy grids)
+            # (bunny: median 2e-6 of the diagonal for the lossy grids)
             assert (hit == rhit).mean() > 0.99, config
             both = hit & rhit
             err = np.abs(r["t_hit"][both] - ref["t_hit"][both]) * \
                 np.linalg.norm(rays[both, 3:], axis=1)
+            # (a ray grazing a silhouette may hit the surface behind instead: not the largest)
             assert np.median(err) < 1e-4 * diag, config
-            assert err.max() < 1e-2 * diag, config
+            assert np.quantile(err, 0.99) < 1e-2 * diag, config
         else:
             # Lossless: the same hits, up to ties (another triangle at the same distance).
             assert (hit == rhit).mean() > 0.999, config
@@ -229,15 +230,16 @@ def test_shared_meshes_equal_brute_force(mesh):
 def test_far_and_huge_geometry():
     # Near the supported limit (+-1e12) hits are found and normals are unit length; far from the
     # origin too.
-    for scale, offset in ((9e11, 0.0), (1e3, 4e6), (1.0, 4e6)):
+    # (half size, centre, ray origin's height above the top; origins must lie within 1e12)
+    for scale, offset, above in ((9e11, 0.0, 5e10), (1e3, 4e6, 2e3), (1.0, 4e6, 2.0)):
         v, t = unit_box()
         v = (v.astype(np.float64) * 2 - 1) * scale + offset
         s = build("clbvh-compact", v.astype(np.float32), t)
-        org = np.array([offset, offset, offset + 3 * scale])
+        org = np.array([offset, offset, offset + scale + above])
         rays = np.array([[*org, 0, 0, -1]], np.float32)
         r = s.cast_rays(rays)
         assert np.isfinite(r["t_hit"][0]), (scale, offset)
-        np.testing.assert_allclose(r["t_hit"][0], 2 * scale, rtol=1e-5)
+        np.testing.assert_allclose(r["t_hit"][0], above, rtol=1e-5)
         np.testing.assert_allclose(r["primitive_normals"][0], [0, 0, 1], atol=1e-6)
 
 

@@ -83,13 +83,13 @@ Vec3f axis_vector(Axis a) {
 }
 
 // The eight corners of the box, or of the unit box around the origin for an empty or non-finite
-// box; a box thinner than 1e-6 of its distance from the origin (about 8 floats there) is grown
+// box; a box thinner than 2.5e-7 of its distance from the origin (about two floats there) is grown
 // to that size, so that the eye never lands on it.
 std::array<Vec3f, 8> frame_corners(const Box3f& box) {
   Box3f b = box;
   if (b.empty() || !is_finite(b.lo) || !is_finite(b.hi)) b = {Vec3f(-1.0f), Vec3f(1.0f)};
   Vec3f c = b.center();
-  float floor_half = std::max(1e-6f, 1e-6f * reduce_max(abs(c)));
+  float floor_half = std::max(1e-6f, 2.5e-7f * reduce_max(abs(c)));
   Vec3f half = max((b.hi - b.lo) * 0.5f, Vec3f(floor_half));
   std::array<Vec3f, 8> out;
   for (int i = 0; i < 8; ++i)

@@ -3,7 +3,9 @@
 # python3 on PATH may be a different installation without Debian's numpy and pybind11).
 # The module lands in ${CMAKE_BINARY_DIR}/python (PYTHONPATH=build/python imports it) and
 # `cmake --install` puts it in SLIM_PYTHON_INSTALL_DIR.
-if(NOT SLIM_PYTHON)
+# Not in sanitizer or fuzz builds: an instrumented module only loads with the sanitizer runtime
+# preloaded into the interpreter.
+if(NOT SLIM_PYTHON OR SLIM_SANITIZE OR SLIM_TSAN OR SLIM_FUZZ)
   return()
 endif()
 set(SLIM_PYTHON_EXECUTABLE "/usr/bin/python3" CACHE FILEPATH "Python interpreter of the module")

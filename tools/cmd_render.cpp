@@ -1,18 +1,25 @@
-// `slimrt render SCENE -o OUT.png|OUT.exr [--shade diffuse|normals|kind] [--spp N] [--res WxH]
-//                [--config NAME] [--threads N] [--bounces N]`
+// `slimrt render SCENE -o OUT.png|OUT.exr [--shade diffuse|sun|normals|kind] [--spp N] [--res WxH]
+//                [--config NAME] [--threads N] [--bounces N] [--up x|y|z] [--eye X,Y,Z]
+//                [--look-at X,Y,Z] [--fov DEG] [--quiet]`
 // Loads a mesh file or procedural scene, builds it in one configuration (BENCHMARK.md names),
-// renders it from the benchmark camera and writes the image; prints build time, render time and
-// MRays/s on stdout. A progress bar goes to stderr when stdout is a terminal.
+// renders it from the user's camera (slim::view_camera: by default the model's corners fill the
+// image, seen from the front-right and above; glTF is Y up by its specification, other inputs Z
+// up) and writes the image; prints build time, render time and MRays/s on stdout. Loading,
+// building and rendering that take over ~2 s show progress on stderr when it is a terminal,
+// unless --quiet.
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <cctype>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <string>
 
 #include "commands.h"
+#include "progress.h"
 #include "slimrt/analysis.h"
 
 namespace slim::cli {
@@ -35,6 +42,40 @@ bool parse_resolution(const std::string& text, int& w, int& h) {
   return parse_int(text.substr(0, x), w) && parse_int(text.substr(x + 1), h);
 }
 
+// "X,Y,Z" as three finite floats; false otherwise.
+bool parse_point(const std::string& text, Vec3f& out) {
+  float v[3];
+  size_t pos = 0;
+  for (int i = 0; i < 3; ++i) {
+    size_t end = text.find(',', pos);
+    if ((i < 2) != (end != std::string::npos)) return false;
+    std::string part = text.substr(pos, i < 2 ? end - pos : std::string::npos);
+    try {
+      size_t used = 0;
+      v[i] = std::stof(part, &used);
+      if (used != part.size() || !std::isfinite(v[i])) return false;
+    } catch (const std::exception&) {
+      return false;
+    }
+    pos = end + 1;
+  }
+  out = {v[0], v[1], v[2]};
+  return true;
+}
+
+// The up axis a scene is authored with when the user names none: glTF (.gltf, .glb, also .xz)
+// is Y up by its specification; OBJ, PLY and the procedural scenes are taken as Z up.
+Axis default_up(const std::string& scene) {
+  std::string s = scene;
+  for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (s.size() > 3 && s.compare(s.size() - 3, 3, ".xz") == 0) s.resize(s.size() - 3);
+  auto ends = [&](const char* e) {
+    size_t n = std::strlen(e);
+    return s.size() >= n && s.compare(s.size() - n, n, e) == 0;
+  };
+  return ends(".gltf") || ends(".glb") ? Axis::Y : Axis::Z;
+}
+
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -42,9 +83,11 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 }  // namespace
 
 int cmd_render(int argc, char** argv) {
-  CLI::App app{"Render a scene from the benchmark camera and write a PNG or EXR image.",
-               "slimrt render"};
+  CLI::App app{"Render a scene and write a PNG or EXR image.", "slimrt render"};
   std::string scene_name, output, shade = "diffuse", res = "1024x1024", config = "bvh8-tri4v";
+  std::string up, eye, look_at;
+  float fov = 40.0f;
+  bool quiet = false;
   int spp = 1, threads = 0, bounces = 8;
   app.add_option("scene", scene_name,
                  "mesh file (.obj .ply .gltf .glb, optionally .xz) or terrain:N, torus:N, canyon:N")
@@ -60,8 +103,10 @@ int cmd_render(int argc, char** argv) {
                        : path + ": unknown image extension, expected .png or .exr";
           },
           "PATH.png|PATH.exr");
-  app.add_option("--shade", shade, "diffuse (path tracing), normals or kind (primitive kind)")
-      ->check(CLI::IsMember({"diffuse", "normals", "kind"}))
+  app.add_option("--shade", shade,
+                 "diffuse (path tracing under the sky), sun (a low sun with shadows: shows "
+                 "relief), normals or kind (primitive kind)")
+      ->check(CLI::IsMember({"diffuse", "sun", "normals", "kind"}))
       ->capture_default_str();
   app.add_option("--spp", spp, "samples per pixel")
       ->check(CLI::Range(1, 1 << 16))
@@ -76,7 +121,8 @@ int cmd_render(int argc, char** argv) {
           },
           "WxH")
       ->capture_default_str();
-  app.add_option("--config", config, "acceleration structure configuration (BENCHMARK.md)")
+  app.add_option("--config", config,
+                 "the format (bvh8-tri4v, clbvh-compact, lossy-grid, ...; see the README)")
       ->capture_default_str();
   app.add_option("--threads", threads, "threads for build and render, 0 = all cores")
       ->check(CLI::Range(0, 4096))
@@ -84,6 +130,25 @@ int cmd_render(int argc, char** argv) {
   app.add_option("--bounces", bounces, "diffuse bounces after the primary hit")
       ->check(CLI::Range(0, 1024))
       ->capture_default_str();
+  auto point_check = [](const std::string& s) {
+    Vec3f p;
+    return parse_point(s, p) ? std::string()
+                             : "expected three finite numbers X,Y,Z, e.g. 0,-5,2, got '" + s + "'";
+  };
+  app.add_option("--up", up, "the scene's up axis (default: y for glTF, z otherwise)")
+      ->check(CLI::IsMember({"x", "y", "z"}));
+  app.add_option("--eye", eye,
+                 "camera position X,Y,Z (default: backed off until the model fills "
+                 "the image)")
+      ->check(point_check, "X,Y,Z");
+  app.add_option("--look-at", look_at,
+                 "point the camera looks at X,Y,Z (default: the model's "
+                 "centre)")
+      ->check(point_check, "X,Y,Z");
+  app.add_option("--fov", fov, "vertical field of view, degrees")
+      ->check(CLI::Range(0.01f, 179.0f))
+      ->capture_default_str();
+  app.add_flag("-q,--quiet", quiet, "no progress on stderr");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -95,23 +160,47 @@ int cmd_render(int argc, char** argv) {
   ropt.spp = spp;
   ropt.max_bounces = bounces;
   ropt.threads = threads;
-  ropt.shade = shade == "normals" ? Shade::Normals : shade == "kind" ? Shade::Kind : Shade::Diffuse;
-  ropt.progress = isatty(fileno(stdout)) != 0;
+  ropt.shade = shade == "normals" ? Shade::Normals
+               : shade == "kind"  ? Shade::Kind
+               : shade == "sun"   ? Shade::Sun
+                                  : Shade::Diffuse;
+  const bool show_progress = !quiet && isatty(fileno(stderr)) != 0;
+  ropt.progress = show_progress;
+  ViewOptions view;
+  view.up = up.empty()  ? default_up(scene_name)
+            : up == "x" ? Axis::X
+            : up == "y" ? Axis::Y
+                        : Axis::Z;
+  view.fov_deg = fov;
+  ropt.up = view.up == Axis::X   ? Vec3f(1, 0, 0)
+            : view.up == Axis::Y ? Vec3f(0, 1, 0)
+                                 : Vec3f(0, 0, 1);
+  view.has_eye = !eye.empty() && parse_point(eye, view.eye);
+  view.has_look_at = !look_at.empty() && parse_point(look_at, view.look_at);
 
   BuildOptions bopt = BuildOptions::from_config(config);  // throws on an unknown name
   bopt.threads = threads;
 
   auto t0 = std::chrono::steady_clock::now();
-  PolyMesh mesh = load(scene_name);
+  PolyMesh mesh;
+  {
+    StepProgress p(show_progress, "load " + scene_name);
+    mesh = load(scene_name);
+  }
   double load_s = seconds_since(t0);
 
   t0 = std::chrono::steady_clock::now();
-  Scene scene = Scene::build(mesh, bopt);
+  Scene scene;
+  {
+    StepProgress p(show_progress, "build " + config + " (" +
+                                      std::to_string(mesh.fan_triangle_count()) + " triangles)");
+    scene = Scene::build(mesh, bopt);
+  }
   double build_s = seconds_since(t0);
   uint64_t faces = mesh.face_count(), triangles = mesh.fan_triangle_count();
   mesh = PolyMesh();  // the scene owns all it needs
 
-  Camera cam = frame_box(scene.bounds(), ropt.width, ropt.height);
+  Camera cam = view_camera(scene.bounds(), view, ropt.width, ropt.height);
   t0 = std::chrono::steady_clock::now();
   RenderStats rstats;
   Image img = render(scene, cam, ropt, &rstats);

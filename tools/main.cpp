@@ -14,8 +14,9 @@ void usage() {
   std::fprintf(stderr,
                "usage: slimrt <command> [args]\n"
                "  info SCENE [--json] [--accel CONFIG] [--pairs] [--costa]\n"
-               "  render SCENE -o OUT.png|OUT.exr [--shade diffuse|normals|kind] [--spp N] "
+               "  render SCENE -o OUT.png|OUT.exr [--shade diffuse|sun|normals|kind] [--spp N] "
                "[--res WxH] [--config NAME]\n"
+               "         [--up x|y|z] [--eye X,Y,Z] [--look-at X,Y,Z] [--fov DEG] [--quiet]\n"
                "  bench SCENE... [--config NAME...] [--threads N] [--repeat K] [--json FILE] "
                "[--plot FILE]\n"
                "SCENE is a mesh file (.obj .ply .gltf .glb, optionally .xz) or terrain:N, "

@@ -14,13 +14,16 @@
 
 namespace slim {
 
-// Pinhole camera. Rays start at `eye`; pixel (x, y) maps to eye + dir00 + du * (x+0.5) + dv *
-// (y+0.5).
+// Pinhole camera. Rays start at `eye`; pixel (x, y) maps to eye + dir00 + du * (x+0.5) + dv * (y+0.5).
+// When `clip` is set (an eye beyond the supported coordinate range, see kMaxCoordinate), each ray
+// starts where it enters `clip_box` instead, so that a view from far away still sees the scene.
 struct Camera {
   Vec3f eye;
   Vec3f dir00;   // direction to the top-left image corner
   Vec3f du, dv;  // per-pixel steps
   int width = 1024, height = 1024;
+  bool clip = false;
+  Box3f clip_box;
 };
 
 // The benchmark camera: looks at the box from a fixed direction (from the +x, -y, +z side, 35
@@ -28,12 +31,48 @@ struct Camera {
 // and frames the box's bounding sphere.
 Camera frame_box(const Box3f& box, int width, int height);
 
+// The user's camera (slimrt render): which axis is up, an optional eye and look-at point, the
+// vertical field of view. Without an eye the camera looks from the benchmark camera's direction
+// (35 degrees above the horizon, 30 degrees round from the front) relative to the up axis and
+// backs off until the box's eight corners fill the image (centred, 3% margin); without a look-at
+// point it looks at the box centre. An eye beyond +-kMaxCoordinate / 2 sets Camera::clip.
+enum class Axis : uint8_t { X = 0, Y = 1, Z = 2 };
+struct ViewOptions {
+  Axis up = Axis::Z;
+  bool has_eye = false, has_look_at = false;
+  Vec3f eye, look_at;
+  float fov_deg = 40.0f;  // vertical field of view, degrees, in (0, 180)
+};
+// Throws slim::Error for a field of view outside (0, 180), non-finite points, an eye on the
+// look-at point or a view direction along the up axis.
+Camera view_camera(const Box3f& box, const ViewOptions& view, int width, int height);
+
+// Unit vector along v, or zero when v is zero or not finite. Scales first, so that vectors
+// whose squared length overflows float (normals of triangles with 1e10-long edges) still
+// normalize.
+SLIM_INLINE Vec3f safe_normalize(Vec3f v) {
+  float m = reduce_max(abs(v));
+  if (!(m > 0.0f) || !std::isfinite(m)) return Vec3f(0.0f);
+  v = v * (1.0f / m);
+  return v * (1.0f / length(v));
+}
+
 SLIM_INLINE Ray camera_ray(const Camera& c, float px, float py) {
   Ray r;
   r.org = c.eye;
   r.dir = normalize(c.dir00 + c.du * px + c.dv * py);
   r.tnear = 0.0f;
   r.tfar = kInf;
+  if (c.clip) {  // start on the box (slab test); a ray that misses it keeps its far origin
+    float t0 = 0.0f, t1 = kInf;
+    for (int k = 0; k < 3; ++k) {
+      float inv = 1.0f / r.dir[k];
+      float a = (c.clip_box.lo[k] - r.org[k]) * inv, b = (c.clip_box.hi[k] - r.org[k]) * inv;
+      t0 = std::max(t0, std::min(a, b));
+      t1 = std::min(t1, std::max(a, b));
+    }
+    if (t0 <= t1 && std::isfinite(t0)) r.org = r.org + r.dir * t0;
+  }
   return r;
 }
 
@@ -94,10 +133,8 @@ PathResult trace_path(const Tracer& tracer, Ray ray, Rng& rng, int max_bounces, 
       break;
     }
     if (bounce == max_bounces) break;
-    Vec3f n = h.Ng;
-    float len = length(n);
-    if (!(len > 0.0f)) break;
-    n = n * (1.0f / len);
+    Vec3f n = safe_normalize(h.Ng);
+    if (n.x == 0.0f && n.y == 0.0f && n.z == 0.0f) break;
     if (dot(n, ray.dir) > 0.0f) n = -n;
     Vec3f p = ray.org + ray.dir * h.t;
     float eps = offset + 1e-6f * reduce_max(abs(p));
@@ -122,7 +159,10 @@ SLIM_INLINE uint64_t pixel_seed(int x, int y, int sample) {
   return (uint64_t(uint32_t(y)) << 32 | uint32_t(x)) * 0x9E3779B97F4A7C15ULL + uint64_t(sample);
 }
 
-enum class Shade { Diffuse, Normals, Kind };
+// Diffuse: BENCHMARK.md workload 2 (sky light only). Sun: a low sun from the camera's left (25
+// degrees above the horizon of RenderOptions::up) with a shadow ray, plus one diffuse bounce
+// under the sky: the shading that shows relief. Normals, Kind: debug shadings.
+enum class Shade { Diffuse, Normals, Kind, Sun };
 
 struct RenderOptions {
   int width = 1024, height = 1024;
@@ -130,7 +170,8 @@ struct RenderOptions {
   int max_bounces = 8;
   Shade shade = Shade::Diffuse;
   int threads = 0;        // 0 = all cores
-  bool progress = false;  // progress bar on stderr
+  Vec3f up{0.0f, 0.0f, 1.0f};  // Shade::Sun: the scene's up direction (unit)
+  bool progress = false;  // progress on stderr (percentage, elapsed, MRays/s) after ~2 s
 };
 
 // Linear RGB float image, row-major, top row first.

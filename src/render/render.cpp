@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cstdio>
 #include <mutex>
 
@@ -41,51 +42,55 @@ Vec3f kind_colour(PrimKind kind) {
   return {1.0f, 1.0f, 1.0f};
 }
 
-// Unit geometric normal, or zero for a degenerate one.
-Vec3f unit_normal(const Hit& h) {
-  float len = length(h.Ng);
-  return len > 0.0f && std::isfinite(len) ? h.Ng * (1.0f / len) : Vec3f(0.0f);
-}
+// Unit geometric normal, or zero for a degenerate one (safe_normalize: no overflow for the
+// normals of huge triangles).
+Vec3f unit_normal(const Hit& h) { return safe_normalize(h.Ng); }
 
-// A progress bar on stderr, updated as tiles finish (any thread); redrawn only when the shown
+// Progress on stderr, updated as tiles finish (any thread, one atomic add per tile): nothing for
+// the first 2 s, then the percentage, the elapsed time and the rate, redrawn when the shown
 // percentage changes.
-class ProgressBar {
+class Progress {
  public:
-  ProgressBar(bool enabled, int total) : enabled_(enabled), total_(std::max(total, 1)) {
-    if (enabled_) draw(0);
-  }
-  void tile_done() {
+  using Clock = std::chrono::steady_clock;
+  Progress(bool enabled, int total) : enabled_(enabled), total_(std::max(total, 1)) {}
+  void tile_done(uint64_t rays) {
     if (!enabled_) return;
+    rays_.fetch_add(rays, std::memory_order_relaxed);
     int done = ++done_;
     int percent = int(int64_t(done) * 100 / total_);
+    if (percent <= shown_.load(std::memory_order_relaxed)) return;
     std::lock_guard<std::mutex> lock(mutex_);
-    if (percent > shown_) draw(percent);
+    double elapsed = std::chrono::duration<double>(Clock::now() - start_).count();
+    if (percent <= shown_ || elapsed < kDelaySeconds) return;
+    std::fprintf(stderr, "\rrender %3d%% | %.1f s | %.2f MRays/s ", percent, elapsed,
+                 double(rays_.load()) / elapsed * 1e-6);
+    std::fflush(stderr);
+    shown_ = percent;
+    drawn_ = true;
   }
   void finish() {
-    if (!enabled_) return;
-    std::lock_guard<std::mutex> lock(mutex_);
+    if (!enabled_ || !drawn_) return;
     std::fputc('\n', stderr);
     std::fflush(stderr);
   }
 
  private:
-  void draw(int percent) {  // caller holds mutex_ (or runs before the threads start)
-    constexpr int kWidth = 40;
-    char bar[kWidth + 1];
-    int filled = percent * kWidth / 100;
-    for (int i = 0; i < kWidth; ++i) bar[i] = i < filled ? '#' : '.';
-    bar[kWidth] = 0;
-    std::fprintf(stderr, "\rrender [%s] %3d%%", bar, percent);
-    std::fflush(stderr);
-    shown_ = percent;
-  }
-
+  static constexpr double kDelaySeconds = 2.0;
   bool enabled_;
   int total_;
+  Clock::time_point start_ = Clock::now();
   std::atomic<int> done_{0};
+  std::atomic<uint64_t> rays_{0};
+  std::atomic<int> shown_{-1};
+  bool drawn_ = false;
   std::mutex mutex_;
-  int shown_ = -1;
 };
+
+// Unit up vector (z when unset).
+Vec3f sun_up(Vec3f up) {
+  Vec3f u = safe_normalize(up);
+  return u.x == 0.0f && u.y == 0.0f && u.z == 0.0f ? Vec3f(0.0f, 0.0f, 1.0f) : u;
+}
 
 }  // namespace
 
@@ -116,6 +121,19 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
   img.height = height;
   img.rgb.assign(size_t(width) * size_t(height) * 3, 0.0f);
 
+  // Shade::Sun: the sun comes from the camera's left and a little from behind the scene, 25
+  // degrees above the horizon, so that slopes facing it are bright and ridges cast shadows.
+  Vec3f sun(0.0f, 0.0f, 1.0f);
+  if (opt.shade == Shade::Sun) {
+    const Vec3f up = sun_up(opt.up);
+    Vec3f right = safe_normalize(cam.du - up * dot(cam.du, up));
+    Vec3f fwd = safe_normalize(cross(up, right));  // horizontal, into the picture
+    Vec3f h = safe_normalize(right * -0.9f + fwd * 0.45f);
+    sun = safe_normalize(h * 0.906f + up * 0.423f);
+    if (h.x == 0.0f && h.y == 0.0f && h.z == 0.0f) sun = up;
+  }
+  const Vec3f sun_colour(1.6f, 1.42f, 1.15f);
+
   std::atomic<uint64_t> rays_traced{0};
   auto shade_sample = [&](int x, int y, int s, uint64_t& rays) -> Vec3f {
     Rng rng(pixel_seed(x, y, s));
@@ -137,6 +155,41 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
         if (!h.valid()) return Vec3f(0.03f);  // dark grey background
         return Vec3f(0.5f) + unit_normal(h) * 0.5f;
       }
+      case Shade::Sun: {
+        rays++;
+        Hit h = scene.intersect(ray);
+        auto sky = [&](Vec3f d) {
+          float a = 0.5f + 0.5f * dot(d, sun_up(opt.up));
+          return Vec3f(0.75f, 0.8f, 0.88f) * (1.0f - a) + Vec3f(0.25f, 0.42f, 0.8f) * a;
+        };
+        if (!h.valid()) return sky(ray.dir);
+        Vec3f n = safe_normalize(h.Ng);
+        if (dot(n, ray.dir) > 0.0f) n = -n;
+        const Vec3f albedo(0.7f, 0.5f, 0.36f);
+        Vec3f p = ray.org + ray.dir * h.t;
+        float eps = offset + 1e-6f * reduce_max(abs(p));
+        Vec3f o = p + n * eps;
+        Vec3f c(0.0f);
+        float ndl = dot(n, sun);
+        if (ndl > 0.0f) {
+          Ray s{o, 0.0f, sun, kInf};
+          rays++;
+          if (!scene.occluded(s)) c += sun_colour * ndl;
+        }
+        // One cosine-weighted bounce: sky light where the hemisphere is open, a dim bounce of
+        // the sun where it meets the scene.
+        Vec3f t, b;
+        onb(n, t, b);
+        float r1 = rng.uniform(), r2 = rng.uniform();
+        float phi = 6.28318530718f * r1, sr = std::sqrt(r2);
+        Vec3f d = normalize(t * (std::cos(phi) * sr) + b * (std::sin(phi) * sr) +
+                            n * std::sqrt(std::max(0.0f, 1.0f - r2)));
+        Ray bounce{o, 0.0f, d, kInf};
+        rays++;
+        Hit hb = scene.intersect(bounce);
+        c += hb.valid() ? sun_colour * (0.1f * albedo.x) : sky(d) * 0.6f;
+        return albedo * c;
+      }
       case Shade::Kind: {
         rays++;
         Hit h = scene.intersect(ray);
@@ -151,13 +204,14 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
   const int tiles_x = (width + kTileSize - 1) / kTileSize;
   const int tiles_y = (height + kTileSize - 1) / kTileSize;
   const int tile_count = tiles_x * tiles_y;
-  ProgressBar progress(opt.progress, tile_count);
+  Progress progress(opt.progress, tile_count);
 
   auto render_tiles = [&] {
     tbb::parallel_for(
         tbb::blocked_range<int>(0, tile_count, 1), [&](const tbb::blocked_range<int>& r) {
           uint64_t rays = 0;
           for (int tile = r.begin(); tile != r.end(); ++tile) {
+            const uint64_t rays_before = rays;
             int x0 = (tile % tiles_x) * kTileSize, y0 = (tile / tiles_x) * kTileSize;
             int x1 = std::min(x0 + kTileSize, width), y1 = std::min(y0 + kTileSize, height);
             for (int y = y0; y < y1; ++y) {
@@ -171,7 +225,7 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
                 px[2] = sum.z;
               }
             }
-            progress.tile_done();
+            progress.tile_done(rays - rays_before);
           }
           rays_traced += rays;
         });

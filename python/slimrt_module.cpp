@@ -1,0 +1,624 @@
+// The Python module `slimrt`: RaycastingScene with the names and conventions of Open3D's
+// open3d.t.geometry.RaycastingScene (add_triangles, add_mesh, cast_rays, test_occlusions,
+// count_intersections, create_rays_pinhole), over any slimrt configuration, plus memory() and
+// stats(). Only the public API (slimrt/slimrt.h) is used.
+//
+// Arrays: rays are read in place when they are float32 and C-contiguous (any other float dtype
+// or layout is converted once); vertices and triangles are copied once into the scene's input
+// mesh. Bad arrays raise TypeError (dtype) or ValueError (shape, NaN, index range) naming what
+// was expected. The scene is built on the first query after geometry was added (as Open3D does);
+// building and tracing run with the GIL released, rays in parallel with TBB.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "slimrt/slimrt.h"
+
+namespace py = pybind11;
+
+namespace {
+
+constexpr uint32_t kInvalid = slim::kInvalidID;
+// count_intersections stops after this many hits per ray unless told otherwise.
+constexpr uint32_t kDefaultMaxHits = 1u << 16;
+
+std::string shape_str(const py::array& a) {
+  std::ostringstream s;
+  s << "(";
+  for (py::ssize_t i = 0; i < a.ndim(); ++i) s << (i ? ", " : "") << a.shape(i);
+  if (a.ndim() == 1) s << ",";
+  s << ")";
+  return s.str();
+}
+
+std::string dtype_str(const py::array& a) { return py::str(a.dtype()).cast<std::string>(); }
+
+// Open3D tensors and other array-likes: anything numpy can view; open3d.core.Tensor via .numpy().
+py::array as_array(py::handle obj) {
+  if (!py::isinstance<py::array>(obj) && py::hasattr(obj, "numpy") &&
+      !py::hasattr(obj, "__array__"))
+    obj = obj.attr("numpy")();
+  return py::module_::import("numpy").attr("asarray")(obj).cast<py::array>();
+}
+
+// A float32 C-contiguous view of `obj` (no copy when it already is one). Float dtypes other than
+// float32 are converted; anything else is a TypeError.
+py::array_t<float, py::array::c_style> float_array(py::handle obj, const char* what,
+                                                   const char* expected) {
+  py::array a = as_array(obj);
+  char kind = a.dtype().kind();
+  if (kind != 'f')
+    throw py::type_error(std::string(what) + ": expected a float32 array " + expected +
+                         ", got dtype " + dtype_str(a));
+  return py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(a);
+}
+
+// Rays [..., 6] as float32 (ox, oy, oz, dx, dy, dz); the number of rays and the leading shape.
+struct Rays {
+  py::array_t<float, py::array::c_style> array;
+  const float* data = nullptr;
+  size_t count = 0;
+  std::vector<py::ssize_t> shape;  // the leading dimensions
+};
+
+Rays get_rays(py::handle obj) {
+  Rays r;
+  r.array = float_array(obj, "rays", "of shape [..., 6] (ox, oy, oz, dx, dy, dz)");
+  if (r.array.ndim() < 1 || r.array.shape(r.array.ndim() - 1) != 6)
+    throw py::value_error("rays: expected shape [..., 6] (ox, oy, oz, dx, dy, dz), got shape " +
+                          shape_str(r.array));
+  r.count = 1;
+  for (py::ssize_t i = 0; i + 1 < r.array.ndim(); ++i) {
+    r.shape.push_back(r.array.shape(i));
+    r.count *= size_t(r.array.shape(i));
+  }
+  r.data = r.array.data();
+  return r;
+}
+
+template <class T>
+py::array_t<T> output(const std::vector<py::ssize_t>& shape, std::vector<py::ssize_t> tail = {}) {
+  std::vector<py::ssize_t> s = shape;
+  s.insert(s.end(), tail.begin(), tail.end());
+  return py::array_t<T>(s);
+}
+
+// Runs body(begin, end) over [0, n) in parallel with `threads` threads (0 = all cores).
+template <class Body>
+void parallel(size_t n, int threads, const Body& body) {
+  auto run = [&] {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256),
+                      [&](const tbb::blocked_range<size_t>& r) { body(r.begin(), r.end()); });
+  };
+  if (threads > 0) {
+    tbb::task_arena arena(threads);
+    arena.execute(run);
+  } else {
+    run();
+  }
+}
+
+// The first ray with a NaN component, found while tracing (kept the smallest index).
+struct BadRay {
+  std::atomic<size_t> index{std::numeric_limits<size_t>::max()};
+  void note(size_t i) {
+    size_t cur = index.load(std::memory_order_relaxed);
+    while (i < cur && !index.compare_exchange_weak(cur, i)) {
+    }
+  }
+  void raise_if_any(const Rays& rays) const {
+    size_t i = index.load();
+    if (i == std::numeric_limits<size_t>::max()) return;
+    std::ostringstream s;
+    s << "rays: expected finite numbers, ray " << i << " (flat index) is [";
+    for (int k = 0; k < 6; ++k) s << (k ? ", " : "") << rays.data[i * 6 + k];
+    s << "]";
+    throw py::value_error(s.str());
+  }
+};
+
+// Ray i of the array; false (and noted) if it holds a NaN.
+inline bool load_ray(const float* p, slim::Ray& r) {
+  r.org = {p[0], p[1], p[2]};
+  r.dir = {p[3], p[4], p[5]};
+  r.tnear = 0.0f;
+  r.tfar = slim::kInf;
+  return !(std::isnan(p[0]) || std::isnan(p[1]) || std::isnan(p[2]) || std::isnan(p[3]) ||
+           std::isnan(p[4]) || std::isnan(p[5]));
+}
+
+class RaycastingScene {
+ public:
+  RaycastingScene(const std::string& config, int threads) : threads_(threads) {
+    if (threads < 0)
+      throw py::value_error("threads: expected 0 (all cores) or more, got " +
+                            std::to_string(threads));
+    try {
+      options_ = slim::BuildOptions::from_config(config);
+    } catch (const slim::Error& e) {
+      throw py::value_error(std::string("config: ") + e.what());  // the message lists the names
+    }
+    options_.threads = threads;
+  }
+
+  uint32_t add_triangles(py::handle vertices_obj, py::handle triangles_obj) {
+    auto v = float_array(vertices_obj, "vertices", "of shape [N, 3]");
+    if (v.ndim() != 2 || v.shape(1) != 3)
+      throw py::value_error("vertices: expected shape [N, 3], got shape " + shape_str(v));
+    py::array t = as_array(triangles_obj);
+    char kind = t.dtype().kind();
+    if (kind != 'u' && kind != 'i')
+      throw py::type_error("triangles: expected a uint32 array of shape [M, 3], got dtype " +
+                           dtype_str(t));
+    if (t.ndim() != 2 || t.shape(1) != 3)
+      throw py::value_error("triangles: expected shape [M, 3], got shape " + shape_str(t));
+    const size_t nv = size_t(v.shape(0)), nt = size_t(t.shape(0));
+    if (nv > size_t(kInvalid))
+      throw py::value_error("vertices: at most 2^32 - 1 vertices, got " + std::to_string(nv));
+
+    slim::PolyMesh mesh;
+    mesh.name = "geometry " + std::to_string(meshes_.size());
+    mesh.positions.resize(nv);
+    static_assert(sizeof(slim::Vec3f) == 3 * sizeof(float));
+    if (nv)
+      std::memcpy(static_cast<void*>(mesh.positions.data()), v.data(), nv * sizeof(slim::Vec3f));
+    for (size_t i = 0; i < nv; ++i) {
+      const slim::Vec3f& p = mesh.positions[i];
+      if (!(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z)))
+        throw py::value_error("vertices: expected finite coordinates, vertex " + std::to_string(i) +
+                              " is [" + std::to_string(p.x) + ", " + std::to_string(p.y) + ", " +
+                              std::to_string(p.z) + "]");
+    }
+    // Indices: any integer dtype, each checked against the vertex count.
+    auto idx = py::array_t<int64_t, py::array::c_style | py::array::forcecast>::ensure(t);
+    if (kind == 'u' && t.dtype().itemsize() == 8) {
+      // uint64 above 2^63 would turn negative as int64: check in the original type.
+      auto u = py::array_t<uint64_t, py::array::c_style>::ensure(t);
+      for (size_t i = 0; i < nt * 3; ++i)
+        if (u.data()[i] >= nv)
+          throw py::value_error("triangles: expected indices in [0, " + std::to_string(nv) +
+                                "), triangle " + std::to_string(i / 3) + " has " +
+                                std::to_string(u.data()[i]));
+    }
+    mesh.face_indices.resize(nt * 3);
+    const int64_t* src = idx.data();
+    for (size_t i = 0; i < nt * 3; ++i) {
+      int64_t k = src[i];
+      if (k < 0 || uint64_t(k) >= nv)
+        throw py::value_error("triangles: expected indices in [0, " + std::to_string(nv) +
+                              "), triangle " + std::to_string(i / 3) + " has " + std::to_string(k));
+      mesh.face_indices[i] = uint32_t(k);
+    }
+    mesh.face_sizes.assign(nt, 3);
+    return add(std::move(mesh));
+  }
+
+  uint32_t add_mesh(const std::string& path) {
+    slim::PolyMesh mesh;
+    {
+      py::gil_scoped_release release;
+      mesh = slim::load(path);
+    }
+    return add(std::move(mesh));
+  }
+
+  py::dict cast_rays(py::handle rays_obj, int nthreads) {
+    Rays rays = get_rays(rays_obj);
+    auto t_hit = output<float>(rays.shape);
+    auto geom = output<uint32_t>(rays.shape);
+    auto prim = output<uint32_t>(rays.shape);
+    auto uvs = output<float>(rays.shape, {2});
+    auto normals = output<float>(rays.shape, {3});
+    float* pt = t_hit.mutable_data();
+    uint32_t* pg = geom.mutable_data();
+    uint32_t* pp = prim.mutable_data();
+    float* puv = uvs.mutable_data();
+    float* pn = normals.mutable_data();
+    BadRay bad;
+    const int nt = threads(nthreads);
+    {
+      py::gil_scoped_release release;
+      const slim::Scene& scene = built();
+      parallel(rays.count, nt, [&](size_t b, size_t e) {
+        for (size_t i = b; i < e; ++i) {
+          slim::Ray r;
+          slim::Hit h;
+          if (load_ray(rays.data + i * 6, r))
+            h = scene.intersect(r);
+          else
+            bad.note(i);
+          if (h.valid()) {
+            pt[i] = h.t;
+            pg[i] = h.geomID;
+            pp[i] = h.primID;
+            puv[2 * i] = h.u;
+            puv[2 * i + 1] = h.v;
+            const slim::Vec3f n = slim::safe_normalize(h.Ng);  // no overflow for huge triangles
+            pn[3 * i] = n.x;
+            pn[3 * i + 1] = n.y;
+            pn[3 * i + 2] = n.z;
+          } else {  // Open3D's miss values
+            pt[i] = slim::kInf;
+            pg[i] = kInvalid;
+            pp[i] = kInvalid;
+            puv[2 * i] = puv[2 * i + 1] = 0.0f;
+            pn[3 * i] = pn[3 * i + 1] = pn[3 * i + 2] = 0.0f;
+          }
+        }
+      });
+    }
+    bad.raise_if_any(rays);
+    py::dict out;
+    out["t_hit"] = t_hit;
+    out["geometry_ids"] = geom;
+    out["primitive_ids"] = prim;
+    out["primitive_uvs"] = uvs;
+    out["primitive_normals"] = normals;
+    return out;
+  }
+
+  py::array test_occlusions(py::handle rays_obj, float tnear, float tfar, int nthreads) {
+    if (std::isnan(tnear) || std::isnan(tfar))
+      throw py::value_error("test_occlusions: expected numbers for tnear and tfar, got NaN");
+    Rays rays = get_rays(rays_obj);
+    auto out = output<bool>(rays.shape);
+    bool* po = out.mutable_data();
+    BadRay bad;
+    const int nt = threads(nthreads);
+    {
+      py::gil_scoped_release release;
+      const slim::Scene& scene = built();
+      parallel(rays.count, nt, [&](size_t b, size_t e) {
+        for (size_t i = b; i < e; ++i) {
+          slim::Ray r;
+          bool ok = load_ray(rays.data + i * 6, r);
+          if (!ok) bad.note(i);
+          r.tnear = tnear;
+          r.tfar = tfar;
+          po[i] = ok && scene.occluded(r);
+        }
+      });
+    }
+    bad.raise_if_any(rays);
+    return out;
+  }
+
+  // slimrt has no all-hits query: each ray is traced again and again, each time starting just
+  // past the last hit (tnear = the next float after its t), so every distinct hit distance counts
+  // once: a ray through a shared edge or vertex counts one crossing, coincident triangles count
+  // once. At most max_hits hits are counted per ray.
+  py::array count_intersections(py::handle rays_obj, int nthreads, uint32_t max_hits) {
+    Rays rays = get_rays(rays_obj);
+    auto out = output<int32_t>(rays.shape);
+    int32_t* po = out.mutable_data();
+    const uint32_t limit =
+        std::min<uint32_t>(max_hits, uint32_t(std::numeric_limits<int32_t>::max()));
+    BadRay bad;
+    const int nt = threads(nthreads);
+    {
+      py::gil_scoped_release release;
+      const slim::Scene& scene = built();
+      parallel(rays.count, nt, [&](size_t b, size_t e) {
+        for (size_t i = b; i < e; ++i) {
+          slim::Ray r;
+          uint32_t n = 0;
+          if (load_ray(rays.data + i * 6, r)) {
+            while (n < limit) {
+              slim::Hit h = scene.intersect(r);
+              if (!h.valid()) break;
+              ++n;
+              r.tnear = std::nextafter(h.t, slim::kInf);
+              if (!(r.tnear < slim::kInf)) break;
+            }
+          } else {
+            bad.note(i);
+          }
+          po[i] = int32_t(n);
+        }
+      });
+    }
+    bad.raise_if_any(rays);
+    return out;
+  }
+
+  py::dict memory() {
+    py::dict d;
+    if (meshes_.empty()) {
+      for (const char* k : {"geometry", "bvh", "other", "total", "triangles"}) d[k] = 0;
+      d["bytes_per_triangle"] = 0.0;
+    } else {
+      slim::MemoryStats m;
+      {
+        py::gil_scoped_release release;
+        m = built().memory();
+      }
+      d["geometry"] = m.geometry_bytes;
+      d["bvh"] = m.bvh_bytes;
+      d["other"] = m.other_bytes;
+      d["total"] = m.total();
+      d["triangles"] = m.triangles;
+      d["bytes_per_triangle"] = m.bytes_per_triangle();
+    }
+    d["input_meshes"] = input_bytes();
+    return d;
+  }
+
+  py::dict stats() {
+    py::dict d;
+    d["config"] = options_.config_name();
+    d["geometries"] = meshes_.size();
+    if (meshes_.empty()) return d;
+    {
+      py::gil_scoped_release release;
+      built();
+    }
+    const slim::SceneStats& s = scene_->stats();
+    d["build_seconds"] = s.build_seconds;
+    d["input_faces"] = s.input_faces;
+    d["triangles"] = s.triangles;
+    d["skipped_faces"] = s.skipped_faces;
+    d["primitives"] = s.primitives;
+    py::dict details;
+    for (const auto& [k, v] : s.details) details[py::str(k)] = v;
+    d["details"] = details;
+    return d;
+  }
+
+  std::string config() const { return options_.config_name(); }
+  size_t geometry_count() const { return meshes_.size(); }
+
+ private:
+  uint32_t add(slim::PolyMesh&& mesh) {
+    if (meshes_.size() >= size_t(kInvalid))
+      throw py::value_error("at most 2^32 - 1 geometries in a scene");
+    std::lock_guard<std::mutex> lock(mutex_);
+    meshes_.push_back(std::move(mesh));
+    scene_.reset();  // rebuilt on the next query
+    return uint32_t(meshes_.size() - 1);
+  }
+
+  int threads(int nthreads) const {
+    if (nthreads < 0)
+      throw py::value_error("nthreads: expected 0 (all cores) or more, got " +
+                            std::to_string(nthreads));
+    return nthreads > 0 ? nthreads : threads_;
+  }
+
+  // The scene, built now if geometry was added since the last build. Called without the GIL.
+  const slim::Scene& built() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!scene_) {
+      if (meshes_.empty()) {
+        slim::PolyMesh empty;
+        scene_.emplace(slim::Scene::build(empty, options_));
+      } else {
+        scene_.emplace(slim::Scene::build(meshes_, options_));
+      }
+    }
+    return *scene_;
+  }
+
+  uint64_t input_bytes() const {
+    uint64_t b = 0;
+    for (const slim::PolyMesh& m : meshes_)
+      b += m.positions.size() * sizeof(slim::Vec3f) +
+           (m.face_sizes.size() + m.face_indices.size() + m.normal_indices.size() +
+            m.uv_indices.size() + m.face_object.size()) *
+               sizeof(uint32_t) +
+           m.normals.size() * sizeof(slim::Vec3f) + m.uvs.size() * sizeof(slim::Vec2f);
+    return b;
+  }
+
+  slim::BuildOptions options_;
+  int threads_ = 0;
+  std::vector<slim::PolyMesh> meshes_;
+  std::optional<slim::Scene> scene_;
+  std::mutex mutex_;
+};
+
+// Open3D's create_rays_pinhole from intrinsic K (3x3) and the world-to-camera extrinsic (4x4):
+// pixel (x, y) gets the direction R^T K^-1 (x + 0.5, y + 0.5, 1) from the camera centre -R^T t.
+py::array_t<float> rays_pinhole(const double K[9], const double E[16], int width, int height) {
+  if (width <= 0 || height <= 0)
+    throw py::value_error("create_rays_pinhole: expected positive width_px and height_px, got " +
+                          std::to_string(width) + " and " + std::to_string(height));
+  const double fx = K[0], s = K[1], cx = K[2], fy = K[4], cy = K[5];
+  if (!(fx != 0 && fy != 0) || !std::isfinite(fx) || !std::isfinite(fy))
+    throw py::value_error(
+        "create_rays_pinhole: expected nonzero finite focal lengths in the "
+        "intrinsic matrix");
+  double R[3][3], t[3];
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) R[i][j] = E[i * 4 + j];
+    t[i] = E[i * 4 + 3];
+  }
+  double o[3];
+  for (int j = 0; j < 3; ++j) o[j] = -(R[0][j] * t[0] + R[1][j] * t[1] + R[2][j] * t[2]);
+  py::array_t<float> out({py::ssize_t(height), py::ssize_t(width), py::ssize_t(6)});
+  float* p = out.mutable_data();
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      // K^-1 of an upper triangular K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]].
+      double v = (y + 0.5 - cy) / fy;
+      double u = (x + 0.5 - cx - s * v) / fx;
+      double d[3] = {u, v, 1.0};
+      for (int j = 0; j < 3; ++j) {
+        p[j] = float(o[j]);
+        p[3 + j] = float(R[0][j] * d[0] + R[1][j] * d[1] + R[2][j] * d[2]);
+      }
+      p += 6;
+    }
+  return out;
+}
+
+std::vector<double> doubles(py::handle obj, size_t n, const char* what, const char* shape) {
+  py::array a = as_array(obj);
+  char kind = a.dtype().kind();
+  if (kind != 'f' && kind != 'i' && kind != 'u')
+    throw py::type_error(std::string(what) + ": expected a number array of shape " + shape +
+                         ", got dtype " + dtype_str(a));
+  auto d = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(a);
+  if (size_t(d.size()) != n)
+    throw py::value_error(std::string(what) + ": expected shape " + shape + ", got shape " +
+                          shape_str(a));
+  std::vector<double> v(d.data(), d.data() + n);
+  for (double x : v)
+    if (!std::isfinite(x)) throw py::value_error(std::string(what) + ": expected finite numbers");
+  return v;
+}
+
+py::array_t<float> rays_pinhole_fov(double fov_deg, py::handle center_obj, py::handle eye_obj,
+                                    py::handle up_obj, int width, int height) {
+  if (!(fov_deg > 0.0 && fov_deg < 180.0))
+    throw py::value_error("create_rays_pinhole: expected fov_deg in (0, 180), got " +
+                          std::to_string(fov_deg));
+  auto c = doubles(center_obj, 3, "center", "[3]");
+  auto e = doubles(eye_obj, 3, "eye", "[3]");
+  auto up = doubles(up_obj, 3, "up", "[3]");
+  auto norm = [](double v[3]) {
+    double l = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (!(l > 0)) return false;
+    for (int i = 0; i < 3; ++i) v[i] /= l;
+    return true;
+  };
+  auto cross = [](const double a[3], const double b[3], double r[3]) {
+    r[0] = a[1] * b[2] - a[2] * b[1];
+    r[1] = a[2] * b[0] - a[0] * b[2];
+    r[2] = a[0] * b[1] - a[1] * b[0];
+  };
+  // The horizontal field of view sets the focal length; the camera looks along f = center - eye
+  // with rows right = up x f, down-facing image rows along f x right (Open3D's convention).
+  double f[3] = {c[0] - e[0], c[1] - e[1], c[2] - e[2]}, r[3], u[3];
+  if (!norm(f)) throw py::value_error("create_rays_pinhole: eye and center are the same point");
+  cross(up.data(), f, r);
+  if (!norm(r)) throw py::value_error("create_rays_pinhole: up is parallel to the view direction");
+  cross(f, r, u);
+  const double focal = 0.5 * width / std::tan(0.5 * fov_deg * M_PI / 180.0);
+  double K[9] = {focal, 0, 0.5 * width, 0, focal, 0.5 * height, 0, 0, 1};
+  double E[16] = {};
+  for (int j = 0; j < 3; ++j) {
+    E[0 * 4 + j] = r[j];
+    E[1 * 4 + j] = u[j];
+    E[2 * 4 + j] = f[j];
+  }
+  for (int i = 0; i < 3; ++i)
+    E[i * 4 + 3] = -(E[i * 4] * e[0] + E[i * 4 + 1] * e[1] + E[i * 4 + 2] * e[2]);
+  E[15] = 1;
+  return rays_pinhole(K, E, width, height);
+}
+
+// A mesh file as triangles: vertices [N, 3] float32, triangles [M, 3] uint32 (each polygon fanned
+// from its first corner) and face [M] uint32, the polygon each triangle comes from.
+py::tuple load_triangles(const std::string& path) {
+  slim::PolyMesh m;
+  {
+    py::gil_scoped_release release;
+    m = slim::load(path);
+  }
+  const uint64_t nt = m.fan_triangle_count();
+  py::array_t<float> v({py::ssize_t(m.positions.size()), py::ssize_t(3)});
+  if (!m.positions.empty())
+    std::memcpy(v.mutable_data(), m.positions.data(), m.positions.size() * sizeof(slim::Vec3f));
+  py::array_t<uint32_t> t({py::ssize_t(nt), py::ssize_t(3)});
+  py::array_t<uint32_t> face({py::ssize_t(nt)});
+  uint32_t* pt = t.mutable_data();
+  uint32_t* pf = face.mutable_data();
+  size_t corner = 0, k = 0;
+  for (size_t f = 0; f < m.face_sizes.size(); ++f) {
+    const uint32_t n = m.face_sizes[f];
+    for (uint32_t j = 1; j + 1 < n; ++j, ++k) {
+      pt[3 * k] = m.face_indices[corner];
+      pt[3 * k + 1] = m.face_indices[corner + j];
+      pt[3 * k + 2] = m.face_indices[corner + j + 1];
+      pf[k] = uint32_t(f);
+    }
+    corner += n;
+  }
+  return py::make_tuple(v, t, face);
+}
+
+}  // namespace
+
+PYBIND11_MODULE(slimrt, m) {
+  m.doc() =
+      "slimrt: compact CPU ray tracing of triangle and quad meshes. RaycastingScene follows "
+      "Open3D's open3d.t.geometry.RaycastingScene.";
+  py::register_exception<slim::Error>(m, "Error", PyExc_RuntimeError);
+  m.attr("INVALID_ID") = kInvalid;
+  m.attr("__version__") = SLIMRT_VERSION;
+  m.def("configs", &slim::all_config_names,
+        "Every configuration name (the formats of the README).");
+  m.def(
+      "simd_isa", [] { return std::string(slim::simd_isa()); },
+      "The SIMD path slimrt was compiled for.");
+  m.def("load_triangles", &load_triangles, py::arg("path"),
+        "Loads a mesh file (.obj .ply .gltf .glb, optionally .xz) or a procedural scene "
+        "(terrain:N, torus:N, canyon:N) as (vertices [N,3] float32, triangles [M,3] uint32, "
+        "face [M] uint32): polygons are fanned from their first corner, face[i] is the polygon "
+        "of triangle i.");
+
+  py::class_<RaycastingScene>(m, "RaycastingScene",
+                              "A scene of triangle meshes to cast rays against (Open3D's "
+                              "RaycastingScene names and conventions). config is a slimrt "
+                              "configuration (slimrt.configs()); threads = 0 uses all cores.")
+      .def(py::init<const std::string&, int>(), py::arg("config") = "clbvh-compact",
+           py::arg("threads") = 0)
+      .def_property_readonly_static("INVALID_ID", [](py::object) { return kInvalid; })
+      .def("add_triangles", &RaycastingScene::add_triangles, py::arg("vertex_positions"),
+           py::arg("triangle_indices"),
+           "Adds a triangle mesh: vertices [N,3] float32, triangles [M,3] uint32. Returns its "
+           "geometry id.")
+      .def("add_mesh", &RaycastingScene::add_mesh, py::arg("path"),
+           "Adds a mesh file (.obj .ply .gltf .glb, optionally .xz) or a procedural scene; "
+           "polygons are kept (primitive_ids are the file's face indices). Returns its geometry "
+           "id.")
+      .def("cast_rays", &RaycastingScene::cast_rays, py::arg("rays"), py::arg("nthreads") = 0,
+           "Closest hits of rays [..., 6] (ox, oy, oz, dx, dy, dz; t in units of the direction's "
+           "length). Returns a dict: t_hit [...] (inf on a miss), geometry_ids and primitive_ids "
+           "[...] (INVALID_ID on a miss), primitive_uvs [..., 2] (barycentric weights of the "
+           "2nd and 3rd vertex), primitive_normals [..., 3] (unit geometric normals, (v1-v0) x "
+           "(v2-v0)); zeros on a miss.")
+      .def("test_occlusions", &RaycastingScene::test_occlusions, py::arg("rays"),
+           py::arg("tnear") = 0.0f, py::arg("tfar") = slim::kInf, py::arg("nthreads") = 0,
+           "True for the rays [..., 6] that hit anything with t in [tnear, tfar].")
+      .def("count_intersections", &RaycastingScene::count_intersections, py::arg("rays"),
+           py::arg("nthreads") = 0, py::arg("max_hits") = kDefaultMaxHits,
+           "Number of intersections along each ray [..., 6] (int32). Each ray is traced again "
+           "from just past its last hit, so hits at the same distance (a shared edge or vertex, "
+           "coincident triangles) count once; at most max_hits per ray.")
+      .def("memory", &RaycastingScene::memory,
+           "Bytes the scene keeps, by part (geometry, bvh, other, total) and per triangle; "
+           "input_meshes is the copy of the input kept to rebuild when geometry is added.")
+      .def("stats", &RaycastingScene::stats, "Build statistics (builds the scene if needed).")
+      .def_property_readonly("config", &RaycastingScene::config)
+      .def_property_readonly("geometry_count", &RaycastingScene::geometry_count)
+      .def_static(
+          "create_rays_pinhole",
+          [](py::handle K, py::handle E, int width_px, int height_px) {
+            auto k = doubles(K, 9, "intrinsic_matrix", "[3, 3]");
+            auto e = doubles(E, 16, "extrinsic_matrix", "[4, 4]");
+            return rays_pinhole(k.data(), e.data(), width_px, height_px);
+          },
+          py::arg("intrinsic_matrix"), py::arg("extrinsic_matrix"), py::arg("width_px"),
+          py::arg("height_px"),
+          "Rays [height_px, width_px, 6] of a pinhole camera: intrinsic K (3x3), world-to-camera "
+          "extrinsic (4x4); directions R^T K^-1 (x + 0.5, y + 0.5, 1), not normalized.")
+      .def_static("create_rays_pinhole", &rays_pinhole_fov, py::arg("fov_deg"), py::arg("center"),
+                  py::arg("eye"), py::arg("up"), py::arg("width_px"), py::arg("height_px"),
+                  "Rays [height_px, width_px, 6] of a pinhole camera at eye looking at center, "
+                  "horizontal field of view fov_deg (Open3D's convention).");
+}

@@ -1,0 +1,331 @@
+"""slimrt.RaycastingScene: Open3D's names and miss values, hits against a double-precision brute
+force, every configuration against bvh8-tri4v, count_intersections, create_rays_pinhole and the
+errors bad arrays raise."""
+import math
+import os
+import threading
+
+import numpy as np
+import pytest
+
+from conftest import (brute_force, brute_force_counts, icosphere, import_slimrt, is_lossy,
+                      random_rays, shared_mesh)
+
+slimrt = import_slimrt()
+
+INVALID = 0xFFFFFFFF
+
+
+def unit_box():
+    v = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], np.float32)
+    # 12 triangles, outward-facing (counter-clockwise seen from outside).
+    t = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], np.uint32)
+    return v, t
+
+
+def build(config, vertices, triangles, threads=0):
+    s = slimrt.RaycastingScene(config, threads)
+    try:
+        s.add_triangles(vertices, triangles)
+        s.stats()  # builds now, so that a configuration that does not apply says so here
+    except slimrt.Error as e:
+        if "does not apply" in str(e):
+            pytest.skip(f"{config}: {e}")
+        raise
+    return s
+
+
+def test_open3d_names_and_miss_values():
+    v, t = unit_box()
+    s = slimrt.RaycastingScene()
+    assert s.config == "clbvh-compact"
+    assert s.add_triangles(v, t) == 0
+    assert s.add_triangles(v + np.float32(5), t) == 1
+    rays = np.array([[0.5, 0.5, 3, 0, 0, -1],      # box 0 from above: t = 2
+                     [5.5, 5.5, 9, 0, 0, -2],      # box 1, direction of length 2: t = 1.5
+                     [20, 20, 20, 1, 0, 0]],       # miss
+                    np.float32)
+    r = s.cast_rays(rays)
+    assert set(r) == {"t_hit", "geometry_ids", "primitive_ids", "primitive_uvs",
+                      "primitive_normals"}
+    assert r["t_hit"].dtype == np.float32 and r["t_hit"].shape == (3,)
+    assert r["geometry_ids"].dtype == np.uint32 and r["primitive_ids"].dtype == np.uint32
+    assert r["primitive_uvs"].shape == (3, 2) and r["primitive_normals"].shape == (3, 3)
+    np.testing.assert_allclose(r["t_hit"][:2], [2.0, 1.5])
+    assert list(r["geometry_ids"]) == [0, 1, INVALID]
+    assert r["primitive_ids"][0] in (10, 11) and r["primitive_ids"][1] in (10, 11)
+    assert r["primitive_ids"][2] == INVALID == slimrt.INVALID_ID
+    assert r["t_hit"][2] == np.inf
+    assert (r["primitive_uvs"][2] == 0).all() and (r["primitive_normals"][2] == 0).all()
+    np.testing.assert_allclose(r["primitive_normals"][0], [0, 0, 1], atol=1e-6)  # unit, outward
+    # Open3D's uvs: barycentric weights of the triangle's 2nd and 3rd vertex.
+    tri = t[r["primitive_ids"][0]]
+    p = v[tri[0]] * (1 - r["primitive_uvs"][0].sum()) + v[tri[1]] * r["primitive_uvs"][0][0] + \
+        v[tri[2]] * r["primitive_uvs"][0][1]
+    np.testing.assert_allclose(p, [0.5, 0.5, 1.0], atol=1e-6)
+    # Leading dimensions are kept.
+    r2 = s.cast_rays(rays.reshape(1, 3, 6))
+    assert r2["t_hit"].shape == (1, 3) and r2["primitive_normals"].shape == (1, 3, 3)
+    occ = s.test_occlusions(rays)
+    assert occ.dtype == np.bool_ and list(occ) == [True, True, False]
+    assert list(s.test_occlusions(rays, tnear=0.0, tfar=1.0)) == [False, False, False]
+    assert list(s.test_occlusions(rays, tfar=2.5)) == [True, True, False]
+    cnt = s.count_intersections(rays)
+    assert cnt.dtype == np.int32 and list(cnt) == [2, 2, 0]
+
+
+def test_create_rays_pinhole_matches_open3d_convention():
+    # The values Open3D 0.16 returns for this call (its fov is horizontal, row 0 looks down).
+    r = slimrt.RaycastingScene.create_rays_pinhole(fov_deg=90, center=[0, 0, 0], eye=[0, 0, 5],
+                                                   up=[0, 1, 0], width_px=4, height_px=2)
+    assert r.shape == (2, 4, 6) and r.dtype == np.float32
+    np.testing.assert_allclose(r[..., :3], np.broadcast_to([0, 0, 5], (2, 4, 3)))
+    np.testing.assert_allclose(r[0, :, 3:], [[0.75, -0.25, -1], [0.25, -0.25, -1],
+                                             [-0.25, -0.25, -1], [-0.75, -0.25, -1]], atol=1e-6)
+    np.testing.assert_allclose(r[1, 0, 3:], [0.75, 0.25, -1], atol=1e-6)
+    K = np.array([[2, 0, 2], [0, 2, 1], [0, 0, 1]], float)
+    r = slimrt.RaycastingScene.create_rays_pinhole(K, np.eye(4), 4, 2)
+    np.testing.assert_allclose(r[0, 0], [0, 0, 0, -0.75, -0.25, 1], atol=1e-6)
+    np.testing.assert_allclose(r[1, 3], [0, 0, 0, 0.75, 0.25, 1], atol=1e-6)
+
+
+def test_create_rays_pinhole_against_open3d():
+    o3d = pytest.importorskip("open3d", reason="Open3D (Debian python3-open3d) is not installed")
+    R = o3d.t.geometry.RaycastingScene
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        eye, center = rng.normal(size=3) * 5, rng.normal(size=3)
+        up = rng.normal(size=3)
+        fov = float(rng.uniform(20, 120))
+        a = R.create_rays_pinhole(fov, o3d.core.Tensor(center.astype(np.float32)),
+                                  o3d.core.Tensor(eye.astype(np.float32)),
+                                  o3d.core.Tensor(up.astype(np.float32)), 7, 5).numpy()
+        b = slimrt.RaycastingScene.create_rays_pinhole(fov, center.astype(np.float32),
+                                                       eye.astype(np.float32),
+                                                       up.astype(np.float32), 7, 5)
+        np.testing.assert_allclose(b, a, rtol=1e-4, atol=1e-4)
+
+
+def check_against_brute_force(s, v, t, rays, lossy_tol=None):
+    r = s.cast_rays(rays)
+    bt, bi, bu, bv, amb = brute_force(v, t, rays)
+    ok = ~amb
+    assert ok.mean() > 0.9, "too many ambiguous rays to say anything"
+    hit = np.isfinite(bt)
+    if lossy_tol is None:
+        assert (np.isfinite(r["t_hit"][ok]) == hit[ok]).all(), "hit/miss differs from brute force"
+        h = ok & hit
+        np.testing.assert_allclose(r["t_hit"][h], bt[h], rtol=1e-4, atol=1e-6)
+        assert (r["primitive_ids"][h] == bi[h]).all()
+        np.testing.assert_allclose(r["primitive_uvs"][h, 0], bu[h], atol=1e-3)
+        np.testing.assert_allclose(r["primitive_uvs"][h, 1], bv[h], atol=1e-3)
+        miss = ok & ~hit
+        assert (r["primitive_ids"][miss] == INVALID).all()
+        assert (r["t_hit"][miss] == np.inf).all()
+    return r, bt, amb
+
+
+def test_small_meshes_equal_brute_force():
+    rng = np.random.default_rng(1)
+    v, t = icosphere(2, 1.0, (0.1, -0.2, 0.3))
+    rays = random_rays(rng, v.min(0), v.max(0), 3000)
+    for config in ("bvh8-tri4v", "clbvh-compact", "bvh8-pairs", "qbvh8-tri4i"):
+        s = build(config, v, t)
+        check_against_brute_force(s, v, t, rays)
+    # A random triangle soup (overlapping, every orientation).
+    p = rng.random((300, 3)).astype(np.float32) * 10
+    tri = rng.integers(0, 300, (200, 3)).astype(np.uint32)
+    tri = tri[(tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])]
+    rays = random_rays(rng, p.min(0), p.max(0), 2000)
+    s = build("bvh8-tri4v", p, tri)
+    check_against_brute_force(s, p, tri, rays)
+
+
+def test_occlusions_equal_brute_force():
+    rng = np.random.default_rng(2)
+    v, t = icosphere(2)
+    rays = random_rays(rng, v.min(0), v.max(0), 2000)
+    s = build("clbvh-compact", v, t)
+    bt, _, _, _, amb = brute_force(v, t, rays, tnear=0.1, tfar=1.0)
+    occ = s.test_occlusions(rays, tnear=0.1, tfar=1.0)
+    assert (occ[~amb] == np.isfinite(bt)[~amb]).all()
+
+
+def test_count_intersections_equal_brute_force():
+    rng = np.random.default_rng(4)
+    # Two nested spheres and an offset one: rays cross up to 6 surfaces.
+    parts = [icosphere(2, 1.0), icosphere(2, 0.5), icosphere(1, 0.4, (0.8, 0.2, 0.1))]
+    v = np.concatenate([p[0] for p in parts])
+    offs = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])
+    t = np.concatenate([p[1] + np.uint32(o) for p, o in zip(parts, offs)])
+    rays = random_rays(rng, v.min(0), v.max(0), 1500)
+    expected, grazing = brute_force_counts(v, t, rays)
+    for config in ("bvh8-tri4v", "clbvh-compact"):
+        s = build(config, v, t)
+        got = s.count_intersections(rays)
+        assert (got[~grazing] == expected[~grazing]).all()
+        assert expected.max() >= 4
+    # The bound on hits per ray.
+    assert s.count_intersections(rays, max_hits=1).max() == 1
+
+
+def sample_configs():
+    return [c for c in slimrt.configs() if c != "bvh8-tri4v"]
+
+
+@pytest.mark.parametrize("mesh", ["spot_quadrangulated.obj", "stanford_bunny.obj.xz"])
+def test_every_configuration_equals_reference(mesh):
+    v, t, face = slimrt.load_triangles(shared_mesh(mesh))
+    rng = np.random.default_rng(5)
+    rays = random_rays(rng, v.min(0), v.max(0), 4000)
+    diag = float(np.linalg.norm(v.max(0) - v.min(0)))
+    ref = build("bvh8-tri4v", v, t).cast_rays(rays)
+    rhit = np.isfinite(ref["t_hit"])
+    checked = []
+    for config in sample_configs():
+        s = slimrt.RaycastingScene(config)
+        s.add_triangles(v, t)
+        try:
+            r = s.cast_rays(rays)
+        except slimrt.Error as e:
+            if "does not apply" in str(e):
+                continue
+            raise
+        hit = np.isfinite(r["t_hit"])
+        same_prim = r["primitive_ids"] == ref["primitive_ids"]
+        if is_lossy(config):
+            # Positions move by at most a small fraction of the scene: hit/miss may differ only
+            # near silhouettes, distances by about the error.
+            # (bunny: median 2e-6 of the diagonal for the lossy grids)
+            assert (hit == rhit).mean() > 0.99, config
+            both = hit & rhit
+            err = np.abs(r["t_hit"][both] - ref["t_hit"][both]) * \
+                np.linalg.norm(rays[both, 3:], axis=1)
+            # (a ray grazing a silhouette may hit the surface behind instead: not the largest)
+            assert np.median(err) < 1e-4 * diag, config
+            assert np.quantile(err, 0.99) < 1e-2 * diag, config
+        else:
+            # Lossless: the same hits, up to ties (another triangle at the same distance).
+            assert (hit == rhit).mean() > 0.999, config
+            both = hit & rhit
+            np.testing.assert_allclose(r["t_hit"][both], ref["t_hit"][both], rtol=1e-5,
+                                       err_msg=config)
+            assert same_prim[both].mean() > 0.995, config
+        checked.append(config)
+    assert len(checked) >= 10, checked
+
+
+@pytest.mark.parametrize("mesh", ["stanford_bunny.obj.xz", "fg_c172p_aircraft.obj.xz",
+                                  "igea.ply.xz"])
+def test_shared_meshes_equal_brute_force(mesh):
+    v, t, _ = slimrt.load_triangles(shared_mesh(mesh))
+    rng = np.random.default_rng(6)
+    rays = random_rays(rng, v.min(0), v.max(0), 32)
+    s = build("clbvh-compact", v, t)
+    r, bt, amb = check_against_brute_force(s, v, t, rays)
+    assert np.isfinite(bt).sum() >= 10
+
+
+def test_far_and_huge_geometry():
+    # Near the supported limit (+-1e12) hits are found and normals are unit length; far from the
+    # origin too.
+    # (half size, centre, ray origin's height above the top; origins must lie within 1e12)
+    for scale, offset, above in ((9e11, 0.0, 5e10), (1e3, 4e6, 2e3), (1.0, 4e6, 2.0)):
+        v, t = unit_box()
+        v = (v.astype(np.float64) * 2 - 1) * scale + offset
+        s = build("clbvh-compact", v.astype(np.float32), t)
+        org = np.array([offset, offset, offset + scale + above])
+        rays = np.array([[*org, 0, 0, -1]], np.float32)
+        r = s.cast_rays(rays)
+        assert np.isfinite(r["t_hit"][0]), (scale, offset)
+        np.testing.assert_allclose(r["t_hit"][0], above, rtol=1e-5)
+        np.testing.assert_allclose(r["primitive_normals"][0], [0, 0, 1], atol=1e-6)
+
+
+def test_add_mesh_and_lazy_rebuild():
+    s = slimrt.RaycastingScene("bvh8-tri4v")
+    rays = np.array([[0.5, 0.5, 3, 0, 0, -1]], np.float32)
+    assert s.cast_rays(rays)["t_hit"][0] == np.inf  # an empty scene
+    v, t = unit_box()
+    s.add_triangles(v, t)
+    assert s.cast_rays(rays)["t_hit"][0] == 2.0  # rebuilt after the geometry was added
+    gid = s.add_mesh("terrain:8")
+    assert gid == 1 and s.geometry_count == 2
+    st = s.stats()
+    assert st["config"] == "bvh8-tri4v" and st["triangles"] == 12 + 2 * 64
+    m = s.memory()
+    assert m["total"] == m["geometry"] + m["bvh"] + m["other"] > 0
+    assert m["triangles"] == 140 and m["input_meshes"] > 0
+    with pytest.raises(slimrt.Error, match="nosuchfile"):
+        s.add_mesh("/nonexistent/nosuchfile.obj")
+
+
+def test_no_copy_and_other_layouts():
+    v, t = unit_box()
+    s = build("bvh8-tri4v", v, t)
+    rays = np.array([[0.5, 0.5, 3, 0, 0, -1]] * 4, np.float64)  # converted once
+    assert (s.cast_rays(rays)["t_hit"] == 2).all()
+    strided = np.zeros((4, 12), np.float32)[:, ::2]
+    strided[:] = rays
+    assert (s.cast_rays(strided)["t_hit"] == 2).all()
+    assert (s.cast_rays(np.asfortranarray(rays.astype(np.float32)))["t_hit"] == 2).all()
+    s2 = slimrt.RaycastingScene()
+    s2.add_triangles(v.astype(np.float64), t.astype(np.int64))
+    assert s2.cast_rays(rays)["t_hit"][0] == 2
+
+
+def test_bad_arrays_raise_with_what_was_expected():
+    v, t = unit_box()
+    s = build("bvh8-tri4v", v, t)
+    with pytest.raises(ValueError, match=r"\[\.\.\., 6\].*got shape \(4, 5\)"):
+        s.cast_rays(np.zeros((4, 5), np.float32))
+    with pytest.raises(TypeError, match="float32.*got dtype int32"):
+        s.cast_rays(np.zeros((4, 6), np.int32))
+    bad = np.zeros((3, 6), np.float32)
+    bad[:, 5] = -1
+    bad[1, 0] = np.nan
+    with pytest.raises(ValueError, match="finite.*ray 1"):
+        s.cast_rays(bad)
+    with pytest.raises(ValueError, match="finite.*ray 1"):
+        s.test_occlusions(bad)
+    with pytest.raises(ValueError, match="finite.*ray 1"):
+        s.count_intersections(bad)
+    with pytest.raises(ValueError, match=r"vertices: expected shape \[N, 3\]"):
+        s.add_triangles(np.zeros((4, 2), np.float32), t)
+    with pytest.raises(TypeError, match="triangles: expected a uint32"):
+        s.add_triangles(v, t.astype(np.float32))
+    with pytest.raises(ValueError, match=r"indices in \[0, 8\).*triangle 0 has 8"):
+        s.add_triangles(v, np.array([[0, 1, 8]], np.uint32))
+    with pytest.raises(ValueError, match=r"indices in \[0, 8\).*has -1"):
+        s.add_triangles(v, np.array([[0, 1, -1]], np.int32))
+    vn = v.copy()
+    vn[3, 1] = np.nan
+    with pytest.raises(ValueError, match="finite coordinates, vertex 3"):
+        s.add_triangles(vn, t)
+    with pytest.raises(ValueError, match="unknown configuration 'nope'.*bvh8-tri4v"):
+        slimrt.RaycastingScene("nope")
+    with pytest.raises(ValueError, match="fov_deg"):
+        slimrt.RaycastingScene.create_rays_pinhole(0.0, [0, 0, 0], [0, 0, 1], [0, 1, 0], 4, 4)
+    with pytest.raises(ValueError, match="center: expected shape \\[3\\]"):
+        slimrt.RaycastingScene.create_rays_pinhole(60.0, [0, 0], [0, 0, 1], [0, 1, 0], 4, 4)
+
+
+def test_threads_and_gil_released():
+    v, t = icosphere(3)
+    s = build("clbvh-compact", v, t, threads=2)
+    rng = np.random.default_rng(7)
+    rays = random_rays(rng, v.min(0), v.max(0), 20000)
+    ref = s.cast_rays(rays, nthreads=1)
+    out = [None] * 4
+
+    def work(k):
+        out[k] = s.cast_rays(rays)
+    th = [threading.Thread(target=work, args=(k,)) for k in range(4)]
+    for x in th:
+        x.start()
+    for x in th:
+        x.join()
+    for o in out:
+        np.testing.assert_array_equal(o["t_hit"], ref["t_hit"])
+        np.testing.assert_array_equal(o["primitive_ids"], ref["primitive_ids"])

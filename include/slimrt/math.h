@@ -52,6 +52,7 @@ SLIM_INLINE Vec3f cross(Vec3f a, Vec3f b) {
 }
 SLIM_INLINE float length(Vec3f a) { return std::sqrt(dot(a, a)); }
 SLIM_INLINE Vec3f normalize(Vec3f a) { return a * (1.0f / length(a)); }
+
 SLIM_INLINE Vec3f min(Vec3f a, Vec3f b) {
   return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)};
 }
@@ -60,6 +61,16 @@ SLIM_INLINE Vec3f max(Vec3f a, Vec3f b) {
 }
 SLIM_INLINE Vec3f abs(Vec3f a) { return {std::fabs(a.x), std::fabs(a.y), std::fabs(a.z)}; }
 SLIM_INLINE float reduce_max(Vec3f a) { return std::max(a.x, std::max(a.y, a.z)); }
+
+// Unit vector along v, or zero when v is zero or not finite. Scales first, so that vectors
+// whose squared length overflows float (normals of triangles with 1e10-long edges) still
+// normalize.
+SLIM_INLINE Vec3f safe_normalize(Vec3f v) {
+  float m = reduce_max(abs(v));
+  if (!(m > 0.0f) || !std::isfinite(m)) return Vec3f(0.0f);
+  v = v * (1.0f / m);
+  return v * (1.0f / length(v));
+}
 SLIM_INLINE float reduce_min(Vec3f a) { return std::min(a.x, std::min(a.y, a.z)); }
 SLIM_INLINE bool is_finite(Vec3f a) {
   return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z);

@@ -47,16 +47,6 @@ struct ViewOptions {
 // look-at point or a view direction along the up axis.
 Camera view_camera(const Box3f& box, const ViewOptions& view, int width, int height);
 
-// Unit vector along v, or zero when v is zero or not finite. Scales first, so that vectors
-// whose squared length overflows float (normals of triangles with 1e10-long edges) still
-// normalize.
-SLIM_INLINE Vec3f safe_normalize(Vec3f v) {
-  float m = reduce_max(abs(v));
-  if (!(m > 0.0f) || !std::isfinite(m)) return Vec3f(0.0f);
-  v = v * (1.0f / m);
-  return v * (1.0f / length(v));
-}
-
 SLIM_INLINE Ray camera_ray(const Camera& c, float px, float py) {
   Ray r;
   r.org = c.eye;

@@ -12,7 +12,10 @@
 //
 // Tolerances, in scene units along the ray (t * |dir|):
 //   lossless formats: 1e-5 * (distance to the reference hit) + 1e-6 * (box diagonal) (rounding:
-//     two formats may hit the two triangles of a shared edge, whose t differ in the last bits);
+//     two formats may hit the two triangles of a shared edge, whose t differ in the last bits)
+//     + 4 * FLT_EPSILON * (largest |coordinate|) (the vertices are translated to the ray origin
+//     in float, rounded at the spacing of the coordinates: far from the origin that spacing
+//     exceeds the other terms);
 //   lossy formats (lossy-grid*, costa-*V*): that plus e / max(|cos theta|, 0.05), where e bounds
 //     the distance of every decoded vertex from its input vertex and theta is the angle between
 //     the ray and the input surface normal at t_ref. Each decoded triangle is the convex hull of
@@ -41,6 +44,7 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <atomic>
+#include <cfloat>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -55,6 +59,7 @@
 #include "commands.h"
 #include "slimrt/costa.h"
 #include "slimrt/grids.h"
+#include "slimrt/output.h"
 #include "slimrt/slimrt.h"
 
 namespace slim::cli {
@@ -249,11 +254,18 @@ struct RaySource {
       target =
           targets->midpoints[(i / 3 + uint64_t(rng.next()) * 7919) % targets->midpoints.size()];
     } else {
+      // The direction itself, not (org + d) - org: far from the origin org + d rounds to org's
+      // spacing (0.25 at 4e6, 64 at 1e9), which would bend or zero the direction.
       Vec3f d;
       do {
         d = Vec3f(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f);
       } while (dot(d, d) < 1e-4f);
-      target = org + d;
+      Ray r;
+      r.org = org;
+      r.dir = d;
+      r.tnear = 0.0f;
+      r.tfar = kInf;
+      return r;
     }
     Ray r;
     r.org = org;
@@ -355,12 +367,24 @@ int cmd_verify(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
+  {
+    // t_ref, cos_ref and a format's own reference: 12 bytes per ray held at once.
+    constexpr uint64_t kBytesPerRay = 12;
+    const uint64_t budget = memory_budget();
+    if (rays > budget / kBytesPerRay)
+      throw Error("--rays " + std::to_string(rays) + " needs about " +
+                  format_bytes(rays * kBytesPerRay) + " for the reference hits (" +
+                  std::to_string(kBytesPerRay) + " bytes per ray); expected at most " +
+                  std::to_string(budget / kBytesPerRay) + " rays, the memory limit being " +
+                  format_bytes(budget) + " (half of this machine's memory)");
+  }
   if (configs.empty()) configs = all_config_names();
   for (const std::string& c : configs) BuildOptions::from_config(c);  // unknown names: error now
 
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
   const auto t_load = std::chrono::steady_clock::now();
-  const PolyMesh mesh = load_scene(scene_name);
+  const PolyMesh mesh =
+      out_of_memory_context("loading " + scene_name, [&] { return load_scene(scene_name); });
   const MeshSummary sum = summarize(mesh);
   const Closedness cl = closedness(mesh);
   std::printf(
@@ -382,9 +406,17 @@ int cmd_verify(int argc, char** argv) {
   BuildOptions ref_opt = BuildOptions::from_config("bvh8-tri4v");
   ref_opt.threads = threads;
   Scene ref;
-  arena.execute([&] { ref = Scene::build(mesh, ref_opt); });
+  out_of_memory_context("building the bvh8-tri4v reference of " + scene_name,
+                        [&] { arena.execute([&] { ref = Scene::build(mesh, ref_opt); }); });
   const Box3f box = mesh.bounds();
   const double diag = length(box.size());
+  // Triangles are intersected with their vertices translated to the ray origin (watertight
+  // test), rounded at the spacing of the coordinates: two formats hitting the two triangles of
+  // an edge may differ by a few of those spacings far from the origin.
+  const double coord_round =
+      4.0 * double(FLT_EPSILON) *
+      double(std::max({std::fabs(box.lo.x), std::fabs(box.lo.y), std::fabs(box.lo.z),
+                       std::fabs(box.hi.x), std::fabs(box.hi.y), std::fabs(box.hi.z)}));
   uint64_t tried = 0;
   std::vector<Vec3f> inside;
   arena.execute([&] { inside = inside_points(ref, box, 4096, uint32_t(seed), tried); });
@@ -403,7 +435,11 @@ int cmd_verify(int argc, char** argv) {
       targets.midpoints.size(), inside.size(), (unsigned long long)tried);
 
   // Reference: t (in ray units) and |cos theta| at the first crossing of the input surface.
-  std::vector<float> t_ref(rays), cos_ref(rays);
+  std::vector<float> t_ref, cos_ref;
+  out_of_memory_context("allocating the reference hits of " + std::to_string(rays) + " rays", [&] {
+    t_ref.resize(rays);
+    cos_ref.resize(rays);
+  });
   const auto t_ref0 = std::chrono::steady_clock::now();
   arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<uint64_t>(0, rays, 4096), [&](const auto& r) {
@@ -430,7 +466,8 @@ int cmd_verify(int argc, char** argv) {
     Scene s;
     const auto t_build = std::chrono::steady_clock::now();
     try {
-      arena.execute([&] { s = Scene::build(mesh, opt); });
+      out_of_memory_context("building " + scene_name + " as " + name,
+                            [&] { arena.execute([&] { s = Scene::build(mesh, opt); }); });
     } catch (const Error& e) {
       const std::string what = e.what();
       if (what.find("does not apply") != std::string::npos ||
@@ -529,7 +566,7 @@ int cmd_verify(int argc, char** argv) {
           const float tr = (*tref)[i];
           if (h.valid() && std::isfinite(tr)) {
             const double excess = (double(h.t) - double(tr)) * len;
-            const double tol = 1e-5 * double(tr) * len + 1e-6 * diag +
+            const double tol = 1e-5 * double(tr) * len + 1e-6 * diag + coord_round +
                                (bound_is_hard ? e / std::max(double(cos_ref[i]), 0.05) : 0.0);
             c.max_excess = std::max(c.max_excess, std::fabs(excess));
             if (excess > tol) c.far++, bad = true;
@@ -538,7 +575,7 @@ int cmd_verify(int argc, char** argv) {
           if (lossy && h.valid() && std::isfinite(t_ref[i])) {
             const double dev = std::fabs(double(h.t) - double(t_ref[i])) * len;
             c.max_input_dev = std::max(c.max_input_dev, dev);
-            if (dev > 1e-5 * double(t_ref[i]) * len + 1e-6 * diag +
+            if (dev > 1e-5 * double(t_ref[i]) * len + 1e-6 * diag + coord_round +
                           e / std::max(double(cos_ref[i]), 0.05))
               c.beyond_bound++, c.beyond_random += i % 3 == 0;
           }

@@ -21,6 +21,7 @@
 #include <fstream>
 
 #include "slimrt/error.h"
+#include "slimrt/output.h"
 
 namespace slim::detail {
 namespace {
@@ -65,16 +66,28 @@ bool read_external_file(std::vector<unsigned char>* out, std::string* err, const
     return false;
   };
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) return fail("not a regular file");
+  if (!std::filesystem::is_regular_file(path, ec))
+    return fail(
+        "exists but is not a regular file (a folder or device); expected a binary buffer "
+        "file");
   const uintmax_t size = std::filesystem::file_size(path, ec);
   if (ec) return fail(ec.message());
-  if (size > kMaxExternalBuffer) return fail("larger than 4 GiB");
+  if (size > kMaxExternalBuffer)
+    return fail("is " + std::to_string(size) + " bytes; expected at most 4 GiB");
   std::ifstream f(path, std::ios::binary);
   if (!f) return fail("cannot be opened");
   out->resize(size_t(size));
   if (size && !f.read(reinterpret_cast<char*>(out->data()), std::streamsize(size)))
     return fail("read error");
   return true;
+}
+
+// tinygltf's FileExists opens the file; this one only asks whether the name exists, so a file
+// that exists but is refused is reported by read_external_file with the reason instead of
+// "File not found".
+bool external_file_exists(const std::string& path, void*) {
+  std::error_code ec;
+  return std::filesystem::exists(path, ec);
 }
 
 uint32_t load_u32(const uint8_t* p) {
@@ -113,9 +126,68 @@ uint32_t check_glb(const std::string& src, std::string_view data) {
   return length;
 }
 
+// Deepest nesting of JSON arrays and objects accepted. nlohmann's DOM and tinygltf's conversion
+// of `extras` into tinygltf::Value recurse once per level, so a deep enough file (about 20,000
+// levels on an 8 MiB stack) overflows the call stack; real glTF files nest a few tens of levels.
+constexpr uint32_t kMaxJsonDepth = 1000;
+
+// Checks the nesting depth of JSON text without recursion, before the recursive parser sees it:
+// one pass over the bytes that skips strings (with their escapes) and counts [ { against ] }.
+// `first_byte` is the offset of `json` in the file, for the message.
+void check_json_depth(const std::string& src, std::string_view json, bool binary,
+                      uint64_t first_byte) {
+  uint32_t depth = 0;
+  uint64_t line = 1;
+  bool in_string = false, escaped = false;
+  for (size_t i = 0; i < json.size(); ++i) {
+    const char c = json[i];
+    if (c == '\n') ++line;
+    if (in_string) {
+      if (escaped)
+        escaped = false;
+      else if (c == '\\')
+        escaped = true;
+      else if (c == '"')
+        in_string = false;
+      continue;
+    }
+    if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > kMaxJsonDepth) {
+        const std::string what = "JSON nests arrays/objects more than " +
+                                 std::to_string(kMaxJsonDepth) + " levels deep; expected at most " +
+                                 std::to_string(kMaxJsonDepth);
+        if (binary) throw_at_byte(src, first_byte + i, what);
+        throw_at_line(src, line, what);
+      }
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;
+    }
+  }
+}
+
 // Turns a tinygltf error into slim::Error. nlohmann reports "... at line L, column C: ...".
+// tinygltf messages that quote a whole data: URI or state the wrong rule are replaced by what was
+// expected and what was found.
+std::string explain_tinygltf(const std::string& line) {
+  auto starts = [&](const char* p) { return line.rfind(p, 0) == 0; };
+  if (starts("Invalid `byteStride' value")) {
+    const size_t colon = line.rfind(':');
+    const std::string found = colon == std::string::npos ? "?" : line.substr(colon + 2);
+    return "a bufferView has byteStride " + found +
+           "; expected a multiple of 4 from 4 to 252 (glTF 2.0 bufferView.byteStride)";
+  }
+  if (starts("Failed to decode 'uri'"))
+    return "a buffer's data: URI does not decode to its byteLength bytes; expected base64 data "
+           "(application/octet-stream or application/gltf-buffer) of at least byteLength bytes";
+  if (starts("File size mismatch")) return line.substr(0, 300);
+  return line;
+}
+
 [[noreturn]] void throw_tinygltf(const std::string& src, const std::string& err, bool binary) {
-  std::string msg = err.substr(0, std::min<size_t>(err.find('\n'), 200));  // URIs can be huge
+  std::string msg = explain_tinygltf(err.substr(0, err.find('\n')));
+  if (msg.size() > 300) msg = msg.substr(0, 300) + "...";  // URIs can be huge
   size_t at = msg.find("at line ");
   if (at != std::string::npos) {
     uint64_t line = std::strtoull(msg.c_str() + at + 8, nullptr, 10);
@@ -141,6 +213,7 @@ class Flattener {
         any_normals_ |= p.attributes.count("NORMAL") > 0;
         any_uvs_ |= p.attributes.count("TEXCOORD_0") > 0;
       }
+    check_expansion();
     for (const Instance& in : instances_)
       for (size_t p = 0; p < m_.meshes[in.mesh].primitives.size(); ++p) emit(in, p);
     if (out_.object_names.size() <= 1) out_.face_object.clear();
@@ -153,6 +226,43 @@ class Flattener {
   };
 
   static bool is_surface(int mode) { return mode >= 4 && mode <= 6; }
+
+  uint64_t accessor_count(int index) const {
+    return index >= 0 && size_t(index) < m_.accessors.size() ? m_.accessors[index].count : 0;
+  }
+
+  // Every node that references a mesh gets its own copy of the mesh (the PolyMesh has no
+  // instances), so a small file with many nodes on one big mesh expands without bound. The
+  // expansion is sized from the accessor counts before anything is copied and must fit the
+  // memory budget (slim::memory_budget(): half the machine's memory) and 2^32-1 vertices.
+  void check_expansion() const {
+    const uint64_t per_vertex = 12 + (any_normals_ ? 12 : 0) + (any_uvs_ ? 8 : 0);
+    uint64_t vertices = 0, indices = 0;
+    auto add = [](uint64_t& sum, uint64_t v) {
+      sum = v > UINT64_MAX / 64 - sum ? UINT64_MAX / 64 : sum + v;
+    };
+    for (const Instance& in : instances_)
+      for (const tinygltf::Primitive& p : m_.meshes[in.mesh].primitives) {
+        if (!is_surface(p.mode)) continue;
+        auto pos = p.attributes.find("POSITION");
+        const uint64_t nv = pos == p.attributes.end() ? 0 : accessor_count(pos->second);
+        add(vertices, nv);
+        const uint64_t ni = p.indices >= 0 ? accessor_count(p.indices) : nv;
+        add(indices, p.mode == TINYGLTF_MODE_TRIANGLES ? ni : 3 * ni);
+      }
+    // face_indices (4 bytes per index) + face_sizes and face_object (8 bytes per triangle).
+    const uint64_t bytes = vertices * per_vertex + indices * 4 + indices / 3 * 8;
+    const uint64_t budget = memory_budget();
+    const std::string what = std::to_string(instances_.size()) +
+                             " mesh instances (nodes referencing meshes) expand to " +
+                             std::to_string(vertices) + " vertices and " +
+                             std::to_string(indices / 3) + " triangles";
+    if (vertices > UINT32_MAX)
+      throw Error(src_ + ": " + what + "; expected at most 2^32-1 vertices in the flattened scene");
+    if (bytes > budget)
+      throw Error(src_ + ": " + what + ", about " + format_bytes(bytes) + "; expected at most " +
+                  format_bytes(budget) + " (half of this machine's memory)");
+  }
 
   [[noreturn]] void fail(const std::string& where, const std::string& what) const {
     throw Error(src_ + ": " + where + ": " + what);
@@ -523,23 +633,30 @@ PolyMesh read_gltf(const std::string& src, std::string_view data, bool binary,
   tinygltf::Model model;
   tinygltf::TinyGLTF loader;
   loader.SetImageLoader(bad_image_loader, nullptr);
-  loader.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath, &read_external_file,
+  loader.SetFsCallbacks({&external_file_exists, &tinygltf::ExpandFilePath, &read_external_file,
                          &tinygltf::WriteWholeFile, nullptr});
   std::string err, warn;
   bool ok = false;
   try {
     if (binary) {
       uint32_t length = check_glb(src, data);
+      check_json_depth(
+          src, data.substr(20, load_u32(reinterpret_cast<const uint8_t*>(data.data()) + 12)), true,
+          20);
       ok = loader.LoadBinaryFromMemory(&model, &err, &warn,
                                        reinterpret_cast<const unsigned char*>(data.data()), length,
                                        base_dir);
     } else {
       if (data.size() > UINT32_MAX) throw Error(src + ": glTF JSON larger than 4 GiB");
+      check_json_depth(src, data, false, 0);
       ok = loader.LoadASCIIFromString(&model, &err, &warn, data.data(),
                                       static_cast<unsigned int>(data.size()), base_dir);
     }
   } catch (const Error&) {
     throw;
+  } catch (const std::bad_alloc&) {
+    throw Error(src + ": out of memory while parsing the glTF JSON and buffers (" +
+                std::to_string(data.size()) + " bytes of file)");
   } catch (const std::exception& e) {
     throw_tinygltf(src, e.what(), binary);
   }

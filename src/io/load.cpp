@@ -58,7 +58,8 @@ PolyMesh load_file(const std::string& path) {
     throw Error(what.append("; ").append(kAccepted));
   }
 
-  const std::string data = detail::read_file(path);
+  const detail::FileBytes bytes = detail::read_file(path);
+  const std::string_view data = bytes.view();
   if (ext == ".obj") return detail::read_obj(path, data);
   if (ext == ".ply") return detail::read_ply(path, data);
   std::filesystem::path base_dir = std::filesystem::path(path).parent_path();

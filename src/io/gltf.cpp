@@ -214,6 +214,13 @@ class Flattener {
         any_uvs_ |= p.attributes.count("TEXCOORD_0") > 0;
       }
     check_expansion();
+    // Sized once: push_back's doubling would hold up to twice the scene (and copy it).
+    out_.positions.reserve(size_t(vertices_));
+    if (any_normals_) out_.normals.reserve(size_t(vertices_));
+    if (any_uvs_) out_.uvs.reserve(size_t(vertices_));
+    out_.face_indices.reserve(size_t(indices_));
+    out_.face_sizes.reserve(size_t(indices_ / 3));
+    out_.face_object.reserve(size_t(indices_ / 3));
     for (const Instance& in : instances_)
       for (size_t p = 0; p < m_.meshes[in.mesh].primitives.size(); ++p) emit(in, p);
     if (out_.object_names.size() <= 1) out_.face_object.clear();
@@ -235,9 +242,10 @@ class Flattener {
   // instances), so a small file with many nodes on one big mesh expands without bound. The
   // expansion is sized from the accessor counts before anything is copied and must fit the
   // memory budget (slim::memory_budget(): half the machine's memory) and 2^32-1 vertices.
-  void check_expansion() const {
+  void check_expansion() {
     const uint64_t per_vertex = 12 + (any_normals_ ? 12 : 0) + (any_uvs_ ? 8 : 0);
-    uint64_t vertices = 0, indices = 0;
+    uint64_t& vertices = vertices_;
+    uint64_t& indices = indices_;
     auto add = [](uint64_t& sum, uint64_t v) {
       sum = v > UINT64_MAX / 64 - sum ? UINT64_MAX / 64 : sum + v;
     };
@@ -624,6 +632,7 @@ class Flattener {
   PolyMesh& out_;
   std::vector<Instance> instances_;
   bool any_normals_ = false, any_uvs_ = false;
+  uint64_t vertices_ = 0, indices_ = 0;  // of the flattened scene (upper bounds for strips/fans)
 };
 
 }  // namespace

@@ -201,17 +201,19 @@ void check_corner(const std::string& src, uint64_t line, std::string_view corner
       throw_at_line(src, line,
                     std::string(kWhat[k]) + " index in face corner " + excerpt(corner) +
                         " is not an integer; expected v, v/t, v//n or v/t/n");
-    const std::string range = "; expected 1.." + std::to_string(defined[k]) + " or -" +
-                              std::to_string(defined[k]) + "..-1 (" + std::to_string(defined[k]) +
-                              " '" + kKeyword[k] + "' lines before this face)";
+    auto range = [&] {
+      return "; expected 1.." + std::to_string(defined[k]) + " or -" +
+             std::to_string(defined[k]) + "..-1 (" + std::to_string(defined[k]) + " '" +
+             kKeyword[k] + "' lines before this face)";
+    };
     if (value == 0 && !big)
       throw_at_line(src, line,
                     std::string(kWhat[k]) + " index 0 in face corner " + excerpt(corner) +
-                        " (OBJ indices start at 1)" + range);
+                        " (OBJ indices start at 1)" + range());
     if (big || value > defined[k])
       throw_at_line(src, line,
                     std::string(kWhat[k]) + " index " + (negative ? "-" : "") + excerpt(d) +
-                        " in face corner " + excerpt(corner) + " is out of range" + range);
+                        " in face corner " + excerpt(corner) + " is out of range" + range());
   }
 }
 

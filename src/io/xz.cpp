@@ -76,13 +76,14 @@ FileBytes decode(const std::string& source, Fill&& fill, uint64_t size_hint, uin
   for (;;) {
     if (s.avail_in == 0 && action == LZMA_RUN && !fill(s)) action = LZMA_FINISH;
     if (s.avail_out == 0) {
+      // Capacity goes up to limit + 1 so that an output of exactly `limit` bytes ends cleanly.
       const size_t used = A::capacity(out);
-      if (used >= limit)
+      if (used > limit)
         throw_at_byte(source, s.total_in,
                       "xz data decompresses to more than " + mib(limit) +
                           "; expected at most the memory limit (half of this machine's memory)");
       try {
-        A::reserve(out, size_t(std::min<uint64_t>(uint64_t(used) * 2, limit)));
+        A::reserve(out, size_t(std::min<uint64_t>(uint64_t(used) * 2, limit + 1)));
       } catch (const std::bad_alloc&) {
         throw_at_byte(source, s.total_in,
                       "out of memory while growing the decompression buffer beyond " + mib(used));
@@ -114,6 +115,10 @@ FileBytes decode(const std::string& source, Fill&& fill, uint64_t size_hint, uin
         throw_at_byte(source, s.total_in, "xz decoder error " + std::to_string(int(ret)));
     }
   }
+  if (s.total_out > limit)
+    throw_at_byte(source, s.total_in,
+                  "xz data decompresses to more than " + mib(limit) +
+                      "; expected at most the memory limit (half of this machine's memory)");
   A::set_size(out, size_t(s.total_out));
   return out;
 }

@@ -47,8 +47,7 @@ int main(int argc, char** argv) {
     std::string obj;
     for (int i = 0; i < depth; ++i) obj += "{\"a\":";
     put("gltf", "deep_object_" + std::to_string(depth) + ".gltf",
-        "{\"asset\":{\"version\":\"2.0\"},\"extras\":" + obj + "0" + std::string(depth, '}') +
-            "}");
+        "{\"asset\":{\"version\":\"2.0\"},\"extras\":" + obj + "0" + std::string(depth, '}') + "}");
   }
   const std::string tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
   put("obj", "index_2p32.obj", tri + "f 4294967297 4294967298 4294967299\n");

@@ -234,10 +234,6 @@ class Flattener {
 
   static bool is_surface(int mode) { return mode >= 4 && mode <= 6; }
 
-  uint64_t accessor_count(int index) const {
-    return index >= 0 && size_t(index) < m_.accessors.size() ? m_.accessors[index].count : 0;
-  }
-
   // Every node that references a mesh gets its own copy of the mesh (the PolyMesh has no
   // instances), so a small file with many nodes on one big mesh expands without bound. The
   // expansion is sized from the accessor counts before anything is copied and must fit the
@@ -252,10 +248,12 @@ class Flattener {
     for (const Instance& in : instances_)
       for (const tinygltf::Primitive& p : m_.meshes[in.mesh].primitives) {
         if (!is_surface(p.mode)) continue;
+        // The same range checks as read(), so a bad accessor is reported as such.
         auto pos = p.attributes.find("POSITION");
-        const uint64_t nv = pos == p.attributes.end() ? 0 : accessor_count(pos->second);
+        const uint64_t nv =
+            pos == p.attributes.end() ? 0 : locate(pos->second, 3, "POSITION", false).count;
         add(vertices, nv);
-        const uint64_t ni = p.indices >= 0 ? accessor_count(p.indices) : nv;
+        const uint64_t ni = p.indices >= 0 ? locate(p.indices, 1, "indices", true).count : nv;
         add(indices, p.mode == TINYGLTF_MODE_TRIANGLES ? ni : 3 * ni);
       }
     // face_indices (4 bytes per index) + face_sizes and face_object (8 bytes per triangle).
@@ -361,11 +359,17 @@ class Flattener {
     }
   }
 
-  // Reads accessor `index` as count x ncomp values of T (conv converts one component).
-  template <class T, class Conv>
-  std::vector<T> read(int index, int ncomp, const std::string& what, Conv conv,
-                      bool integer_only = false) const {
-    const std::string where = "accessors[" + std::to_string(index) + "] (" + what + ")";
+  // Where accessor `index` lies, every range checked (no allocation).
+  struct Located {
+    const uint8_t* base = nullptr;  // null: no bufferView (zeros)
+    size_t stride = 0, elem = 0, count = 0;
+    int ct = 0, csize = 0;
+    std::string where;
+  };
+  Located locate(int index, int ncomp, const std::string& what, bool integer_only) const {
+    Located L;
+    L.where = "accessors[" + std::to_string(index) + "] (" + what + ")";
+    const std::string& where = L.where;
     if (index < 0 || size_t(index) >= m_.accessors.size())
       fail(what, "accessor index " + std::to_string(index) + " out of range (" +
                      std::to_string(m_.accessors.size()) + " accessors)");
@@ -380,15 +384,14 @@ class Flattener {
       fail(where, "indices must be unsigned byte, short or int");
     const size_t elem = size_t(csize) * ncomp;
     const size_t count = a.count;
-    std::vector<T> out;
-    if (count == 0) return out;
+    L.ct = ct, L.csize = csize, L.elem = elem, L.count = count, L.stride = elem;
+    if (count == 0) return L;
 
-    const uint8_t* base = nullptr;
-    size_t stride = elem;
     if (a.bufferView >= 0) {
       std::string_view span = view(a.bufferView, where);
       const tinygltf::BufferView& bv = m_.bufferViews[a.bufferView];
-      if (bv.byteStride != 0) stride = bv.byteStride;
+      if (bv.byteStride != 0) L.stride = bv.byteStride;
+      const size_t stride = L.stride;
       if (stride < elem)
         fail(where, "byteStride " + std::to_string(stride) + " is smaller than an element (" +
                         std::to_string(elem) + " bytes)");
@@ -398,7 +401,7 @@ class Flattener {
                         std::to_string(a.byteOffset) + " do not fit in bufferViews[" +
                         std::to_string(a.bufferView) + "] (" + std::to_string(span.size()) +
                         " bytes)");
-      base = reinterpret_cast<const uint8_t*>(span.data()) + a.byteOffset;
+      L.base = reinterpret_cast<const uint8_t*>(span.data()) + a.byteOffset;
     } else if (a.bufferView < -1) {
       fail(where, "negative bufferView index");
     } else if (count > input_bytes_) {
@@ -406,6 +409,21 @@ class Flattener {
       // file size instead of allocating whatever the JSON claims.
       fail(where, "count " + std::to_string(count) + " without a bufferView exceeds the file size");
     }
+    return L;
+  }
+
+  // Reads accessor `index` as count x ncomp values of T (conv converts one component).
+  template <class T, class Conv>
+  std::vector<T> read(int index, int ncomp, const std::string& what, Conv conv,
+                      bool integer_only = false) const {
+    const Located L = locate(index, ncomp, what, integer_only);
+    const tinygltf::Accessor& a = m_.accessors[index];
+    const std::string& where = L.where;
+    const uint8_t* base = L.base;
+    const size_t stride = L.stride, elem = L.elem, count = L.count;
+    const int ct = L.ct, csize = L.csize;
+    std::vector<T> out;
+    if (count == 0) return out;
 
     out.assign(count * ncomp, T{});
     if (base)

@@ -156,13 +156,15 @@ void check_floats(const std::string& src, uint64_t line, std::string_view rest, 
   });
 }
 
-// Checks one face corner "v", "v/t", "v//n" or "v/t/n" against the counts of v, vt and vn lines
-// read so far (OBJ indices: 1..N, or -N..-1 counting back from the last one). tinyobjloader reads
-// them into int, so 4294967297 would wrap around to 1.
-void check_corner(const std::string& src, uint64_t line, std::string_view corner,
-                  const uint64_t defined[3]) {
+// Checks one face corner "v", "v/t", "v//n" or "v/t/n" of face line `text` against the counts of
+// v, vt and vn lines read so far (OBJ indices: 1..N, or -N..-1 counting back from the last one).
+// tinyobjloader reads them into int, so 4294967297 would wrap around to 1.
+void check_corner(const std::string& src, uint64_t line, std::string_view text,
+                  std::string_view corner, const uint64_t defined[3]) {
   static const char* const kWhat[3] = {"vertex", "texture", "normal"};
   static const char* const kKeyword[3] = {"v", "vt", "vn"};
+  static const char* const kForms =
+      "; expected vertex references v, v/t, v//n or v/t/n with nonzero integers";
   std::string_view part[3];
   int parts = 0;
   size_t b = 0;
@@ -170,8 +172,8 @@ void check_corner(const std::string& src, uint64_t line, std::string_view corner
     if (i == corner.size() || corner[i] == '/') {
       if (parts == 3)
         throw_at_line(src, line,
-                      "face corner " + excerpt(corner) +
-                          " has more than 3 parts; expected v, v/t, v//n or v/t/n");
+                      "corner " + excerpt(corner) + " has more than 3 parts in face " +
+                          excerpt(text) + kForms);
       part[parts++] = corner.substr(b, i - b);
       b = i + 1;
     }
@@ -181,9 +183,8 @@ void check_corner(const std::string& src, uint64_t line, std::string_view corner
       if (k == 1 && parts == 3) continue;  // v//n
       throw_at_line(
           src, line,
-          "face corner " + excerpt(corner) + " has an empty index; expected v, v/t, v//n or v/t/n");
+          "corner " + excerpt(corner) + " has an empty index in face " + excerpt(text) + kForms);
     }
-    const bool negative = d[0] == '-';
     if (d[0] == '-' || d[0] == '+') d.remove_prefix(1);
     uint64_t value = 0;
     bool digits = !d.empty(), big = false;
@@ -199,21 +200,15 @@ void check_corner(const std::string& src, uint64_t line, std::string_view corner
     }
     if (!digits)
       throw_at_line(src, line,
-                    std::string(kWhat[k]) + " index in face corner " + excerpt(corner) +
-                        " is not an integer; expected v, v/t, v//n or v/t/n");
-    auto range = [&] {
-      return "; expected 1.." + std::to_string(defined[k]) + " or -" +
-             std::to_string(defined[k]) + "..-1 (" + std::to_string(defined[k]) + " '" +
-             kKeyword[k] + "' lines before this face)";
-    };
-    if (value == 0 && !big)
+                    std::string(kWhat[k]) + " index " + excerpt(part[k]) +
+                        " is not an integer in face " + excerpt(text) + kForms);
+    if (big || value == 0 || value > defined[k])
       throw_at_line(src, line,
-                    std::string(kWhat[k]) + " index 0 in face corner " + excerpt(corner) +
-                        " (OBJ indices start at 1)" + range());
-    if (big || value > defined[k])
-      throw_at_line(src, line,
-                    std::string(kWhat[k]) + " index " + (negative ? "-" : "") + excerpt(d) +
-                        " in face corner " + excerpt(corner) + " is out of range" + range());
+                    std::string(kWhat[k]) + " index out of range: " + excerpt(part[k]) +
+                        " in face " + excerpt(text) + "; expected a nonzero index from 1 to " +
+                        std::to_string(defined[k]) + " or from -" + std::to_string(defined[k]) +
+                        " to -1 (" + std::to_string(defined[k]) + " '" + kKeyword[k] +
+                        "' lines before this face)");
   }
 }
 
@@ -271,7 +266,8 @@ PolyMesh read_obj(const std::string& src, std::string_view data) {
     int64_t n = face_corners(text);
     if (n < 0) return true;
     statement(text, 'f', rest);
-    for_each_token(rest, [&](int64_t, std::string_view t) { check_corner(src, line, t, defined); });
+    for_each_token(rest,
+                   [&](int64_t, std::string_view t) { check_corner(src, line, text, t, defined); });
     if (n < 3)
       throw_at_line(src, line, "face has " + std::to_string(n) + " vertices; expected at least 3");
     if (n > int64_t(UINT32_MAX)) throw_at_line(src, line, "face has too many vertices");

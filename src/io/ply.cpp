@@ -15,6 +15,7 @@
 #include <cfloat>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
@@ -133,6 +134,12 @@ bool parse_u64(std::string_view s, uint64_t& v) {
   if (s.empty()) return false;
   auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
   return ec == std::errc() && p == s.data() + s.size();
+}
+
+std::string shortest(double d) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.17g", d);
+  return buf;
 }
 
 std::string quoted(std::string_view s) {
@@ -352,7 +359,7 @@ class BinaryBody {
   float to_float(double d, const Prop& p) const {
     if (std::isfinite(d) && std::fabs(d) > double(FLT_MAX))
       throw_at_byte(src_, pos_,
-                    "vertex property '" + p.name + "' is " + std::to_string(d).substr(0, 40) +
+                    "vertex property '" + p.name + "' is " + shortest(d) +
                         ", which overflows float; expected a magnitude of at most 3.4e38");
     return float(d);
   }

@@ -9,11 +9,11 @@
 
 #include <algorithm>
 #include <cerrno>
-#include <cstring>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <functional>
 #include <memory>
@@ -696,12 +696,12 @@ static bool run_gnuplot(const std::string& script, const std::string& png_path, 
       std::remove(log.c_str());
       if (status != 0) {
         std::string what =
-            status == -1                ? std::string("could not wait for gnuplot")
-            : WIFEXITED(status)         ? "gnuplot exited with code " +
-                                              std::to_string(WEXITSTATUS(status)) + ", expected 0"
-            : WIFSIGNALED(status)       ? "gnuplot was killed by signal " +
-                                              std::to_string(WTERMSIG(status))
-                                        : "gnuplot failed";
+            status == -1 ? std::string("could not wait for gnuplot")
+            : WIFEXITED(status)
+                ? "gnuplot exited with code " + std::to_string(WEXITSTATUS(status)) + ", expected 0"
+            : WIFSIGNALED(status)
+                ? "gnuplot was killed by signal " + std::to_string(WTERMSIG(status))
+                : "gnuplot failed";
         throw Error(what + (said.empty() ? std::string() : ": " + said));
       }
     });

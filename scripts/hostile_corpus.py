@@ -49,8 +49,9 @@ def cases(out, big):
     n = 10 ** 6
     c = []
 
-    def add(klass, args, code, msg, fsize=None, absent=None):
-        c.append(dict(klass=klass, args=args, code=code, msg=msg, fsize=fsize, absent=absent))
+    def add(klass, args, code, msg, fsize=None, absent=None, vmem=None):
+        c.append(dict(klass=klass, args=args, code=code, msg=msg, fsize=fsize, absent=absent,
+                      vmem=vmem))
 
     # 1. depth
     p = write(out, "deep_array.gltf", gltf('"extras":' + "[" * n + "]" * n))
@@ -118,6 +119,12 @@ def cases(out, big):
         ["render", "terrain:8", "--res", "65536x65536", "-o", os.path.join(out, "huge.png")], 1,
         "4294967296 pixels need about")
 
+    # 6. out of memory: the step and the scene, not "std::bad_alloc"
+    add("render terrain:2048 in 1.5 GB of address space",
+        ["render", "terrain:2048", "--res", "64x64", "--threads", "1", "-o",
+         os.path.join(out, "oom.png")], 1, "out of memory while building terrain:2048",
+        vmem=1500000 * 1024)
+
     # 5. verify far from the origin
     for radius in (1e3, 1e9):
         o = 4e6
@@ -158,6 +165,8 @@ def run(cli, case):
     def limits():
         if case["fsize"]:
             resource.setrlimit(resource.RLIMIT_FSIZE, (case["fsize"], case["fsize"]))
+        if case["vmem"]:
+            resource.setrlimit(resource.RLIMIT_AS, (case["vmem"], case["vmem"]))
 
     t0 = time.monotonic()
     proc = subprocess.Popen([cli] + case["args"], stdout=subprocess.PIPE,

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_runner.h"
 #include "io/gltf.h"
 #include "io/obj.h"
 #include "io/ply.h"
@@ -356,6 +357,50 @@ TEST(RobustHostile, BufferSizingOptionsHaveLimits) {
   EXPECT_NE(r.err.find("--res 65536x65536: 4294967296 pixels need about"), std::string::npos)
       << r.err;
   EXPECT_TRUE(d.names().empty());
+}
+
+// ---- 6. std::bad_alloc never the whole message ----
+
+TEST(RobustHostile, OutOfMemoryNamesTheStepAndTheScene) {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  GTEST_SKIP() << "an address space limit breaks the sanitizers' shadow memory";
+#endif
+  TempDir d;
+  // 1.5 GB of address space: terrain:2048 loads, its build runs out.
+  const Cli r = run_cli("render terrain:2048 --res 64x64 --threads 1 -o " + d.path("t.png"),
+                        "ulimit -v 1500000;");
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_NE(r.err.find("out of memory while building terrain:2048 as bvh8-tri4v"),
+            std::string::npos)
+      << r.err;
+  EXPECT_TRUE(d.names().empty());
+}
+
+TEST(RobustHostile, GnuplotFailureSaysWhatGnuplotSaid) {
+  TempDir d;
+  // A stand-in gnuplot that answers --version and then fails like a bad script.
+  d.write("gnuplot",
+          "#!/bin/sh\n[ \"$1\" = --version ] && exit 0\ncat >/dev/null\n"
+          "echo 'line 3: undefined variable: foo' >&2\nexit 3\n");
+  fs::permissions(d.path("gnuplot"), fs::perms::owner_all);
+  const std::string old_path = std::getenv("PATH") ? std::getenv("PATH") : "";
+  setenv("PATH", (d.path("") + ":" + old_path).c_str(), 1);
+  bench::BenchReport report;
+  bench::BenchRow row;
+  row.scene = "s";
+  row.config = "bvh8-tri4v";
+  row.bytes_per_triangle = 40.0;
+  row.mrays_diffuse = 10.0;
+  report.rows.push_back(row);
+  std::string why;
+  const bool ok = bench::write_plot(report, d.path("plot.png"), &why);
+  setenv("PATH", old_path.c_str(), 1);
+  EXPECT_FALSE(ok);
+  EXPECT_NE(why.find("gnuplot exited with code 3, expected 0: line 3: undefined variable: foo"),
+            std::string::npos)
+      << why;
+  EXPECT_EQ(why.find("256"), std::string::npos) << why;
+  EXPECT_EQ(d.names(), std::vector<std::string>{"gnuplot"});  // no plot, no temporary file
 }
 
 // ---- 5. verify far from the origin ----

@@ -86,6 +86,15 @@ def cases(out, big):
               + "0 0 0\n1 0 0\n0 1 0\n4294967295 0 1 2\n")
     add("PLY list count 2^32-1", ["info", p], 1, "list count 4294967295")
 
+    b36 = "data:application/octet-stream;base64," + "A" * 48
+    geo = ('"buffers":[{"byteLength":36,"uri":"%s"}],"bufferViews":[{"buffer":0,"byteLength":36}],'
+           '"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3"}],'
+           '"meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],' % b36)
+    p = write(out, "mesh_2p32.gltf", gltf(geo + '"nodes":[{"mesh":4294967296}]'))
+    add("glTF node mesh index 2^32", ["info", p], 1, "expected an integer from 0 to 2147483647")
+    p = write(out, "mesh_1e10.gltf", gltf(geo + '"nodes":[{"mesh":1e10}]'))
+    add("glTF node mesh index 1e10", ["info", p], 1, "expected an integer from 0 to 2147483647")
+
     # 3. outputs
     add("render -o into a missing folder (scene missing too)",
         ["render", os.path.join(out, "missing.obj"), "-o", os.path.join(out, "nodir", "x.png")],

@@ -216,6 +216,27 @@ TEST(RobustHostile, FloatOverflowIsAnErrorNamingTheLine) {
   EXPECT_NE(msg.find("overflows float"), std::string::npos) << msg;
 }
 
+TEST(RobustHostile, GltfIntPropertiesBeyondIntAreErrorsNotWrapped) {
+  const std::string head =
+      "{\"asset\":{\"version\":\"2.0\"},\"buffers\":[{\"byteLength\":36,\"uri\":"
+      "\"data:application/octet-stream;base64," +
+      std::string(48, 'A') +
+      "\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":36}],\"accessors\":[{"
+      "\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"}],"
+      "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":";
+  const std::string ok = head + "0}}]}],\"nodes\":[{\"mesh\":0,\"extras\":{\"mesh\":1e10}}]}";
+  EXPECT_EQ(error_of([&] { detail::read_gltf("ok.gltf", ok, false, "."); }), "");
+  for (const std::string& bad :
+       {head + "0}}]}],\"nodes\":[{\"mesh\":4294967296}]}",
+        head + "0}}]}],\"nodes\":[{\"mesh\":1e10}]}",
+        head + "4294967296}}]}],\"nodes\":[{\"mesh\":0}]}",
+        head + "0}}]}],\"nodes\":[{\"children\":[1,4294967297]},{\"mesh\":0}]}"}) {
+    const std::string msg = error_of([&] { detail::read_gltf("w.gltf", bad, false, "."); });
+    EXPECT_NE(msg.find("w.gltf:1: "), std::string::npos) << msg;
+    EXPECT_NE(msg.find("expected an integer from 0 to 2147483647"), std::string::npos) << msg;
+  }
+}
+
 // ---- 3. outputs complete or absent ----
 
 TEST(RobustHostile, AtomicWriteReplacesWholeFilesAndLeavesNoTemporary) {

@@ -15,10 +15,13 @@
 
 #include <algorithm>
 #include <bit>
+#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <string_view>
+#include <vector>
 
 #include "slimrt/error.h"
 #include "slimrt/output.h"
@@ -131,43 +134,95 @@ uint32_t check_glb(const std::string& src, std::string_view data) {
 // levels on an 8 MiB stack) overflows the call stack; real glTF files nest a few tens of levels.
 constexpr uint32_t kMaxJsonDepth = 1000;
 
-// Checks the nesting depth of JSON text without recursion, before the recursive parser sees it:
-// one pass over the bytes that skips strings (with their escapes) and counts [ { against ] }.
-// `first_byte` is the offset of `json` in the file, for the message.
-void check_json_depth(const std::string& src, std::string_view json, bool binary,
-                      uint64_t first_byte) {
-  uint32_t depth = 0;
+// glTF properties that tinygltf reads into an int (glTF 2.0: indices and enums). Its reader
+// converts a larger number by wrapping (a node's "mesh": 4294967296 became mesh 0) and skips a
+// non-integer one ("mesh": 1e10 dropped the mesh without a word), so these are checked first.
+bool is_int_property(std::string_view key) {
+  static constexpr std::string_view kKeys[] = {
+      "mesh",    "scene",         "nodes", "children", "buffer", "bufferView", "byteStride",
+      "indices", "componentType", "mode",  "material", "skin",   "camera",     "target"};
+  for (std::string_view k : kKeys)
+    if (k == key) return true;
+  return false;
+}
+
+// One pass over JSON text, without recursion, before the recursive parser sees it: checks the
+// nesting depth (kMaxJsonDepth) and that the glTF int properties (is_int_property, and the values
+// of "attributes" and morph "targets") are integers in the int range. Strings are skipped with
+// their escapes; "extras" and "extensions" are not looked into (user data). `first_byte` is the
+// offset of `json` in the file, for the message.
+void check_json(const std::string& src, std::string_view json, bool binary, uint64_t first_byte) {
+  struct Frame {
+    bool object;
+    bool int_values;  // values of this object (attributes) or items of this array are ints
+    bool skip;        // inside extras/extensions
+    std::string key;  // the key this container is the value of
+  };
+  std::vector<Frame> stack;
+  std::string key;  // last key read in the innermost object
+  bool expect_key = false;
   uint64_t line = 1;
-  bool in_string = false, escaped = false;
+  auto fail = [&](size_t i, const std::string& what) {
+    if (binary) throw_at_byte(src, first_byte + i, what);
+    throw_at_line(src, line, what);
+  };
   for (size_t i = 0; i < json.size(); ++i) {
     const char c = json[i];
-    if (c == '\n') ++line;
-    if (in_string) {
-      if (escaped)
-        escaped = false;
-      else if (c == '\\')
-        escaped = true;
-      else if (c == '"')
-        in_string = false;
-      continue;
-    }
-    if (c == '"') {
-      in_string = true;
-    } else if (c == '[' || c == '{') {
-      if (++depth > kMaxJsonDepth) {
-        const std::string what = "JSON nests arrays/objects more than " +
-                                 std::to_string(kMaxJsonDepth) + " levels deep; expected at most " +
-                                 std::to_string(kMaxJsonDepth);
-        if (binary) throw_at_byte(src, first_byte + i, what);
-        throw_at_line(src, line, what);
+    if (c == '\n') {
+      ++line;
+    } else if (c == '"') {
+      const size_t start = ++i;
+      for (; i < json.size() && json[i] != '"'; ++i) {
+        if (json[i] == '\\')
+          ++i;
+        else if (json[i] == '\n')
+          ++line;
       }
-    } else if ((c == ']' || c == '}') && depth > 0) {
-      --depth;
+      if (expect_key && !stack.empty() && stack.back().object) {
+        key.assign(json.substr(start, std::min<size_t>(i - start, 64)));
+        expect_key = false;
+      }
+    } else if (c == ',') {
+      expect_key = !stack.empty() && stack.back().object;
+    } else if (c == '[' || c == '{') {
+      if (stack.size() >= kMaxJsonDepth)
+        fail(i, "JSON nests arrays/objects more than " + std::to_string(kMaxJsonDepth) +
+                    " levels deep; expected at most " + std::to_string(kMaxJsonDepth));
+      Frame f{c == '{', false, false, {}};
+      if (!stack.empty()) {
+        const Frame& top = stack.back();
+        f.key = top.object ? key : top.key;
+        f.skip = top.skip || (top.object && (key == "extras" || key == "extensions"));
+      }
+      f.int_values =
+          f.key == "attributes" || f.key == "targets" || (!f.object && is_int_property(f.key));
+      stack.push_back(std::move(f));
+      expect_key = c == '{';
+    } else if (c == ']' || c == '}') {
+      if (!stack.empty()) stack.pop_back();
+      expect_key = false;
+    } else if (c == '-' || (c >= '0' && c <= '9')) {
+      size_t j = i;
+      while (j < json.size() &&
+             std::string_view("+-.0123456789eE").find(json[j]) != std::string_view::npos)
+        ++j;
+      const std::string_view number = json.substr(i, j - i);
+      i = j - 1;
+      if (stack.empty() || stack.back().skip) continue;
+      const Frame& top = stack.back();
+      const bool checked = top.object ? (top.int_values || is_int_property(key)) : top.int_values;
+      if (!checked) continue;
+      const std::string name = top.object ? key : top.key;
+      int64_t v = 0;
+      auto [end, ec] = std::from_chars(number.data(), number.data() + number.size(), v);
+      if (ec != std::errc() || end != number.data() + number.size() || v < INT32_MIN ||
+          v > INT32_MAX)
+        fail(i, "\"" + name + "\" is " + std::string(number.substr(0, 40)) +
+                    "; expected an integer from 0 to 2147483647 (a glTF index or enum)");
     }
   }
 }
 
-// Turns a tinygltf error into slim::Error. nlohmann reports "... at line L, column C: ...".
 // tinygltf messages that quote a whole data: URI or state the wrong rule are replaced by what was
 // expected and what was found.
 std::string explain_tinygltf(const std::string& line) {
@@ -667,15 +722,14 @@ PolyMesh read_gltf(const std::string& src, std::string_view data, bool binary,
   try {
     if (binary) {
       uint32_t length = check_glb(src, data);
-      check_json_depth(
-          src, data.substr(20, load_u32(reinterpret_cast<const uint8_t*>(data.data()) + 12)), true,
-          20);
+      check_json(src, data.substr(20, load_u32(reinterpret_cast<const uint8_t*>(data.data()) + 12)),
+                 true, 20);
       ok = loader.LoadBinaryFromMemory(&model, &err, &warn,
                                        reinterpret_cast<const unsigned char*>(data.data()), length,
                                        base_dir);
     } else {
       if (data.size() > UINT32_MAX) throw Error(src + ": glTF JSON larger than 4 GiB");
-      check_json_depth(src, data, false, 0);
+      check_json(src, data, false, 0);
       ok = loader.LoadASCIIFromString(&model, &err, &warn, data.data(),
                                       static_cast<unsigned int>(data.size()), base_dir);
     }

@@ -141,8 +141,8 @@ int cmd_render(int argc, char** argv) {
       "%s: %llu faces, %llu triangles | load %.3f s | build %.3f s (%s) | render %.3f s "
       "(%dx%d, %d spp, %s) | %.2f MRays/s%s | %s\n",
       scene_name.c_str(), (unsigned long long)faces, (unsigned long long)triangles, load_s, build_s,
-      config.c_str(), render_s, ropt.width, ropt.height, ropt.spp, shade.c_str(), mrays, "",
-      output.c_str());
+      config.c_str(), render_s, ropt.width, ropt.height, ropt.spp, shade.c_str(), mrays,
+      "", output.c_str());
   return 0;
 }
 

@@ -12,10 +12,7 @@
 //
 // Tolerances, in scene units along the ray (t * |dir|):
 //   lossless formats: 1e-5 * (distance to the reference hit) + 1e-6 * (box diagonal) (rounding:
-//     two formats may hit the two triangles of a shared edge, whose t differ in the last bits)
-//     + 4 * FLT_EPSILON * (largest |coordinate|) (the vertices are translated to the ray origin
-//     in float, rounded at the spacing of the coordinates: far from the origin that spacing
-//     exceeds the other terms);
+//     two formats may hit the two triangles of a shared edge, whose t differ in the last bits);
 //   lossy formats (lossy-grid*, costa-*V*): that plus e / max(|cos theta|, 0.05), where e bounds
 //     the distance of every decoded vertex from its input vertex and theta is the angle between
 //     the ray and the input surface normal at t_ref. Each decoded triangle is the convex hull of
@@ -44,7 +41,6 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <atomic>
-#include <cfloat>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -410,13 +406,6 @@ int cmd_verify(int argc, char** argv) {
                         [&] { arena.execute([&] { ref = Scene::build(mesh, ref_opt); }); });
   const Box3f box = mesh.bounds();
   const double diag = length(box.size());
-  // Triangles are intersected with their vertices translated to the ray origin (watertight
-  // test), rounded at the spacing of the coordinates: two formats hitting the two triangles of
-  // an edge may differ by a few of those spacings far from the origin.
-  const double coord_round =
-      4.0 * double(FLT_EPSILON) *
-      double(std::max({std::fabs(box.lo.x), std::fabs(box.lo.y), std::fabs(box.lo.z),
-                       std::fabs(box.hi.x), std::fabs(box.hi.y), std::fabs(box.hi.z)}));
   uint64_t tried = 0;
   std::vector<Vec3f> inside;
   arena.execute([&] { inside = inside_points(ref, box, 4096, uint32_t(seed), tried); });
@@ -566,7 +555,7 @@ int cmd_verify(int argc, char** argv) {
           const float tr = (*tref)[i];
           if (h.valid() && std::isfinite(tr)) {
             const double excess = (double(h.t) - double(tr)) * len;
-            const double tol = 1e-5 * double(tr) * len + 1e-6 * diag + coord_round +
+            const double tol = 1e-5 * double(tr) * len + 1e-6 * diag +
                                (bound_is_hard ? e / std::max(double(cos_ref[i]), 0.05) : 0.0);
             c.max_excess = std::max(c.max_excess, std::fabs(excess));
             if (excess > tol) c.far++, bad = true;
@@ -575,7 +564,7 @@ int cmd_verify(int argc, char** argv) {
           if (lossy && h.valid() && std::isfinite(t_ref[i])) {
             const double dev = std::fabs(double(h.t) - double(t_ref[i])) * len;
             c.max_input_dev = std::max(c.max_input_dev, dev);
-            if (dev > 1e-5 * double(t_ref[i]) * len + 1e-6 * diag + coord_round +
+            if (dev > 1e-5 * double(t_ref[i]) * len + 1e-6 * diag +
                           e / std::max(double(cos_ref[i]), 0.05))
               c.beyond_bound++, c.beyond_random += i % 3 == 0;
           }

@@ -47,7 +47,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "slimrt: error: %s\n", e.what());
     return 1;
   } catch (const std::bad_alloc&) {
-    // The commands wrap their phases with context (slim::cli::out_of_memory); this is the rest.
+    // The commands wrap their phases with context (slim::cli::out_of_memory_context); this is the
+    // rest.
     std::fprintf(stderr, "slimrt: error: out of memory in 'slimrt %s' (std::bad_alloc)\n",
                  cmd.c_str());
     return 1;

@@ -60,7 +60,13 @@ for t in "${targets[@]}"; do
   rc=0
   # -timeout: seconds per input before it counts as a hang; -rss_limit_mb: runaway allocations
   # (a header claiming 2^40 elements must be refused, not allocated) count as failures too.
-  "$bin" -max_total_time="$SECS" -timeout=10 -rss_limit_mb=2048 -max_len=16384 \
+  # Dictionaries (fuzz/dict/): tokens for deep nesting and numbers beyond their types.
+  dict=()
+  case $t in
+    obj | ply | gltf) dict=(-dict="fuzz/dict/$t.dict") ;;
+    glb) dict=(-dict=fuzz/dict/gltf.dict) ;;
+  esac
+  "$bin" "${dict[@]}" -max_total_time="$SECS" -timeout=10 -rss_limit_mb=2048 -max_len=16384 \
     -print_final_stats=1 -artifact_prefix="$OUT/crashes/$t/" \
     "$OUT/corpus/$t" "$OUT/seeds/$t" >"$log" 2>&1 || rc=$?
   execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || echo 0)

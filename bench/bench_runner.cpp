@@ -5,11 +5,15 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <sys/wait.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <functional>
 #include <memory>
@@ -18,6 +22,7 @@
 
 #include "embree_scene.h"
 #include "slimrt/analysis.h"
+#include "slimrt/output.h"
 
 namespace slim::bench {
 
@@ -654,6 +659,52 @@ std::string report_markdown(const BenchReport& report) {
   return o.str();
 }
 
+// Runs gnuplot on `script` (whose "set output" names SLIM_PLOT_OUTPUT) through write_atomically:
+// the PNG appears complete or not at all. gnuplot's own error lines are kept for the message.
+static bool run_gnuplot(const std::string& script, const std::string& png_path, std::string* why) {
+  try {
+    write_atomically(png_path, [&](const std::string& tmp) {
+      std::string quoted = "'";
+      for (char c : tmp) quoted += c == '\'' ? std::string("''") : std::string(1, c);
+      quoted += "'";
+      std::string full = script;
+      const std::string marker = "SLIM_PLOT_OUTPUT";
+      if (const size_t at = full.find(marker); at != std::string::npos)
+        full.replace(at, marker.size(), quoted);
+      const std::string log = tmp + ".log";
+      FILE* pipe = popen(("gnuplot 2> '" + log + "'").c_str(), "w");
+      if (!pipe) throw Error("could not start gnuplot: " + std::string(std::strerror(errno)));
+      std::fwrite(full.data(), 1, full.size(), pipe);
+      const int status = pclose(pipe);
+      std::string said;
+      if (FILE* f = std::fopen(log.c_str(), "r")) {
+        char line[512];
+        while (std::fgets(line, sizeof line, f)) {
+          std::string l(line);
+          while (!l.empty() && (l.back() == '\n' || l.back() == ' ')) l.pop_back();
+          if (!l.empty()) said = l;  // the last non-empty line holds gnuplot's error
+        }
+        std::fclose(f);
+      }
+      std::remove(log.c_str());
+      if (status != 0) {
+        std::string what =
+            status == -1 ? std::string("could not wait for gnuplot")
+            : WIFEXITED(status)
+                ? "gnuplot exited with code " + std::to_string(WEXITSTATUS(status)) + ", expected 0"
+            : WIFSIGNALED(status)
+                ? "gnuplot was killed by signal " + std::to_string(WTERMSIG(status))
+                : "gnuplot failed";
+        throw Error(what + (said.empty() ? std::string() : ": " + said));
+      }
+    });
+  } catch (const Error& e) {
+    if (why) *why = e.what();
+    return false;
+  }
+  return true;
+}
+
 bool write_plot(const BenchReport& report, const std::string& png_path, std::string* why) {
   auto fail = [&](const std::string& msg) {
     if (why) *why = msg;
@@ -682,7 +733,7 @@ bool write_plot(const BenchReport& report, const std::string& png_path, std::str
     << "} else {\n"
     << "  set terminal png size 960," << panel_h * int(scenes.size()) << "\n"
     << "}\n"
-    << "set output " << quote(png_path) << "\n"
+    << "set output SLIM_PLOT_OUTPUT\n"
     << "set multiplot layout " << scenes.size() << ",1\n"
     << "set logscale x\nset grid\nset key top right\n"
     << "set xlabel 'memory: bytes per input triangle (log scale)'\n"
@@ -718,13 +769,7 @@ bool write_plot(const BenchReport& report, const std::string& png_path, std::str
   }
   g << "unset multiplot\n";
 
-  FILE* pipe = popen("gnuplot", "w");
-  if (!pipe) return fail("could not start gnuplot");
-  const std::string script = g.str();
-  std::fwrite(script.data(), 1, script.size(), pipe);
-  const int status = pclose(pipe);
-  if (status != 0) return fail("gnuplot failed (exit status " + std::to_string(status) + ")");
-  return true;
+  return run_gnuplot(g.str(), png_path, why);
 }
 
 }  // namespace slim::bench

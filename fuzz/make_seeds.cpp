@@ -33,6 +33,30 @@ int main(int argc, char** argv) {
       ++n;
     }
   }
+  // Hostile seeds (issue 24): nesting just past the JSON depth limit (1000) and far past it
+  // within -max_len, indices beyond 2^32 and floats beyond float's range.
+  auto put = [&](const std::string& target, const std::string& name, const std::string& bytes) {
+    fs::create_directories(out / target);
+    std::ofstream(out / target / name, std::ios::binary) << bytes;
+    ++n;
+  };
+  for (int depth : {999, 1001, 7000}) {
+    put("gltf", "deep_array_" + std::to_string(depth) + ".gltf",
+        "{\"asset\":{\"version\":\"2.0\"},\"extras\":" + std::string(depth, '[') +
+            std::string(depth, ']') + "}");
+    std::string obj;
+    for (int i = 0; i < depth; ++i) obj += "{\"a\":";
+    put("gltf", "deep_object_" + std::to_string(depth) + ".gltf",
+        "{\"asset\":{\"version\":\"2.0\"},\"extras\":" + obj + "0" + std::string(depth, '}') + "}");
+  }
+  const std::string tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+  put("obj", "index_2p32.obj", tri + "f 4294967297 4294967298 4294967299\n");
+  put("obj", "index_2p31.obj", tri + "f 2147483648 -2147483649 1\n");
+  put("obj", "float_1e39.obj", "v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n");
+  put("ply", "double_1e300.ply",
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\n"
+      "property double z\nelement face 1\nproperty list uint uint vertex_indices\nend_header\n"
+      "0 0 0\n1e300 0 0\n0 1 0\n3 0 1 4294967295\n");
   std::printf("make_seeds: %d files in %s\n", n, out.c_str());
   return 0;
 }

@@ -6,13 +6,13 @@
 // configuration under 99.9% hit agreement, a build failure, a non-deterministic run).
 #include <CLI/CLI.hpp>
 #include <cstdio>
-#include <fstream>
 #include <string>
 #include <vector>
 
 #include "bench_runner.h"
 #include "commands.h"
 #include "slimrt/analysis.h"
+#include "slimrt/output.h"
 
 namespace slim::cli {
 
@@ -46,15 +46,15 @@ int cmd_bench(int argc, char** argv) {
     return app.exit(e);
   }
   for (const std::string& c : opt.configs) bench::check_config_name(c);  // before any work
+  if (!json_path.empty()) check_output_path(json_path);
+  if (!plot_path.empty()) check_output_path(plot_path);
 
   const bench::BenchReport report = bench::run_bench(opt);
   std::fputs(bench::report_markdown(report).c_str(), stdout);
   std::fflush(stdout);
 
   if (!json_path.empty()) {
-    std::ofstream out(json_path);
-    out << bench::report_json(report).dump(1) << "\n";
-    if (!out) throw Error(json_path + ": cannot write the JSON output");
+    write_file_atomically(json_path, bench::report_json(report).dump(1) + "\n");
   }
   if (!plot_path.empty()) {
     std::string why;

@@ -21,6 +21,7 @@
 #include "commands.h"
 #include "progress.h"
 #include "slimrt/analysis.h"
+#include "slimrt/output.h"
 
 namespace slim::cli {
 
@@ -157,6 +158,21 @@ int cmd_render(int argc, char** argv) {
 
   RenderOptions ropt;
   if (!parse_resolution(res, ropt.width, ropt.height)) return 2;  // already checked by CLI11
+  // Before the load, build and render: a typo in -o or a huge --res must not cost that work.
+  check_output_path(output);
+  {
+    // The float image (12 bytes per pixel), its 8-bit copy and the encoded file: about 24 bytes
+    // per pixel at the peak of write_image.
+    constexpr uint64_t kBytesPerPixel = 24;
+    const uint64_t pixels = uint64_t(ropt.width) * uint64_t(ropt.height);
+    const uint64_t budget = memory_budget();
+    if (pixels * kBytesPerPixel > budget)
+      throw Error("--res " + res + ": " + std::to_string(pixels) + " pixels need about " +
+                  format_bytes(pixels * kBytesPerPixel) + " (" + std::to_string(kBytesPerPixel) +
+                  " bytes per pixel); expected at most " + std::to_string(budget / kBytesPerPixel) +
+                  " pixels, the memory limit being " + format_bytes(budget) +
+                  " (half of this machine's memory)");
+  }
   ropt.spp = spp;
   ropt.max_bounces = bounces;
   ropt.threads = threads;
@@ -194,7 +210,8 @@ int cmd_render(int argc, char** argv) {
   {
     StepProgress p(show_progress, "build " + config + " (" +
                                       std::to_string(mesh.fan_triangle_count()) + " triangles)");
-    scene = Scene::build(mesh, bopt);
+    scene = out_of_memory_context("building " + scene_name + " as " + config,
+                                  [&] { return Scene::build(mesh, bopt); });
   }
   double build_s = seconds_since(t0);
   uint64_t faces = mesh.face_count(), triangles = mesh.fan_triangle_count();
@@ -203,7 +220,8 @@ int cmd_render(int argc, char** argv) {
   Camera cam = view_camera(scene.bounds(), view, ropt.width, ropt.height);
   t0 = std::chrono::steady_clock::now();
   RenderStats rstats;
-  Image img = render(scene, cam, ropt, &rstats);
+  Image img = out_of_memory_context("rendering " + scene_name + " at " + res,
+                                    [&] { return render(scene, cam, ropt, &rstats); });
   double render_s = seconds_since(t0);
   write_image(img, output);
 

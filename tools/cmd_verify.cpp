@@ -50,6 +50,7 @@
 
 #include "commands.h"
 #include "slimrt/analysis.h"
+#include "slimrt/output.h"
 
 namespace slim::cli {
 
@@ -206,11 +207,18 @@ struct RaySource {
       target =
           targets->midpoints[(i / 3 + uint64_t(rng.next()) * 7919) % targets->midpoints.size()];
     } else {
+      // The direction itself, not (org + d) - org: far from the origin org + d rounds to org's
+      // spacing (0.25 at 4e6, 64 at 1e9), which would bend or zero the direction.
       Vec3f d;
       do {
         d = Vec3f(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f);
       } while (dot(d, d) < 1e-4f);
-      target = org + d;
+      Ray r;
+      r.org = org;
+      r.dir = d;
+      r.tnear = 0.0f;
+      r.tfar = kInf;
+      return r;
     }
     Ray r;
     r.org = org;
@@ -277,12 +285,24 @@ int cmd_verify(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
+  {
+    // t_ref, cos_ref and a format's own reference: 12 bytes per ray held at once.
+    constexpr uint64_t kBytesPerRay = 12;
+    const uint64_t budget = memory_budget();
+    if (rays > budget / kBytesPerRay)
+      throw Error("--rays " + std::to_string(rays) + " needs about " +
+                  format_bytes(rays * kBytesPerRay) + " for the reference hits (" +
+                  std::to_string(kBytesPerRay) + " bytes per ray); expected at most " +
+                  std::to_string(budget / kBytesPerRay) + " rays, the memory limit being " +
+                  format_bytes(budget) + " (half of this machine's memory)");
+  }
   if (configs.empty()) configs = all_config_names();
   for (const std::string& c : configs) BuildOptions::from_config(c);  // unknown names: error now
 
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
   const auto t_load = std::chrono::steady_clock::now();
-  const PolyMesh mesh = load_scene(scene_name);
+  const PolyMesh mesh =
+      out_of_memory_context("loading " + scene_name, [&] { return load_scene(scene_name); });
   const MeshSummary sum = summarize(mesh);
   const Closedness cl = closedness(mesh);
   std::printf(
@@ -304,7 +324,8 @@ int cmd_verify(int argc, char** argv) {
   BuildOptions ref_opt = BuildOptions::from_config("bvh8-tri4v");
   ref_opt.threads = threads;
   Scene ref;
-  arena.execute([&] { ref = Scene::build(mesh, ref_opt); });
+  out_of_memory_context("building the bvh8-tri4v reference of " + scene_name,
+                        [&] { arena.execute([&] { ref = Scene::build(mesh, ref_opt); }); });
   const Box3f box = mesh.bounds();
   const double diag = length(box.size());
   uint64_t tried = 0;
@@ -325,7 +346,11 @@ int cmd_verify(int argc, char** argv) {
       targets.midpoints.size(), inside.size(), (unsigned long long)tried);
 
   // Reference: t (in ray units) and |cos theta| at the first crossing of the input surface.
-  std::vector<float> t_ref(rays), cos_ref(rays);
+  std::vector<float> t_ref, cos_ref;
+  out_of_memory_context("allocating the reference hits of " + std::to_string(rays) + " rays", [&] {
+    t_ref.resize(rays);
+    cos_ref.resize(rays);
+  });
   const auto t_ref0 = std::chrono::steady_clock::now();
   arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<uint64_t>(0, rays, 4096), [&](const auto& r) {
@@ -352,7 +377,8 @@ int cmd_verify(int argc, char** argv) {
     Scene s;
     const auto t_build = std::chrono::steady_clock::now();
     try {
-      arena.execute([&] { s = Scene::build(mesh, opt); });
+      out_of_memory_context("building " + scene_name + " as " + name,
+                            [&] { arena.execute([&] { s = Scene::build(mesh, opt); }); });
     } catch (const NotApplicable& e) {
       row.status = "n/a";
       row.note = e.what();

@@ -2,8 +2,11 @@
 // and printed by main().
 #pragma once
 
+#include <new>
 #include <nlohmann/json.hpp>
 #include <string>
+
+#include "slimrt/error.h"
 
 #include "slimrt/mesh.h"
 
@@ -13,6 +16,17 @@ int cmd_info(int argc, char** argv);
 int cmd_render(int argc, char** argv);
 int cmd_bench(int argc, char** argv);
 int cmd_verify(int argc, char** argv);  // cmd_verify.cpp
+
+// Runs fn(); a std::bad_alloc becomes slim::Error "out of memory while <what>", so the user
+// learns which step of which scene ran out (main() only knows the command).
+template <class Fn>
+auto out_of_memory_context(const std::string& what, Fn&& fn) -> decltype(fn()) {
+  try {
+    return fn();
+  } catch (const std::bad_alloc&) {
+    throw Error("out of memory while " + what);
+  }
+}
 
 // `slimrt info` sections of the technique issues, each in its own file (info_*.cpp). Each
 // prints a human-readable section to stdout, or fills `out` when json is true.

@@ -1,7 +1,10 @@
 // slimrt command-line tool: info, render, bench.
+#include <cerrno>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <exception>
+#include <new>
 #include <string>
 
 #include "commands.h"
@@ -31,18 +34,37 @@ int main(int argc, char** argv) {
     return argc < 2 ? 2 : 0;
   }
   std::string cmd = argv[1];
+  // A file size limit (ulimit -f) makes writes fail with EFBIG, reported like a full disk,
+  // instead of killing the process half-way through an output.
+  std::signal(SIGXFSZ, SIG_IGN);
+  int rc = -1;
   try {
     slim::check_cpu_isa();  // before any code compiled for the SIMD path runs
-    if (cmd == "info") return slim::cli::cmd_info(argc - 1, argv + 1);
-    if (cmd == "render") return slim::cli::cmd_render(argc - 1, argv + 1);
-    if (cmd == "bench") return slim::cli::cmd_bench(argc - 1, argv + 1);
-    if (cmd == "verify") return slim::cli::cmd_verify(argc - 1, argv + 1);
+    if (cmd == "info") rc = slim::cli::cmd_info(argc - 1, argv + 1);
+    if (cmd == "render") rc = slim::cli::cmd_render(argc - 1, argv + 1);
+    if (cmd == "bench") rc = slim::cli::cmd_bench(argc - 1, argv + 1);
+    if (cmd == "verify") rc = slim::cli::cmd_verify(argc - 1, argv + 1);
   } catch (const slim::Error& e) {
     std::fprintf(stderr, "slimrt: error: %s\n", e.what());
+    return 1;
+  } catch (const std::bad_alloc&) {
+    // The commands wrap their phases with context (slim::cli::out_of_memory_context); this is the
+    // rest.
+    std::fprintf(stderr, "slimrt: error: out of memory in 'slimrt %s' (std::bad_alloc)\n",
+                 cmd.c_str());
     return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "slimrt: error: %s\n", e.what());
     return 1;
+  }
+  if (rc >= 0) {
+    // Results printed on stdout count as output: a full disk or closed pipe is an error.
+    if (std::fflush(stdout) != 0 || std::ferror(stdout)) {
+      std::fprintf(stderr, "slimrt: error: cannot write to standard output: %s\n",
+                   std::strerror(errno));
+      return 1;
+    }
+    return rc;
   }
   std::fprintf(stderr, "slimrt: unknown command '%s'\n", cmd.c_str());
   usage();

@@ -15,12 +15,16 @@
 
 #include <algorithm>
 #include <bit>
+#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <string_view>
+#include <vector>
 
 #include "slimrt/error.h"
+#include "slimrt/output.h"
 
 namespace slim::detail {
 namespace {
@@ -65,16 +69,28 @@ bool read_external_file(std::vector<unsigned char>* out, std::string* err, const
     return false;
   };
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) return fail("not a regular file");
+  if (!std::filesystem::is_regular_file(path, ec))
+    return fail(
+        "exists but is not a regular file (a folder or device); expected a binary buffer "
+        "file");
   const uintmax_t size = std::filesystem::file_size(path, ec);
   if (ec) return fail(ec.message());
-  if (size > kMaxExternalBuffer) return fail("larger than 4 GiB");
+  if (size > kMaxExternalBuffer)
+    return fail("is " + std::to_string(size) + " bytes; expected at most 4 GiB");
   std::ifstream f(path, std::ios::binary);
   if (!f) return fail("cannot be opened");
   out->resize(size_t(size));
   if (size && !f.read(reinterpret_cast<char*>(out->data()), std::streamsize(size)))
     return fail("read error");
   return true;
+}
+
+// tinygltf's FileExists opens the file; this one only asks whether the name exists, so a file
+// that exists but is refused is reported by read_external_file with the reason instead of
+// "File not found".
+bool external_file_exists(const std::string& path, void*) {
+  std::error_code ec;
+  return std::filesystem::exists(path, ec);
 }
 
 uint32_t load_u32(const uint8_t* p) {
@@ -113,9 +129,120 @@ uint32_t check_glb(const std::string& src, std::string_view data) {
   return length;
 }
 
-// Turns a tinygltf error into slim::Error. nlohmann reports "... at line L, column C: ...".
+// Deepest nesting of JSON arrays and objects accepted. nlohmann's DOM and tinygltf's conversion
+// of `extras` into tinygltf::Value recurse once per level, so a deep enough file (about 20,000
+// levels on an 8 MiB stack) overflows the call stack; real glTF files nest a few tens of levels.
+constexpr uint32_t kMaxJsonDepth = 1000;
+
+// glTF properties that tinygltf reads into an int (glTF 2.0: indices and enums). Its reader
+// converts a larger number by wrapping (a node's "mesh": 4294967296 became mesh 0) and skips a
+// non-integer one ("mesh": 1e10 dropped the mesh without a word), so these are checked first.
+bool is_int_property(std::string_view key) {
+  static constexpr std::string_view kKeys[] = {
+      "mesh",    "scene",         "nodes", "children", "buffer", "bufferView", "byteStride",
+      "indices", "componentType", "mode",  "material", "skin",   "camera",     "target"};
+  for (std::string_view k : kKeys)
+    if (k == key) return true;
+  return false;
+}
+
+// One pass over JSON text, without recursion, before the recursive parser sees it: checks the
+// nesting depth (kMaxJsonDepth) and that the glTF int properties (is_int_property, and the values
+// of "attributes" and morph "targets") are integers in the int range. Strings are skipped with
+// their escapes; "extras" and "extensions" are not looked into (user data). `first_byte` is the
+// offset of `json` in the file, for the message.
+void check_json(const std::string& src, std::string_view json, bool binary, uint64_t first_byte) {
+  struct Frame {
+    bool object;
+    bool int_values;  // values of this object (attributes) or items of this array are ints
+    bool skip;        // inside extras/extensions
+    std::string key;  // the key this container is the value of
+  };
+  std::vector<Frame> stack;
+  std::string key;  // last key read in the innermost object
+  bool expect_key = false;
+  uint64_t line = 1;
+  auto fail = [&](size_t i, const std::string& what) {
+    if (binary) throw_at_byte(src, first_byte + i, what);
+    throw_at_line(src, line, what);
+  };
+  for (size_t i = 0; i < json.size(); ++i) {
+    const char c = json[i];
+    if (c == '\n') {
+      ++line;
+    } else if (c == '"') {
+      const size_t start = ++i;
+      for (; i < json.size() && json[i] != '"'; ++i) {
+        if (json[i] == '\\')
+          ++i;
+        else if (json[i] == '\n')
+          ++line;
+      }
+      if (expect_key && !stack.empty() && stack.back().object) {
+        key.assign(json.substr(start, std::min<size_t>(i - start, 64)));
+        expect_key = false;
+      }
+    } else if (c == ',') {
+      expect_key = !stack.empty() && stack.back().object;
+    } else if (c == '[' || c == '{') {
+      if (stack.size() >= kMaxJsonDepth)
+        fail(i, "JSON nests arrays/objects more than " + std::to_string(kMaxJsonDepth) +
+                    " levels deep; expected at most " + std::to_string(kMaxJsonDepth));
+      Frame f{c == '{', false, false, {}};
+      if (!stack.empty()) {
+        const Frame& top = stack.back();
+        f.key = top.object ? key : top.key;
+        f.skip = top.skip || (top.object && (key == "extras" || key == "extensions"));
+      }
+      f.int_values =
+          f.key == "attributes" || f.key == "targets" || (!f.object && is_int_property(f.key));
+      stack.push_back(std::move(f));
+      expect_key = c == '{';
+    } else if (c == ']' || c == '}') {
+      if (!stack.empty()) stack.pop_back();
+      expect_key = false;
+    } else if (c == '-' || (c >= '0' && c <= '9')) {
+      size_t j = i;
+      while (j < json.size() &&
+             std::string_view("+-.0123456789eE").find(json[j]) != std::string_view::npos)
+        ++j;
+      const std::string_view number = json.substr(i, j - i);
+      i = j - 1;
+      if (stack.empty() || stack.back().skip) continue;
+      const Frame& top = stack.back();
+      const bool checked = top.object ? (top.int_values || is_int_property(key)) : top.int_values;
+      if (!checked) continue;
+      const std::string name = top.object ? key : top.key;
+      int64_t v = 0;
+      auto [end, ec] = std::from_chars(number.data(), number.data() + number.size(), v);
+      if (ec != std::errc() || end != number.data() + number.size() || v < INT32_MIN ||
+          v > INT32_MAX)
+        fail(i, "\"" + name + "\" is " + std::string(number.substr(0, 40)) +
+                    "; expected an integer from 0 to 2147483647 (a glTF index or enum)");
+    }
+  }
+}
+
+// tinygltf messages that quote a whole data: URI or state the wrong rule are replaced by what was
+// expected and what was found.
+std::string explain_tinygltf(const std::string& line) {
+  auto starts = [&](const char* p) { return line.rfind(p, 0) == 0; };
+  if (starts("Invalid `byteStride' value")) {
+    const size_t colon = line.rfind(':');
+    const std::string found = colon == std::string::npos ? "?" : line.substr(colon + 2);
+    return "a bufferView has byteStride " + found +
+           "; expected a multiple of 4 from 4 to 252 (glTF 2.0 bufferView.byteStride)";
+  }
+  if (starts("Failed to decode 'uri'"))
+    return "a buffer's data: URI does not decode to its byteLength bytes; expected base64 data "
+           "(application/octet-stream or application/gltf-buffer) of at least byteLength bytes";
+  if (starts("File size mismatch")) return line.substr(0, 300);
+  return line;
+}
+
 [[noreturn]] void throw_tinygltf(const std::string& src, const std::string& err, bool binary) {
-  std::string msg = err.substr(0, std::min<size_t>(err.find('\n'), 200));  // URIs can be huge
+  std::string msg = explain_tinygltf(err.substr(0, err.find('\n')));
+  if (msg.size() > 300) msg = msg.substr(0, 300) + "...";  // URIs can be huge
   size_t at = msg.find("at line ");
   if (at != std::string::npos) {
     uint64_t line = std::strtoull(msg.c_str() + at + 8, nullptr, 10);
@@ -141,6 +268,14 @@ class Flattener {
         any_normals_ |= p.attributes.count("NORMAL") > 0;
         any_uvs_ |= p.attributes.count("TEXCOORD_0") > 0;
       }
+    check_expansion();
+    // Sized once: push_back's doubling would hold up to twice the scene (and copy it).
+    out_.positions.reserve(size_t(vertices_));
+    if (any_normals_) out_.normals.reserve(size_t(vertices_));
+    if (any_uvs_) out_.uvs.reserve(size_t(vertices_));
+    out_.face_indices.reserve(size_t(indices_));
+    out_.face_sizes.reserve(size_t(indices_ / 3));
+    out_.face_object.reserve(size_t(indices_ / 3));
     for (const Instance& in : instances_)
       for (size_t p = 0; p < m_.meshes[in.mesh].primitives.size(); ++p) emit(in, p);
     if (out_.object_names.size() <= 1) out_.face_object.clear();
@@ -153,6 +288,42 @@ class Flattener {
   };
 
   static bool is_surface(int mode) { return mode >= 4 && mode <= 6; }
+
+  // Every node that references a mesh gets its own copy of the mesh (the PolyMesh has no
+  // instances), so a small file with many nodes on one big mesh expands without bound. The
+  // expansion is sized from the accessor counts before anything is copied and must fit the
+  // memory budget (slim::memory_budget(): half the machine's memory) and 2^32-1 vertices.
+  void check_expansion() {
+    const uint64_t per_vertex = 12 + (any_normals_ ? 12 : 0) + (any_uvs_ ? 8 : 0);
+    uint64_t& vertices = vertices_;
+    uint64_t& indices = indices_;
+    auto add = [](uint64_t& sum, uint64_t v) {
+      sum = v > UINT64_MAX / 64 - sum ? UINT64_MAX / 64 : sum + v;
+    };
+    for (const Instance& in : instances_)
+      for (const tinygltf::Primitive& p : m_.meshes[in.mesh].primitives) {
+        if (!is_surface(p.mode)) continue;
+        // The same range checks as read(), so a bad accessor is reported as such.
+        auto pos = p.attributes.find("POSITION");
+        const uint64_t nv =
+            pos == p.attributes.end() ? 0 : locate(pos->second, 3, "POSITION", false).count;
+        add(vertices, nv);
+        const uint64_t ni = p.indices >= 0 ? locate(p.indices, 1, "indices", true).count : nv;
+        add(indices, p.mode == TINYGLTF_MODE_TRIANGLES ? ni : 3 * ni);
+      }
+    // face_indices (4 bytes per index) + face_sizes and face_object (8 bytes per triangle).
+    const uint64_t bytes = vertices * per_vertex + indices * 4 + indices / 3 * 8;
+    const uint64_t budget = memory_budget();
+    const std::string what = std::to_string(instances_.size()) +
+                             " mesh instances (nodes referencing meshes) expand to " +
+                             std::to_string(vertices) + " vertices and " +
+                             std::to_string(indices / 3) + " triangles";
+    if (vertices > UINT32_MAX)
+      throw Error(src_ + ": " + what + "; expected at most 2^32-1 vertices in the flattened scene");
+    if (bytes > budget)
+      throw Error(src_ + ": " + what + ", about " + format_bytes(bytes) + "; expected at most " +
+                  format_bytes(budget) + " (half of this machine's memory)");
+  }
 
   [[noreturn]] void fail(const std::string& where, const std::string& what) const {
     throw Error(src_ + ": " + where + ": " + what);
@@ -243,11 +414,17 @@ class Flattener {
     }
   }
 
-  // Reads accessor `index` as count x ncomp values of T (conv converts one component).
-  template <class T, class Conv>
-  std::vector<T> read(int index, int ncomp, const std::string& what, Conv conv,
-                      bool integer_only = false) const {
-    const std::string where = "accessors[" + std::to_string(index) + "] (" + what + ")";
+  // Where accessor `index` lies, every range checked (no allocation).
+  struct Located {
+    const uint8_t* base = nullptr;  // null: no bufferView (zeros)
+    size_t stride = 0, elem = 0, count = 0;
+    int ct = 0, csize = 0;
+    std::string where;
+  };
+  Located locate(int index, int ncomp, const std::string& what, bool integer_only) const {
+    Located L;
+    L.where = "accessors[" + std::to_string(index) + "] (" + what + ")";
+    const std::string& where = L.where;
     if (index < 0 || size_t(index) >= m_.accessors.size())
       fail(what, "accessor index " + std::to_string(index) + " out of range (" +
                      std::to_string(m_.accessors.size()) + " accessors)");
@@ -262,15 +439,14 @@ class Flattener {
       fail(where, "indices must be unsigned byte, short or int");
     const size_t elem = size_t(csize) * ncomp;
     const size_t count = a.count;
-    std::vector<T> out;
-    if (count == 0) return out;
+    L.ct = ct, L.csize = csize, L.elem = elem, L.count = count, L.stride = elem;
+    if (count == 0) return L;
 
-    const uint8_t* base = nullptr;
-    size_t stride = elem;
     if (a.bufferView >= 0) {
       std::string_view span = view(a.bufferView, where);
       const tinygltf::BufferView& bv = m_.bufferViews[a.bufferView];
-      if (bv.byteStride != 0) stride = bv.byteStride;
+      if (bv.byteStride != 0) L.stride = bv.byteStride;
+      const size_t stride = L.stride;
       if (stride < elem)
         fail(where, "byteStride " + std::to_string(stride) + " is smaller than an element (" +
                         std::to_string(elem) + " bytes)");
@@ -280,7 +456,7 @@ class Flattener {
                         std::to_string(a.byteOffset) + " do not fit in bufferViews[" +
                         std::to_string(a.bufferView) + "] (" + std::to_string(span.size()) +
                         " bytes)");
-      base = reinterpret_cast<const uint8_t*>(span.data()) + a.byteOffset;
+      L.base = reinterpret_cast<const uint8_t*>(span.data()) + a.byteOffset;
     } else if (a.bufferView < -1) {
       fail(where, "negative bufferView index");
     } else if (count > input_bytes_) {
@@ -288,6 +464,21 @@ class Flattener {
       // file size instead of allocating whatever the JSON claims.
       fail(where, "count " + std::to_string(count) + " without a bufferView exceeds the file size");
     }
+    return L;
+  }
+
+  // Reads accessor `index` as count x ncomp values of T (conv converts one component).
+  template <class T, class Conv>
+  std::vector<T> read(int index, int ncomp, const std::string& what, Conv conv,
+                      bool integer_only = false) const {
+    const Located L = locate(index, ncomp, what, integer_only);
+    const tinygltf::Accessor& a = m_.accessors[index];
+    const std::string& where = L.where;
+    const uint8_t* base = L.base;
+    const size_t stride = L.stride, elem = L.elem, count = L.count;
+    const int ct = L.ct, csize = L.csize;
+    std::vector<T> out;
+    if (count == 0) return out;
 
     out.assign(count * ncomp, T{});
     if (base)
@@ -514,6 +705,7 @@ class Flattener {
   PolyMesh& out_;
   std::vector<Instance> instances_;
   bool any_normals_ = false, any_uvs_ = false;
+  uint64_t vertices_ = 0, indices_ = 0;  // of the flattened scene (upper bounds for strips/fans)
 };
 
 }  // namespace
@@ -523,23 +715,29 @@ PolyMesh read_gltf(const std::string& src, std::string_view data, bool binary,
   tinygltf::Model model;
   tinygltf::TinyGLTF loader;
   loader.SetImageLoader(bad_image_loader, nullptr);
-  loader.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath, &read_external_file,
+  loader.SetFsCallbacks({&external_file_exists, &tinygltf::ExpandFilePath, &read_external_file,
                          &tinygltf::WriteWholeFile, nullptr});
   std::string err, warn;
   bool ok = false;
   try {
     if (binary) {
       uint32_t length = check_glb(src, data);
+      check_json(src, data.substr(20, load_u32(reinterpret_cast<const uint8_t*>(data.data()) + 12)),
+                 true, 20);
       ok = loader.LoadBinaryFromMemory(&model, &err, &warn,
                                        reinterpret_cast<const unsigned char*>(data.data()), length,
                                        base_dir);
     } else {
       if (data.size() > UINT32_MAX) throw Error(src + ": glTF JSON larger than 4 GiB");
+      check_json(src, data, false, 0);
       ok = loader.LoadASCIIFromString(&model, &err, &warn, data.data(),
                                       static_cast<unsigned int>(data.size()), base_dir);
     }
   } catch (const Error&) {
     throw;
+  } catch (const std::bad_alloc&) {
+    throw Error(src + ": out of memory while parsing the glTF JSON and buffers (" +
+                std::to_string(data.size()) + " bytes of file)");
   } catch (const std::exception& e) {
     throw_tinygltf(src, e.what(), binary);
   }

@@ -28,6 +28,10 @@ PolyMesh make_procedural(const std::string& spec) {
   bool ok = !digits.empty() && digits.size() <= 6 && digits[0] != '0' &&
             std::all_of(digits.begin(), digits.end(), [](char c) { return c >= '0' && c <= '9'; });
   const int n = ok ? std::stoi(digits) : 0;
+  // A torus needs N even and N/2 >= 3 (make_torus): one range stated, the one that holds.
+  if (kind == "torus" && (!ok || n > kMaxProceduralN || n < 6 || n % 2 != 0))
+    throw Error(spec + ": expected torus:N with N an even integer from 6 to " +
+                std::to_string(kMaxProceduralN));
   if (!ok || n > kMaxProceduralN)
     throw Error(spec + ": expected " + kind + ":N with N an integer from 1 to " +
                 std::to_string(kMaxProceduralN));
@@ -58,7 +62,8 @@ PolyMesh load_file(const std::string& path) {
     throw Error(what.append("; ").append(kAccepted));
   }
 
-  const std::string data = detail::read_file(path);
+  const detail::FileBytes bytes = detail::read_file(path);
+  const std::string_view data = bytes.view();
   if (ext == ".obj") return detail::read_obj(path, data);
   if (ext == ".ply") return detail::read_ply(path, data);
   std::filesystem::path base_dir = std::filesystem::path(path).parent_path();

@@ -14,6 +14,7 @@
 
 #include "io/obj.h"
 
+#include <cfloat>
 #include <cmath>
 #include <cstdlib>
 #include <streambuf>
@@ -129,12 +130,95 @@ std::string trim(const std::string& s) {
   return s.substr(b, s.find_last_not_of(" \t") + 1 - b);
 }
 
+// Statement with a two-letter keyword ("vn", "vt"): rest = after the keyword.
+bool statement2(std::string_view s, const char* kw, std::string_view& rest) {
+  size_t i = 0;
+  while (i < s.size() && (s[i] == ' ' || s[i] == '\t')) ++i;
+  if (s.size() < i + 3 || s[i] != kw[0] || s[i + 1] != kw[1] ||
+      (s[i + 2] != ' ' && s[i + 2] != '\t'))
+    return false;
+  rest = s.substr(i + 2);
+  return true;
+}
+
+// Checks the numbers of a v, vn or vt line: tinyobjloader parses them as double and stores float,
+// so a value beyond the float range (1e39) would become inf and its faces be dropped later
+// without a word. Such a value is refused here, like a literal inf.
+void check_floats(const std::string& src, uint64_t line, std::string_view rest, const char* kw) {
+  for_each_token(rest, [&](int64_t, std::string_view t) {
+    if (std::string_view("+-.0123456789").find(t[0]) == t.npos) return;  // handled elsewhere
+    const std::string tok(t.substr(0, 400));
+    const double v = std::strtod(tok.c_str(), nullptr);
+    if (!(std::fabs(v) <= double(FLT_MAX)))
+      throw_at_line(src, line,
+                    std::string(kw) + " value " + excerpt(t) +
+                        " overflows float; expected a finite number of magnitude at most 3.4e38");
+  });
+}
+
+// Checks one face corner "v", "v/t", "v//n" or "v/t/n" of face line `text` against the counts of
+// v, vt and vn lines read so far (OBJ indices: 1..N, or -N..-1 counting back from the last one).
+// tinyobjloader reads them into int, so 4294967297 would wrap around to 1.
+void check_corner(const std::string& src, uint64_t line, std::string_view text,
+                  std::string_view corner, const uint64_t defined[3]) {
+  static const char* const kWhat[3] = {"vertex", "texture", "normal"};
+  static const char* const kKeyword[3] = {"v", "vt", "vn"};
+  static const char* const kForms =
+      "; expected vertex references v, v/t, v//n or v/t/n with nonzero integers";
+  std::string_view part[3];
+  int parts = 0;
+  size_t b = 0;
+  for (size_t i = 0; i <= corner.size(); ++i)
+    if (i == corner.size() || corner[i] == '/') {
+      if (parts == 3)
+        throw_at_line(src, line,
+                      "corner " + excerpt(corner) + " has more than 3 parts in face " +
+                          excerpt(text) + kForms);
+      part[parts++] = corner.substr(b, i - b);
+      b = i + 1;
+    }
+  for (int k = 0; k < parts; ++k) {
+    std::string_view d = part[k];
+    if (d.empty()) {
+      if (k == 1 && parts == 3) continue;  // v//n
+      throw_at_line(
+          src, line,
+          "corner " + excerpt(corner) + " has an empty index in face " + excerpt(text) + kForms);
+    }
+    if (d[0] == '-' || d[0] == '+') d.remove_prefix(1);
+    uint64_t value = 0;
+    bool digits = !d.empty(), big = false;
+    for (char c : d) {
+      if (c < '0' || c > '9') {
+        digits = false;
+        break;
+      }
+      if (value > (uint64_t(1) << 40))
+        big = true;
+      else
+        value = value * 10 + uint64_t(c - '0');
+    }
+    if (!digits)
+      throw_at_line(src, line,
+                    std::string(kWhat[k]) + " index " + excerpt(part[k]) +
+                        " is not an integer in face " + excerpt(text) + kForms);
+    if (big || value == 0 || value > defined[k])
+      throw_at_line(src, line,
+                    std::string(kWhat[k]) + " index out of range: " + excerpt(part[k]) +
+                        " in face " + excerpt(text) + "; expected a nonzero index from 1 to " +
+                        std::to_string(defined[k]) + " or from -" + std::to_string(defined[k]) +
+                        " to -1 (" + std::to_string(defined[k]) + " '" + kKeyword[k] +
+                        "' lines before this face)");
+  }
+}
+
 }  // namespace
 
 PolyMesh read_obj(const std::string& src, std::string_view data) {
   PolyMesh mesh;
 
-  // Pre-scan: corners per face, control bytes.
+  // Pre-scan: corners per face, control bytes, float overflow, index ranges.
+  uint64_t defined[3] = {0, 0, 0};  // v, vt, vn lines so far
   for_each_line(data, [&](uint64_t line, std::string_view text) {
     for (char c : text) {
       unsigned char u = static_cast<unsigned char>(c);
@@ -153,6 +237,18 @@ PolyMesh read_obj(const std::string& src, std::string_view data) {
         throw_at_line(src, line,
                       "vertex has " + std::to_string(coords) + " coordinates; expected x y z");
       if (bad >= 0) throw_at_line(src, line, "vertex coordinate is not a number; expected x y z");
+      check_floats(src, line, rest, "vertex coordinate");
+      ++defined[0];
+      return true;
+    }
+    if (statement2(text, "vt", rest)) {
+      check_floats(src, line, rest, "texture coordinate");
+      ++defined[1];
+      return true;
+    }
+    if (statement2(text, "vn", rest)) {
+      check_floats(src, line, rest, "normal coordinate");
+      ++defined[2];
       return true;
     }
     if (vertex_weight_statement(text, rest)) {
@@ -169,6 +265,9 @@ PolyMesh read_obj(const std::string& src, std::string_view data) {
     }
     int64_t n = face_corners(text);
     if (n < 0) return true;
+    statement(text, 'f', rest);
+    for_each_token(rest,
+                   [&](int64_t, std::string_view t) { check_corner(src, line, text, t, defined); });
     if (n < 3)
       throw_at_line(src, line, "face has " + std::to_string(n) + " vertices; expected at least 3");
     if (n > int64_t(UINT32_MAX)) throw_at_line(src, line, "face has too many vertices");

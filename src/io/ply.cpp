@@ -12,8 +12,10 @@
 // names the file with the header/ascii line or the binary byte offset.
 #include "io/ply.h"
 
+#include <cfloat>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
@@ -132,6 +134,12 @@ bool parse_u64(std::string_view s, uint64_t& v) {
   if (s.empty()) return false;
   auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
   return ec == std::errc() && p == s.data() + s.size();
+}
+
+std::string shortest(double d) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.17g", d);
+  return buf;
 }
 
 std::string quoted(std::string_view s) {
@@ -312,7 +320,7 @@ class BinaryBody {
       for (const Prop& p : e.props) {
         if (!p.list) {
           need(ty_bytes(p.type), e, r);
-          if (p.role != kSkip) v[p.role] = float(load_real<BE>(p_ + pos_, p.type));
+          if (p.role != kSkip) v[p.role] = to_float(load_real<BE>(p_ + pos_, p.type), p);
           pos_ += ty_bytes(p.type);
           continue;
         }
@@ -346,6 +354,15 @@ class BinaryBody {
   size_t pos() const { return pos_; }
 
  private:
+  // A finite double beyond the float range (1e300) would become inf and its faces be dropped
+  // later without a word: refused here.
+  float to_float(double d, const Prop& p) const {
+    if (std::isfinite(d) && std::fabs(d) > double(FLT_MAX))
+      throw_at_byte(src_, pos_,
+                    "vertex property '" + p.name + "' is " + shortest(d) +
+                        ", which overflows float; expected a magnitude of at most 3.4e38");
+    return float(d);
+  }
   void need(size_t n, const Elem& e, uint64_t r) {
     if (n > size_ - pos_) truncated(e, r, n);
   }
@@ -388,7 +405,7 @@ class AsciiBody {
         if (!p.list) {
           next(e, r);
           if (p.role != kSkip)
-            v[p.role] = float(real(p.type));
+            v[p.role] = to_float(real(p.type), p);
           else if (ty_is_int(p.type))
             integer(p.type);
           else
@@ -449,6 +466,13 @@ class AsciiBody {
     tok_line_ = line_;
   }
   std::string_view token() const { return {tok_, size_t(p_ - tok_)}; }
+  float to_float(double d, const Prop& p) const {
+    if (std::isfinite(d) && std::fabs(d) > double(FLT_MAX))
+      throw_at_line(src_, tok_line_,
+                    "vertex property '" + p.name + "' is " + quoted(token()) +
+                        ", which overflows float; expected a magnitude of at most 3.4e38");
+    return float(d);
+  }
   int64_t integer(Ty t) {
     const char* b = tok_;
     if (b < p_ && *b == '+') ++b;
@@ -467,10 +491,15 @@ class AsciiBody {
     if (b < p_ && *b == '+') ++b;
     double v = 0;
     auto [q, ec] = std::from_chars(b, p_, v);
-    // Out of range: overflow (1e999) gives +-inf, counted later as a non-finite vertex, and
-    // underflow (1e-999) gives 0, as strtod decides.
-    if (ec == std::errc::result_out_of_range)
-      return std::strtod(std::string(b, p_).c_str(), nullptr);
+    // Out of range: overflow (1e999) is an error naming the line; underflow (1e-999) gives 0
+    // (or a denormal), as strtod decides.
+    if (ec == std::errc::result_out_of_range) {
+      const double d = std::strtod(std::string(b, p_).c_str(), nullptr);
+      if (!std::isfinite(d))
+        throw_at_line(src_, tok_line_,
+                      "number " + quoted(token()) + " overflows double; expected a finite number");
+      return d;
+    }
     if (ec != std::errc() || q != p_)
       throw_at_line(src_, tok_line_, "expected a number, got " + quoted(token()));
     return v;

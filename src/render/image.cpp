@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "slimrt/output.h"
 #include "slimrt/render.h"
 
 // Debian's libstb.so exports stbi_write_png; when the build links it (and defines
@@ -64,6 +65,53 @@ std::vector<uint8_t> to_srgb8(const Image& img) {
   return out;
 }
 
+// The EXR bytes (3 float channels stored B, G, R as most viewers expect; ZIP-compressed from
+// 16x16 up, as tinyexr's SaveEXR does), built in memory so that the file goes through
+// write_file_atomically like every other output.
+std::string exr_bytes(const Image& img, const std::string& path) {
+  const size_t n = size_t(img.width) * size_t(img.height);
+  std::vector<float> planes[3];
+  for (int c = 0; c < 3; ++c) {
+    planes[c].resize(n);
+    for (size_t i = 0; i < n; ++i) planes[c][i] = img.rgb[3 * i + size_t(2 - c)];  // B, G, R
+  }
+  float* ptrs[3] = {planes[0].data(), planes[1].data(), planes[2].data()};
+  EXRImage image;
+  InitEXRImage(&image);
+  image.num_channels = 3;
+  image.images = reinterpret_cast<unsigned char**>(ptrs);
+  image.width = img.width;
+  image.height = img.height;
+  EXRHeader header;
+  InitEXRHeader(&header);
+  header.compression_type = img.width < 16 && img.height < 16 ? TINYEXR_COMPRESSIONTYPE_NONE
+                                                              : TINYEXR_COMPRESSIONTYPE_ZIP;
+  EXRChannelInfo channels[3] = {};
+  int types[3] = {TINYEXR_PIXELTYPE_FLOAT, TINYEXR_PIXELTYPE_FLOAT, TINYEXR_PIXELTYPE_FLOAT};
+  int requested[3] = {TINYEXR_PIXELTYPE_FLOAT, TINYEXR_PIXELTYPE_FLOAT, TINYEXR_PIXELTYPE_FLOAT};
+  for (int c = 0; c < 3; ++c) channels[c].name[0] = "BGR"[c];
+  header.num_channels = 3;
+  header.channels = channels;
+  header.pixel_types = types;
+  header.requested_pixel_types = requested;
+  unsigned char* mem = nullptr;
+  const char* err = nullptr;
+  const size_t size = SaveEXRImageToMemory(&image, &header, &mem, &err);
+  if (size == 0 || !mem) {
+    std::string why = err ? err : "tinyexr returned no data";
+    if (err) FreeEXRErrorMessage(err);
+    std::free(mem);
+    throw Error(path + ": cannot encode EXR: " + why);
+  }
+  std::string out(reinterpret_cast<const char*>(mem), size);
+  std::free(mem);
+  return out;
+}
+
+void append_bytes(void* context, void* data, int size) {
+  static_cast<std::string*>(context)->append(static_cast<const char*>(data), size_t(size));
+}
+
 }  // namespace
 
 void write_image(const Image& img, const std::string& path) {
@@ -71,32 +119,21 @@ void write_image(const Image& img, const std::string& path) {
   if (ext != ".png" && ext != ".exr")
     throw Error(path + ": unknown image extension, expected .png or .exr");
   check_image(img, path);
-  if (ext == ".png") {
-    std::vector<uint8_t> bytes = to_srgb8(img);
-    errno = 0;
-    if (!stbi_write_png(path.c_str(), img.width, img.height, 3, bytes.data(), img.width * 3)) {
-      std::string why = errno ? std::strerror(errno) : "write failed";
-      throw Error(path + ": cannot write PNG: " + why);
+  std::string bytes;
+  try {
+    if (ext == ".png") {
+      const std::vector<uint8_t> pixels = to_srgb8(img);
+      if (!stbi_write_png_to_func(append_bytes, &bytes, img.width, img.height, 3, pixels.data(),
+                                  img.width * 3))
+        throw Error(path + ": cannot encode PNG (stb_image_write failed)");
+    } else {
+      bytes = exr_bytes(img, path);
     }
-    return;
+  } catch (const std::bad_alloc&) {
+    throw Error(path + ": out of memory while encoding a " + std::to_string(img.width) + "x" +
+                std::to_string(img.height) + " image");
   }
-  // Open the file ourselves first: Debian's tinyexr leaks its buffers when it cannot open the
-  // output (LeakSanitizer, RenderFiles.WriteErrors), and our message names the system error.
-  errno = 0;
-  if (std::FILE* f = std::fopen(path.c_str(), "wb")) {
-    std::fclose(f);
-  } else {
-    std::string why = errno ? std::strerror(errno) : "cannot open";
-    throw Error(path + ": cannot write EXR: " + why);
-  }
-  const char* err = nullptr;
-  int rc =
-      SaveEXR(img.rgb.data(), img.width, img.height, 3, /*save_as_fp16=*/0, path.c_str(), &err);
-  if (rc != TINYEXR_SUCCESS) {
-    std::string why = err ? err : "error " + std::to_string(rc);
-    if (err) FreeEXRErrorMessage(err);
-    throw Error(path + ": cannot write EXR: " + why);
-  }
+  write_file_atomically(path, bytes);
 }
 
 double psnr(const Image& a, const Image& b) {

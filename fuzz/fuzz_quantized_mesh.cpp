@@ -85,9 +85,13 @@ void check_store(const NgonMesh& m) {
     }
     if (!decodable) continue;
     for (int a = 0; a < 3; ++a) {
-      const double step = q.quantizer().step[a];
-      // Float rounding of lo + q * step; and a box narrower than 65535 denormal steps (about
-      // 1e-40) has its step rounded to a denormal or to 0, every vertex then decodes near lo.
+      // The step the specification gives (Listing 4: 16 bits per component in the box of the
+      // finite vertices), from this target's own box, not the quantizer's stored step.
+      const double step = (double(box.hi[a]) - double(box.lo[a])) / 65535.0;
+      // Float rounding of lo + q * step (the stored step is this one rounded to float: at most
+      // 65535 of its ulps, below the term below); and a box narrower than 65535 denormal steps
+      // (about 1e-40) has its step rounded to a denormal or to 0, every vertex then decodes near
+      // lo.
       const double ulp =
           2.4e-7 * (std::fabs(double(box.lo[a])) + std::fabs(double(box.hi[a]))) + 1e-40;
       SLIM_FUZZ_CHECK(std::fabs(double(got[a]) - double(want[a])) <= 0.5 * step + ulp,

@@ -1,11 +1,14 @@
 // Writes the seed corpus of the fuzz targets: make_seeds OUT_DIR creates OUT_DIR/<target>/ for
-// obj, ply, gltf, glb and xz, each holding the seed files of its format (fuzz/seed_files.h).
+// obj, ply, gltf, glb and xz, each holding the seed files of its format (fuzz/seed_files.h), and
+// for scene, pairing, quantized_mesh and lossy_subgrid, each holding inputs in the target's own
+// byte layout (fuzz/binary_seeds.h).
 // Run by ./fuzz.sh before fuzzing; nothing it writes is kept in git.
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
 
+#include "binary_seeds.h"
 #include "seed_files.h"
 
 int main(int argc, char** argv) {
@@ -57,6 +60,8 @@ int main(int argc, char** argv) {
       "ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\n"
       "property double z\nelement face 1\nproperty list uint uint vertex_indices\nend_header\n"
       "0 0 0\n1e300 0 0\n0 1 0\n3 0 1 4294967295\n");
+  for (const slim::seeds::BinarySeed& b : slim::seeds::binary_seeds())
+    put(b.target, b.name, b.bytes);
   std::printf("make_seeds: %d files in %s\n", n, out.c_str());
   return 0;
 }

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "slimrt/mesh.h"
+#include "test_util.h"
 
 namespace fs = std::filesystem;
 using slim::PolyMesh;
@@ -993,7 +994,7 @@ TEST(IoFuzz, MutatedFilesNeverCrash) {
 
 TEST(IoSharedData, CountsMatchManifest) {
   const std::string dir = SLIM_SHARED_DATA;
-  if (!fs::exists(dir + "/MANIFEST")) GTEST_SKIP() << "no shared data at " << dir;
+  SLIM_REQUIRE_SHARED_DATA();
   struct Row {
     const char* file;
     uint64_t vertices, faces, tris, quads, ngons, fan_tris;

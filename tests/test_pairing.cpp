@@ -431,7 +431,6 @@ TEST(Pairing, PublicStats) {
   EXPECT_LE(s.heuristic_paired_fraction, s.paired_fraction);
   EXPECT_NEAR(s.paired_fraction - s.heuristic_paired_fraction,
               2.0 * double(s.augmented_pairs) / double(s.triangles), 1e-12);
-  EXPECT_GE(s.pairing_s, 0.0);
   EXPECT_EQ(s.half_edges, 3 * s.triangles);
   PairingStats q = pairing_stats(quad_grid(10, 1));
   EXPECT_TRUE(q.prescan_skipped);
@@ -471,7 +470,8 @@ TEST_P(PairConfigs, RandomSoupMatchesReference) {
     Agreement a = compare_with_reference(s, {&m}, 2000, seed);
     EXPECT_GT(a.hits, 500u);
     EXPECT_EQ(a.agree, a.rays) << GetParam() << " seed " << seed;
-    EXPECT_GE(a.same_face, a.hits * 99 / 100);
+    // Random vertices: ties are impossible, every hit names the reference's face.
+    EXPECT_EQ(a.same_face, a.hits) << GetParam() << " seed " << seed << ":" << a.wrong;
   }
 }
 
@@ -484,7 +484,9 @@ TEST_P(PairConfigs, WeldedShuffledMeshMatchesReference) {
     Agreement a = compare_with_reference(s, {&m}, 3000, seed + 10);
     EXPECT_GT(a.hits, 1000u);
     EXPECT_EQ(a.agree, a.rays) << GetParam() << " seed " << seed;
-    EXPECT_GE(a.same_face, a.hits * 99 / 100);
+    // Welded: another face only at a shared edge or vertex (checked geometrically), rarely.
+    EXPECT_EQ(a.same_face + a.ties, a.hits) << GetParam() << " seed " << seed << ":" << a.wrong;
+    EXPECT_LE(a.ties, a.hits / 200) << GetParam() << " seed " << seed;
     auto get = [&](const char* k) { return detail(s, k); };
     if (window2()) {  // the shuffled order pairs poorly in a window of 2
       EXPECT_EQ(get("paired_fraction"), get("window2_paired_fraction"));
@@ -497,7 +499,7 @@ TEST_P(PairConfigs, WeldedShuffledMeshMatchesReference) {
       for (const auto& [k, v] : s.stats().details)  // the pre-scan stopped early: not known
         EXPECT_NE(k, "window2_paired_fraction");
     }
-    EXPECT_GE(get("pairing_s"), 0.0);
+    get("pairing_s");  // reported (detail() fails otherwise); a timing, its value is not checked
     EXPECT_EQ(2 * get("pairs") + get("unpaired_triangles"), double(m.face_count()));
     EXPECT_EQ(s.stats().primitives, uint64_t(get("pairs") + get("unpaired_triangles")));
     EXPECT_EQ(s.memory().triangles, m.face_count());
@@ -530,7 +532,8 @@ TEST_P(PairConfigs, MixedPolygonsAndSeveralMeshes) {
   ASSERT_TRUE(s.validate(&why)) << why;
   Agreement ag = compare_with_reference(s, ms, 3000, 5);
   EXPECT_EQ(ag.agree, ag.rays);
-  EXPECT_GE(ag.same_face, ag.hits * 99 / 100);
+  EXPECT_EQ(ag.same_face + ag.ties, ag.hits) << GetParam() << ":" << ag.wrong;
+  EXPECT_LE(ag.ties, ag.hits / 200) << GetParam();
   EXPECT_EQ(s.memory().triangles, a.fan_triangle_count() + b.fan_triangle_count() +
                                       c.fan_triangle_count() + d.fan_triangle_count());
 }
@@ -646,18 +649,14 @@ TEST_P(PairConfigs, WatertightClosedSphere) {
 }
 
 TEST_P(PairConfigs, ProceduralTerrain) {
-  PolyMesh m;
-  try {
-    m = make_terrain(64);
-  } catch (const Error& e) {
-    GTEST_SKIP() << "make_terrain not available yet: " << e.what();
-  }
+  const PolyMesh m = make_terrain(64);
   Scene s = Scene::build(m, BuildOptions::from_config(GetParam()));
   std::string why;
   ASSERT_TRUE(s.validate(&why)) << why;
   Agreement a = compare_with_reference(s, {&m}, 1500, 4);
   EXPECT_EQ(a.agree, a.rays);
-  EXPECT_GE(a.same_face, a.hits * 99 / 100);
+  EXPECT_EQ(a.same_face + a.ties, a.hits) << GetParam() << ":" << a.wrong;
+  EXPECT_LE(a.ties, a.hits / 200) << GetParam();
   if (!window2()) {
     EXPECT_EQ(detail(s, "prescan_skipped"), 1.0);  // all quads, in order
   }
@@ -751,14 +750,9 @@ TEST(PairScene, Pair4BlockSize) {
 class PairScans : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(PairScans, IrregularScansReach89Percent) {
-  SLIM_REQUIRE_SHARED_DATA();
-  std::string path = shared_data_dir() + "/" + GetParam();
-  PolyMesh m;
-  try {
-    m = load(path);
-  } catch (const Error& e) {
-    GTEST_SKIP() << "cannot load " << path << " (loader not ready?): " << e.what();
-  }
+  const std::string path = shared_data_dir() + "/" + GetParam();
+  SLIM_REQUIRE_SHARED_FILE(path);
+  const PolyMesh m = load(path);
   PairingStats s = pairing_stats(m);
   EXPECT_GE(s.paired_fraction, 0.89) << GetParam();
   EXPECT_GT(s.paired_fraction, s.window2_paired_fraction) << GetParam();

@@ -276,17 +276,6 @@ TEST(RenderPsnr, IdenticalNoisyAndMismatched) {
 // ---- rendering (needs slim::Scene) ----
 
 namespace {
-// Builds the scene, or skips the test while Scene::build is not available.
-bool try_build(const slim::PolyMesh& mesh, slim::Scene& scene, const std::string& config) {
-  try {
-    scene = slim::Scene::build(mesh, slim::BuildOptions::from_config(config));
-    return true;
-  } catch (const slim::Error& e) {
-    std::string what = e.what();
-    if (what.find("not implemented") != std::string::npos) return false;
-    throw;
-  }
-}
 
 size_t count_not(const Image& img, Vec3f bg) {
   size_t n = 0;
@@ -298,8 +287,7 @@ size_t count_not(const Image& img, Vec3f bg) {
 
 TEST(RenderScene, TerrainNormalsKindDiffuse) {
   slim::PolyMesh mesh = slim::make_terrain(64);
-  slim::Scene scene;
-  if (!try_build(mesh, scene, "bvh8-tri4v")) GTEST_SKIP() << "Scene::build not implemented yet";
+  const slim::Scene scene = slim::Scene::build(mesh, slim::BuildOptions::from_config("bvh8-tri4v"));
   slim::RenderOptions opt;
   opt.width = opt.height = 64;
   opt.shade = slim::Shade::Normals;
@@ -382,9 +370,6 @@ TEST_F(RenderFiles, CliRejectsBadArguments) {
 }
 
 TEST_F(RenderFiles, CliRendersPng) {
-  slim::Scene scene;
-  if (!try_build(slim::make_terrain(4), scene, "bvh8-tri4v"))
-    GTEST_SKIP() << "Scene::build not implemented yet";
   std::string file = path("terrain.png");
   ASSERT_EQ(run_cli("render terrain:16 -o " + file + " --shade normals --res 40x30 --threads 1"),
             0);

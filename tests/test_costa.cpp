@@ -833,7 +833,9 @@ TEST(CostaRender, QuantizedRendersCloseToUnquantized) {
     std::printf(
         "[ costa    ] %-26s PSNR of PFV vs uncompressed: diffuse %.2f dB, normals %.2f dB\n", f, p,
         pn);
-    EXPECT_GT(p, 30.0) << f;
+    // The paper's lowest figure (39 dB); measured here: 42-58 dB diffuse, 48-77 dB normals.
+    EXPECT_GT(p, 39.0) << f;
+    EXPECT_GT(pn, 39.0) << f;
   }
 }
 

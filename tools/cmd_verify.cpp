@@ -33,8 +33,10 @@
 //     the input crossing FAILS the configuration unless the geometry excuses it: its point lies
 //     within e of the input surface (double-precision distance to the input's fan triangles) and,
 //     if it is farther than t_ref, the ray runs along the input surface in between (grazing: the
-//     midpoint of t_ref and t lies within 2e of it) or only dips under it by less than 2e (the
-//     midpoint of t_ref and the next input crossing lies within 2e of the surface).
+//     midpoint of t_ref and t lies within 2e of it), only dips under it by less than 2e (the
+//     midpoint of t_ref and the next input crossing lies within 2e of the surface), or only
+//     touches it at t_ref (a ray aimed at a vertex or edge of a saddle: still inside the input
+//     4e past t_ref, by the parity test below).
 //
 // SCENE is anything slim::load() reads, or `sphere:L`: an icosahedron subdivided L times
 // (20 * 4^L triangles, 1 <= L <= 9) with vertices jittered radially by +-1%, closed and welded.
@@ -668,7 +670,16 @@ int cmd_verify(int argc, char** argv) {
           Ray r2 = ray;
           r2.tnear = t_ref[i];
           const Hit next = ref.intersect(r2);
-          ok[k] = next.valid() && near_surface_at(0.5 * (double(t_ref[i]) + double(next.t)));
+          if (next.valid() && near_surface_at(0.5 * (double(t_ref[i]) + double(next.t)))) {
+            ok[k] = 1;
+            return;
+          }
+          // A ray aimed at a vertex or edge may only touch the input there (a saddle, a fold):
+          // it is still inside 4e past t_ref, and the decoded surface need not be touched.
+          const double ta = double(t_ref[i]) + (4 * e + tol) / len;
+          const Vec3f after(float(ray.org.x + ta * ray.dir.x), float(ray.org.y + ta * ray.dir.y),
+                            float(ray.org.z + ta * ray.dir.z));
+          ok[k] = is_inside(ref, after);
         });
       });
       uint64_t first_unexcused = UINT64_MAX;

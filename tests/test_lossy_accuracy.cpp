@@ -399,7 +399,7 @@ TEST(LossyAccuracy, LossyGridsWithinThePerVertexBoundOnAKnownSubgridPatch) {
       // is the decoded copy of the nearest of the face's 4 input vertices.
       const GridTriangles gt = grid_triangles({&p.mesh}, opt);
       ASSERT_EQ(gt.size(), 128u);
-      const bool enc2 = opt.geometry == Geometry::LossyGridsE2;
+      const bool enc2 = opt.grid_encoding == GridEncoding::SharedExponent;
       uint64_t over = 0;
       double worst = 0, worst2 = 0;
       std::string first;

@@ -46,25 +46,19 @@ inline bool data_required() {
     if (!std::filesystem::exists(path)) SLIM_MISSING_DATA("missing shared file " << (path)); \
   } while (0)
 
-// ---- configuration properties (one place; issue 23 moves them to the configuration registry) ----
+// ---- configuration properties (the registry of slimrt/scene.h) ----
 
-// The build says "this configuration does not apply to this mesh" (slim::NotApplicable once
-// issue 23 lands). Any other error is a failure, never a skip.
+// The build says "this configuration does not apply to this mesh". Any other error is a failure,
+// never a skip.
 inline bool not_applicable(const Error& e) {
-  return std::string(e.what()).find("does not apply") != std::string::npos;
+  return dynamic_cast<const NotApplicable*>(&e) != nullptr;
 }
-// Lossy: the format moves vertices (lossy-grid*, costa-*V*; the future `cluster` config when
-// lossy). Its hits are held to lossy_error_bound() (test_lossy_accuracy.cpp).
-inline bool is_lossy_config(const std::string& c) {
-  return c.rfind("lossy-grid", 0) == 0 ||
-         (c.rfind("costa", 0) == 0 && c.find('V') != std::string::npos);
-}
-// Own geometry: the format intersects triangles of its own (decoded by grid_triangles() /
-// costa_triangles()), not the input's fan triangles: lossy grids, and costa (GLU tessellates
-// its 5+-gons even without V).
-inline bool has_own_geometry(const std::string& c) {
-  return c.rfind("lossy-grid", 0) == 0 || c.rfind("costa", 0) == 0;
-}
+// Lossy: the format moves vertices (lossy-grid*, costa-*V*). Its hits are held to the bound its
+// specification promises (test_lossy_accuracy.cpp).
+inline bool is_lossy_config(const std::string& c) { return config_info(c).lossy; }
+// Own geometry: the format intersects triangles of its own (decoded_triangles()), not the input's
+// fan triangles.
+inline bool has_own_geometry(const std::string& c) { return config_info(c).own_geometry; }
 
 // Random triangles inside the unit cube (sizes around `size`), as a PolyMesh of triangles.
 inline PolyMesh random_soup(uint32_t tris, uint32_t seed, float size = 0.05f) {

@@ -232,8 +232,8 @@ void BuildOptions::check() const {
     throw Error(
         "BuildOptions: grid_parts above 1 needs CompressedLeaf nodes (parts are "
         "multi-leaf children)");
-  if ((leaf == Leaf::CompactTriangles || leaf == Leaf::SharedLossyGrids ||
-       leaf == Leaf::Clusters || leaf == Leaf::LosslessClusters) &&
+  if ((leaf == Leaf::CompactTriangles || leaf == Leaf::SharedLossyGrids || leaf == Leaf::Clusters ||
+       leaf == Leaf::LosslessClusters) &&
       nodes != Nodes::CompressedLeaf)
     throw Error("BuildOptions: leaf " + std::string(leaf_name(leaf)) +
                 " lives in multi-leaf nodes: it needs nodes = CompressedLeaf");

@@ -299,9 +299,8 @@ ClusterTriangles cluster_triangles(const std::vector<const PolyMesh*>& meshes,
 std::unique_ptr<Scene::Impl> build_cluster_scene(const std::vector<const PolyMesh*>& meshes,
                                                  const BuildOptions& opt) {
   TriangleMesh tm = triangulate_fan(meshes);
-  std::unique_ptr<Scene::Impl> s = opt.leaf == Leaf::LosslessClusters
-                                       ? build_with<true>(tm, opt)
-                                       : build_with<false>(tm, opt);
+  std::unique_ptr<Scene::Impl> s =
+      opt.leaf == Leaf::LosslessClusters ? build_with<true>(tm, opt) : build_with<false>(tm, opt);
   s->stats.input_faces = tm.input_faces;
   s->stats.triangles = tm.input_triangles;
   s->stats.skipped_faces = tm.skipped_faces;

@@ -4,7 +4,7 @@
 # Builds the libFuzzer targets of fuzz/ with clang, ASan and UBSan in ./build-fuzz, writes the seed
 # corpus (fuzz/seed_files.h, generated now: no mesh file is kept in git) and runs each target for
 # SECONDS (default 30), one after the other. TARGET names (obj ply gltf glb xz, and the decoder
-# and algorithm targets lossy_subgrid, quantized_mesh, pairing) restrict the run; default: every
+# and algorithm targets lossy_subgrid, quantized_mesh, pairing, cluster) restrict the run; default: every
 # target built.
 #
 #   fuzz-out/seeds/<target>/    the generated seeds (rewritten each run)

@@ -1,4 +1,5 @@
 // slimrt info SCENE [--json] [--accel CONFIG] [--pairs [--repeat K]] [--costa] [--grids]
+//                   [--clusters [--cluster-error E]]
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <nlohmann/json.hpp>
@@ -20,7 +21,8 @@ nlohmann::json box_json(const Box3f& b) {
 int cmd_info(int argc, char** argv) {
   CLI::App app{"slimrt info: statistics of a scene (a mesh file or terrain:N/torus:N/canyon:N)"};
   std::string scene_name, accel;
-  bool json = false, pairs = false, costa = false, grids = false;
+  bool json = false, pairs = false, costa = false, grids = false, clusters = false;
+  double cluster_error = BuildOptions().cluster_error;
   app.add_option("scene", scene_name, "mesh file or procedural scene")->required();
   app.add_flag("--json", json, "print one JSON object");
   app.add_option("--accel", accel, "build this configuration and print its statistics");
@@ -33,6 +35,11 @@ int cmd_info(int argc, char** argv) {
       ->needs("--pairs");
   app.add_flag("--costa", costa, "quantized n-gon mesh sizes (Costa et al.)");
   app.add_flag("--grids", grids, "grid conversion and lossy grid error statistics");
+  // Issue 26: the compressed triangle clusters' figures.
+  app.add_flag("--clusters", clusters, "compressed triangle clusters (cluster, cluster-lossless)");
+  app.add_option("--cluster-error", cluster_error,
+                 "--clusters: the lossy error bound, a fraction of the box diagonal")
+      ->needs("--clusters");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -105,6 +112,27 @@ int cmd_info(int argc, char** argv) {
   if (pairs) info_pairs(mesh, json, repeat, out);
   if (costa) info_costa(mesh, json, out);
   if (grids) info_grids(mesh, json, out);
+  if (clusters) {
+    for (const char* config : {"cluster", "cluster-lossless"}) {
+      BuildOptions opt = BuildOptions::from_config(config);
+      opt.cluster_error = cluster_error;
+      Scene scene = Scene::build(mesh, opt);
+      const MemoryStats m = scene.memory();
+      nlohmann::json c;
+      c["triangles"] = m.triangles;
+      c["build_s"] = scene.stats().build_seconds;
+      c["bytes_per_triangle"] = m.bytes_per_triangle();
+      for (const auto& [k, v] : scene.stats().details) c[k] = v;
+      if (!json) {
+        std::printf("\n%s: %.2f B/triangle (geometry %.2f, BVH %.2f)\n", config,
+                    m.bytes_per_triangle(), double(m.geometry_bytes) / double(m.triangles),
+                    double(m.bvh_bytes) / double(m.triangles));
+        for (const auto& [k, v] : scene.stats().details)
+          std::printf("  %-28s %.6g\n", k.c_str(), v);
+      }
+      out["clusters"][config] = c;
+    }
+  }
   if (json) std::printf("%s\n", out.dump(2).c_str());
   return 0;
 }

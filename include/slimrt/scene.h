@@ -44,6 +44,10 @@ enum class Leaf : uint8_t {
   LossyGrids,        // 128-byte lossy sub-grids (bilinear patch + 21 quantized displacements)
   SharedLossyGrids,  // 68-byte lossy sub-grids over shared corner lattices (CompressedLeaf only)
   Costa,             // quantized n-gon mesh (letters in BuildOptions::costa)
+  // Compressed triangle clusters (issue 26, prim/cluster.h; CompressedLeaf only): positions on one
+  // scene-wide lattice within BuildOptions::cluster_error, or exact floats.
+  Clusters,
+  LosslessClusters,
 };
 
 // Displacement encoding of the lossy sub-grids (Benthin et al., "Ray Tracing Lossy Compressed Grid
@@ -109,6 +113,9 @@ struct BuildOptions {
   int sah_bins = 32;      // binned SAH: bins per axis (2..64)
   int max_leaf_size = 4;  // primitives per leaf (triangles; pairs and sub-grids use their own)
   int threads = 0;        // build threads; 0 = all cores
+  // Leaf::Clusters: every vertex lies within this fraction of the scene's box diagonal of its
+  // input position (the lattice step is the largest power of two meeting it).
+  double cluster_error = 1e-5;
 
   // The options of a registry row ("bvh8-tri4v", "clbvh-compact", "lossy-grid", "costa-PFV",
   // ...). Throws slim::Error for an unknown name, listing the known ones.

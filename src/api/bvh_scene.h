@@ -3,6 +3,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -115,8 +116,15 @@ class BvhScene : public Scene::Impl {
 
   // Builds the BVH over `prim_count` primitives of `src` (Leaf::encode, Leaf::source_key and
   // Leaf::source_bounds read it), fills bvh, expected, bounds and the BVH part of stats/mem.
+  // Optional hooks (cluster formats, issue 26): the BVH2's leaf shape, and a pass that restructures
+  // the BVH2 before the collapse.
+  struct Bvh2Hooks {
+    uint32_t max_leaf_size = 0, block_prims = 0;  // override the BVH2 config when nonzero
+    std::function<void(Bvh2&)> reshape;
+  };
   template <class Source>
-  void build(const Source& src, uint32_t prim_count, const BuildOptions& opt) {
+  void build(const Source& src, uint32_t prim_count, const BuildOptions& opt,
+             const Bvh2Hooks& hooks = {}) {
     using clock = std::chrono::steady_clock;
     auto secs = [](clock::time_point a) {
       return std::chrono::duration<double>(clock::now() - a).count();
@@ -137,8 +145,11 @@ class BvhScene : public Scene::Impl {
     cfg.max_leaf_size = std::max<uint32_t>(
         1, std::min<uint32_t>(opt.max_leaf_size, Leaf::kBlockPrims * kMaxLeafBlocks));
     cfg.block_prims = Leaf::kBlockPrims;
+    if (hooks.max_leaf_size) cfg.max_leaf_size = hooks.max_leaf_size;
+    if (hooks.block_prims) cfg.block_prims = hooks.block_prims;
     cfg.threads = opt.threads;
     Bvh2 b2 = build_bvh2(prim_count, fill, cfg);
+    if (hooks.reshape) hooks.reshape(b2);
     expected = Fingerprint{};
     for (const Fingerprint& f : keys) expected.merge(f);
     double bvh2_s = secs(t0);

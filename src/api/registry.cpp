@@ -10,6 +10,7 @@
 
 #include "core/simd.h"
 #include "slimrt/analysis.h"
+#include "slimrt/clusters.h"
 #include "slimrt/scene.h"
 
 namespace slim {
@@ -21,12 +22,18 @@ namespace {
 void describe_format(ConfigInfo& c) {
   const BuildOptions& o = c.options;
   c.lossy = o.leaf == Leaf::LossyGrids || o.leaf == Leaf::SharedLossyGrids ||
+            o.leaf == Leaf::Clusters ||
             (o.leaf == Leaf::Costa && o.costa.find('V') != std::string::npos);
   // Costa splits n-gons of 5+ corners with GLU's tessellator, not into fans. Every grid triangle
   // is a fan triangle of the input (cells keep the fan's diagonal, mesh/grids.h).
   c.own_geometry = c.lossy || o.leaf == Leaf::Costa;
   if (!c.lossy)
     c.error_bound = "0 (positions are stored exactly)";
+  else if (o.leaf == Leaf::Clusters)  // issue 26
+    c.error_bound =
+        "the largest |decoded - input| over the vertices, measured at build (at most "
+        "BuildOptions::cluster_error x the box diagonal unless the lattice had to be coarsened: "
+        "detail lattice_coarsened)";
   else if (o.leaf == Leaf::Costa)
     c.error_bound =
         "the largest |decoded - input| over the vertices, measured at build (16 bits per "
@@ -99,6 +106,11 @@ std::vector<ConfigInfo> make_rows() {
                      "128-byte lossy sub-grids under the quantized BVH8"),
       lossy_grid_row("lossy-grid-shared", Nodes::CompressedLeaf, Leaf::SharedLossyGrids,
                      GridEncoding::Octahedral, "68-byte lossy sub-grids over shared corners"),
+      // Issue 26: compressed triangle clusters (prim/cluster.h), one per multi-leaf.
+      row("cluster", Nodes::CompressedLeaf, Leaf::Clusters,
+          "compressed triangle clusters on one scene-wide lattice (lossy, cluster_error)"),
+      row("cluster-lossless", Nodes::CompressedLeaf, Leaf::LosslessClusters,
+          "compressed triangle clusters, exact floats"),
   };
   for (const char* t : {"", "T"})
     for (const char* c : {"", "P", "F", "V", "PF", "PV", "FV", "PFV"})
@@ -163,6 +175,10 @@ const char* leaf_name(Leaf l) {
       return "lossy-grid-shared";
     case Leaf::Costa:
       return "costa";
+    case Leaf::Clusters:
+      return "cluster";
+    case Leaf::LosslessClusters:
+      return "cluster-lossless";
   }
   return "?";
 }
@@ -216,7 +232,8 @@ void BuildOptions::check() const {
     throw Error(
         "BuildOptions: grid_parts above 1 needs CompressedLeaf nodes (parts are "
         "multi-leaf children)");
-  if ((leaf == Leaf::CompactTriangles || leaf == Leaf::SharedLossyGrids) &&
+  if ((leaf == Leaf::CompactTriangles || leaf == Leaf::SharedLossyGrids || leaf == Leaf::Clusters ||
+       leaf == Leaf::LosslessClusters) &&
       nodes != Nodes::CompressedLeaf)
     throw Error("BuildOptions: leaf " + std::string(leaf_name(leaf)) +
                 " lives in multi-leaf nodes: it needs nodes = CompressedLeaf");
@@ -260,6 +277,9 @@ SceneBuilder builder_of(Leaf leaf) {
       return build_grid_scene;
     case Leaf::Costa:
       return build_costa_scene;
+    case Leaf::Clusters:
+    case Leaf::LosslessClusters:
+      return build_cluster_scene;
   }
   throw Error("BuildOptions: unknown leaf format " + std::to_string(int(leaf)));
 }
@@ -274,6 +294,7 @@ std::optional<DecodedTriangles> decoded_triangles(const std::vector<const PolyMe
     return std::nullopt;
   }
   if (opt.leaf == Leaf::Costa) return costa_triangles(meshes, opt);
+  if (opt.leaf == Leaf::Clusters) return DecodedTriangles(cluster_triangles(meshes, opt));
   return grid_triangles(meshes, opt);
 }
 

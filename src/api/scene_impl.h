@@ -37,5 +37,7 @@ std::unique_ptr<Scene::Impl> build_grid_scene(const std::vector<const PolyMesh*>
                                               const BuildOptions& opt);  // scene_grids.cpp
 std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*>& meshes,
                                                const BuildOptions& opt);  // scene_costa.cpp
+std::unique_ptr<Scene::Impl> build_cluster_scene(const std::vector<const PolyMesh*>& meshes,
+                                                 const BuildOptions& opt);  // scene_clusters.cpp
 
 }  // namespace slim

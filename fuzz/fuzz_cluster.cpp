@@ -1,0 +1,132 @@
+// libFuzzer target: the compressed triangle cluster block (src/prim/cluster.h, issue 26).
+//
+// Input bytes:
+//   [0]      bits 0-2: children - 1 (1..8); bit 3: lossless; bits 4-7: round-trip triangles / 4
+//   [1..]    a cluster block, any bits (the decoder's input), as long as the rest of the input
+// Checks:
+//   1. cluster::check() either rejects the block or accepts one that the decoders read only
+//      inside its bytes plus kClusterReadSlack (ASan: the block is copied to an exact-size
+//      buffer), for every child, with ids of every triangle;
+//   2. round trip: the input bytes as vertex codes and a topology of up to 63 triangles in up to 8
+//      children: encode(), check() accepts it, and every child decodes to the codes' positions and
+//      the ids bit for bit.
+#include <algorithm>
+#include <cstdint>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "fuzz_common.h"
+#include "prim/cluster.h"
+
+namespace {
+
+using namespace slim;
+using fuzz::Reader;
+
+template <bool kLossless>
+void decode_all(const uint8_t* block, uint32_t children) {
+  ClusterLattice lat;
+  lat.origin[0] = 1.0f;
+  lat.step = 0.25f;
+  ClusterHeader h;
+  std::memcpy(&h, block, sizeof(h));
+  for (uint32_t c = 0; c < children; ++c) {
+    cluster::Decoded8 d;
+    cluster::decode_child<kLossless>(lat, block, int(c), d);
+    SLIM_FUZZ_CHECK(d.n >= 1 && d.n <= 8, "child size");
+    for (int l = 0; l < d.n; ++l) {
+      uint32_t g, p;
+      cluster::decode_ids(block, uint32_t(d.first + l), g, p);
+      SLIM_FUZZ_CHECK(p - h.prim_base < (uint64_t(1) << h.pb), "prim offset width");
+    }
+  }
+}
+
+void round_trip(Reader& in, uint32_t ntris, bool lossless) {
+  // Up to 64 distinct vertices with codes from the input (lossy: below 2^24).
+  const uint32_t nv = 1 + in.byte() % 64;
+  std::vector<uint32_t> codes(3 * nv);
+  std::vector<Vec3f> decoded(nv);
+  ClusterLattice lat;
+  lat.origin[1] = -3.0f;
+  lat.step = 0.5f;
+  for (uint32_t i = 0; i < nv; ++i)
+    for (int a = 0; a < 3; ++a) {
+      uint32_t c = 0;
+      in.bytes(&c, 4);
+      if (!lossless) c &= (1u << 24) - 1;
+      codes[3 * i + a] = c;
+      decoded[i][a] = lossless ? cluster::key_float(c) : cluster::lattice_coord(lat, a, c);
+    }
+  std::vector<uint32_t> tris(3 * ntris), geom(ntris), prim(ntris), order(ntris);
+  for (uint32_t t = 0; t < ntris; ++t) {
+    for (int k = 0; k < 3; ++k) tris[3 * t + k] = in.byte() % nv;
+    in.bytes(&prim[t], 4);
+    geom[t] = in.byte() & 3;
+    order[t] = t;
+  }
+  ClusterSource src;
+  src.vertices = decoded.data();
+  src.codes = codes.data();
+  src.tris = tris.data();
+  src.geom_ids = geom.data();
+  src.prim_ids = prim.data();
+  src.lossless = lossless;
+  const uint32_t* prims[8];
+  uint32_t counts[8];
+  int k = 0;
+  for (uint32_t pos = 0; pos < ntris && k < 8; ++k) {
+    counts[k] = std::min<uint32_t>(1 + in.byte() % 8, ntris - pos);
+    prims[k] = &order[pos];
+    pos += counts[k];
+  }
+  std::vector<uint8_t> block = cluster::encode(src, prims, counts, k, true);
+  std::string why;
+  SLIM_FUZZ_CHECK(
+      cluster::check(block.data(), block.size() - kClusterReadSlack, uint32_t(k), lossless, &why),
+      why);
+  for (int c = 0; c < k; ++c) {
+    cluster::Decoded8 d;
+    if (lossless)
+      cluster::decode_child<true>(lat, block.data(), c, d);
+    else
+      cluster::decode_child<false>(lat, block.data(), c, d);
+    SLIM_FUZZ_CHECK(d.n == int(counts[c]), "child size");
+    for (int l = 0; l < d.n; ++l) {
+      const uint32_t t = prims[c][l];
+      for (int j = 0; j < 3; ++j)
+        for (int a = 0; a < 3; ++a)
+          SLIM_FUZZ_CHECK(fuzz::same_bits(d.v[j][a][l], decoded[tris[3 * t + j]][a]),
+                          "vertex bits");
+      uint32_t g, p;
+      cluster::decode_ids(block.data(), uint32_t(d.first + l), g, p);
+      SLIM_FUZZ_CHECK(g == geom[t] && p == prim[t], "ids");
+    }
+  }
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  if (size < 1) return 0;
+  const uint8_t mode = data[0];
+  const uint32_t children = 1 + (mode & 7);
+  const bool lossless = mode & 8;
+  // 1. The rest of the input as a block, in a buffer of exactly its size plus the read slack.
+  std::vector<uint8_t> block(data + 1, data + size);
+  const size_t n = block.size();
+  block.resize(n + kClusterReadSlack, 0);
+  block.shrink_to_fit();
+  if (cluster::check(block.data(), n, children, lossless, nullptr)) {
+    if (lossless)
+      decode_all<true>(block.data(), children);
+    else
+      decode_all<false>(block.data(), children);
+  }
+  // 2. Round trip.
+  Reader in{data + 1, size - 1};
+  const uint32_t ntris = 1 + std::min<uint32_t>(62, 4 * (mode >> 4) + in.byte() % 4);
+  round_trip(in, ntris, lossless);
+  return 0;
+}

@@ -1,0 +1,311 @@
+// Compressed triangle clusters: `cluster` (lossy, one scene-wide power-of-two lattice) and
+// `cluster-lossless` (exact floats). Format: prim/cluster.h.
+//
+// Clusters come from the SAH BVH2, built with leaves of up to 63 triangles (the multi-leaf limit
+// of the compressed-leaf BVH, < 8 x 8) whose SAH cost counts one block per leaf, so that leaves
+// come out near that size: every maximal subtree of at most 63 triangles (in practice a leaf) is
+// one cluster (49-52 triangles on average on the benchmark scenes); its triangles are re-split by
+// SAH into at most 8 leaves of at most 8 triangles (left sizes multiples of 8, so that ceil(n / 8)
+// leaves suffice), and the collapse turns each such subtree into one multi-leaf whose data is
+// the cluster (LeafEncoder::encode_multileaf).
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <stdexcept>
+#include <unordered_map>
+
+#include <tbb/parallel_for.h>
+
+#include "api/bvh_scene.h"
+#include "mesh/triangulate.h"
+#include "prim/cluster.h"
+#include "slimrt/clusters.h"
+
+namespace slim {
+
+namespace {
+
+constexpr uint32_t kClusterMax = 63;  // < 8 x kBlockPrims (bvh8.cpp multileaf_candidate)
+
+// Re-cuts the BVH2 into clusters (see the file comment). The clusters are split and encoded in
+// parallel; encode_multileaf then takes each cluster's block from ClusterSource::encoded.
+class ClusterReshaper {
+ public:
+  ClusterReshaper(const Bvh2& in, ClusterSource& src) : in_(in), src_(src) {}
+
+  Bvh2 run() {
+    Bvh2 out;
+    if (in_.nodes.size() == 0) return out;
+    count_.assign(in_.nodes.size(), 0);
+    count(0);
+    nodes_.push_back({});
+    upper(0, 0, 0);
+    // Each cluster on its own: local nodes (index 0 = the cluster root) and prims.
+    std::vector<Local> local(roots_.size());
+    tbb::parallel_for(size_t(0), roots_.size(), [&](size_t c) {
+      Local& l = local[c];
+      std::vector<uint32_t> v;
+      collect(roots_[c].in, v);
+      std::vector<Item> items(v.size());
+      for (size_t k = 0; k < v.size(); ++k) {
+        items[k].prim = v[k];
+        items[k].box = tri_box(v[k]);
+        items[k].c = items[k].box.center();
+      }
+      l.nodes.push_back({});
+      // A whole scene of at most 8 triangles is one leaf (no box test, as the other formats).
+      const bool whole = roots_[c].depth == 0 && items.size() <= 8;
+      l.depth = split(l, items, 0, uint32_t(items.size()), 0, !whole);
+      if (l.nodes.size() > 1) {  // a multi-leaf: its block, keyed by its first triangle
+        // Children in depth-first order (the collapse's order): their prims are consecutive.
+        const uint32_t* prims[8];
+        uint32_t counts[8];
+        int k = 0;
+        for (uint32_t first = 0; first < l.prims.size(); ++k)
+          for (const Bvh2Node& n : l.nodes)
+            if (n.is_leaf() && n.first == first) {
+              prims[k] = &l.prims[n.first];
+              counts[k] = n.count;
+              first += n.count;
+              break;
+            }
+        l.block = cluster::encode(src_, prims, counts, k, false);
+      }
+    });
+    // Append them (serial), moving each block into the source's cache.
+    for (size_t c = 0; c < roots_.size(); ++c) {
+      Local& l = local[c];
+      const uint32_t nbase = uint32_t(nodes_.size()) - 1, pbase = uint32_t(prims_.size());
+      for (size_t k = 0; k < l.nodes.size(); ++k) {
+        Bvh2Node n = l.nodes[k];
+        n.first += n.is_leaf() ? pbase : nbase;
+        if (k == 0)
+          nodes_[roots_[c].out] = n;
+        else
+          nodes_.push_back(n);
+      }
+      if (!l.block.empty()) (*src_.encoded)[l.prims[0]] = {l.prims, std::move(l.block)};
+      prims_.insert(prims_.end(), l.prims.begin(), l.prims.end());
+      depth_ = std::max(depth_, roots_[c].depth + l.depth);
+    }
+    out.nodes = LargeArray<Bvh2Node>(nodes_.size());
+    std::copy(nodes_.begin(), nodes_.end(), out.nodes.data());
+    out.prim_ids = LargeArray<uint32_t>(prims_.size());
+    std::copy(prims_.begin(), prims_.end(), out.prim_ids.data());
+    out.depth = depth_;
+    return out;
+  }
+
+ private:
+  struct Item {
+    uint32_t prim;
+    Box3f box;
+    Vec3f c;
+  };
+  struct Local {
+    std::vector<Bvh2Node> nodes;
+    std::vector<uint32_t> prims;
+    std::vector<uint8_t> block;
+    int depth = 0;
+  };
+  struct Root {
+    uint32_t in, out;
+    int depth;
+  };
+  const Bvh2& in_;
+  ClusterSource& src_;
+  std::vector<uint32_t> count_;
+  std::vector<Bvh2Node> nodes_;
+  std::vector<uint32_t> prims_;
+  std::vector<Root> roots_;
+  int depth_ = 0;
+
+  uint32_t count(uint32_t i) {
+    const Bvh2Node& n = in_.nodes[i];
+    return count_[i] = n.is_leaf() ? n.count : count(n.first) + count(n.first + 1);
+  }
+  void collect(uint32_t i, std::vector<uint32_t>& v) const {
+    const Bvh2Node& n = in_.nodes[i];
+    if (n.is_leaf()) {
+      for (uint32_t k = 0; k < n.count; ++k) v.push_back(in_.prim_ids[n.first + k]);
+      return;
+    }
+    collect(n.first, v);
+    collect(n.first + 1, v);
+  }
+  Box3f tri_box(uint32_t t) const {
+    Box3f b;
+    for (int k = 0; k < 3; ++k) b.extend(src_.vertices[src_.tris[3 * size_t(t) + k]]);
+    return b;
+  }
+
+  // The nodes above the clusters, each cluster root remembered for the parallel pass.
+  void upper(uint32_t i, uint32_t idx, int depth) {
+    const Bvh2Node& n = in_.nodes[i];
+    if (count_[i] <= kClusterMax) {
+      roots_.push_back({i, idx, depth});
+      return;
+    }
+    if (n.is_leaf()) throw std::logic_error("cluster: BVH2 leaf beyond the cluster size");
+    const uint32_t c = uint32_t(nodes_.size());
+    nodes_[idx] = {n.box, c, 0};
+    nodes_.resize(c + 2);
+    depth_ = std::max(depth_, depth + 1);
+    upper(n.first, c, depth + 1);
+    upper(n.first + 1, c + 1, depth + 1);
+  }
+
+  // Items [b, e) of one cluster into local node idx; returns the subtree depth.
+  int split(Local& l, std::vector<Item>& it, uint32_t b, uint32_t e, uint32_t idx,
+            bool root) const {
+    const uint32_t n = e - b;
+    Box3f box;
+    for (uint32_t k = b; k < e; ++k) box.extend(it[k].box);
+    if (n == 1 || (n <= 8 && !root)) {
+      l.nodes[idx] = {box, uint32_t(l.prims.size()), n};
+      for (uint32_t k = b; k < e; ++k) l.prims.push_back(it[k].prim);
+      return 0;
+    }
+    // SAH over the left sizes allowed: any when n <= 8 (the cluster root must be an inner node to
+    // become a multi-leaf), else multiples of 8.
+    const uint32_t unit = n <= 8 ? 1 : 8;
+    float best = kInf;
+    int best_axis = 0;
+    uint32_t best_left = unit;
+    Box3f right[kClusterMax + 1];
+    for (int a = 0; a < 3; ++a) {
+      std::sort(it.begin() + b, it.begin() + e,
+                [a](const Item& x, const Item& y) { return x.c[a] < y.c[a]; });
+      right[n] = Box3f();
+      for (uint32_t k = n; k-- > 0;) {
+        right[k] = right[k + 1];
+        right[k].extend(it[b + k].box);
+      }
+      Box3f left;
+      for (uint32_t k = 0; k + 1 < n; ++k) {
+        left.extend(it[b + k].box);
+        const uint32_t nl = k + 1;
+        if (nl % unit) continue;
+        const float cost = left.half_area() * float((nl + 7) / 8) +
+                           right[nl].half_area() * float((n - nl + 7) / 8);
+        if (cost < best) {
+          best = cost;
+          best_axis = a;
+          best_left = nl;
+        }
+      }
+    }
+    std::sort(it.begin() + b, it.begin() + e, [best_axis](const Item& x, const Item& y) {
+      return x.c[best_axis] < y.c[best_axis];
+    });
+    const uint32_t c = uint32_t(l.nodes.size());
+    l.nodes[idx] = {box, c, 0};
+    l.nodes.resize(c + 2);
+    const int d0 = split(l, it, b, b + best_left, c, false);
+    const int d1 = split(l, it, b + best_left, e, c + 1, false);
+    return 1 + std::max(d0, d1);
+  }
+};
+
+template <bool kLossless>
+std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& opt) {
+  using Leaf = ClusterLeaf<kLossless>;
+  auto s = std::make_unique<BvhScene<Leaf>>();
+  auto z = std::make_shared<cluster::Quantized>(
+      cluster::quantize(tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(),
+                        opt.cluster_error, kLossless));
+  const ClusterLattice& lat = z->lattice;
+  auto side = std::make_shared<std::vector<uint8_t>>();
+  std::mutex side_mutex;
+  cluster::EncodeStats est;
+  ClusterSource src;
+  src.vertices = z->decoded.data();
+  src.codes = z->codes.data();
+  src.tris = tm.tris.data();
+  src.geom_ids = tm.geom_ids.data();
+  src.prim_ids = tm.prim_ids.data();
+  src.lossless = kLossless;
+  src.side = side.get();
+  src.side_mutex = &side_mutex;
+  src.stats = &est;
+  std::unordered_map<uint32_t, std::pair<std::vector<uint32_t>, std::vector<uint8_t>>> encoded;
+  src.encoded = &encoded;
+  BuildOptions o = opt;
+  o.nodes = Nodes::CompressedLeaf;
+  o.max_leaf_size = 8;
+  // The BVH2's leaves are the clusters: the SAH leaf cost counts whole clusters of up to 63
+  // triangles, so leaves come out near that size; reshape then splits each into its children.
+  typename BvhScene<Leaf>::Bvh2Hooks hooks;
+  hooks.max_leaf_size = hooks.block_prims = kClusterMax;
+  hooks.reshape = [&](Bvh2& b2) { b2 = ClusterReshaper(b2, src).run(); };
+  s->build(src, uint32_t(tm.tri_count()), o, hooks);
+  // The decoders' 64-bit loads may read up to kClusterReadSlack bytes past a cluster's data.
+  s->bvh.leaves.append(kClusterReadSlack, 1);
+  side->resize(side->size() + kClusterReadSlack, 0);
+  side->shrink_to_fit();
+  s->ctx.lattice = lat;
+  s->ctx.side = side->data();
+  s->keepalive = side;
+  s->mem.geometry_bytes += side->size();
+  s->error_bound = z->max_error;  // Scene::error_bound(); 0 for cluster-lossless
+
+  const double tris = double(std::max<uint64_t>(est.triangles, 1));
+  const double in_tris = double(std::max<uint64_t>(tm.input_triangles, 1));
+  auto& d = s->stats.details;
+  d.emplace_back("clusters", double(est.clusters));
+  d.emplace_back("avg_triangles_per_cluster", est.clusters ? tris / double(est.clusters) : 0);
+  d.emplace_back("vertices_per_triangle", double(est.vertices) / tris);
+  d.emplace_back("geometry_bytes_per_triangle", double(s->mem.geometry_bytes) / in_tris);
+  d.emplace_back("bvh_bytes_per_triangle", double(s->mem.bvh_bytes) / in_tris);
+  d.emplace_back("position_bits_avg",
+                 est.vertices ? double(est.position_bits) / (3.0 * double(est.vertices)) : 0);
+  d.emplace_back("position_bits_per_triangle", double(est.position_bits) / tris);
+  d.emplace_back("topology_bits_per_triangle", double(est.topology_bits) / tris);
+  d.emplace_back("id_bits_per_triangle", double(est.id_bits) / tris);
+  d.emplace_back("header_bits_per_triangle", 8.0 * double(est.header_bytes) / tris);
+  d.emplace_back("lattice_step", kLossless ? 0.0 : double(lat.step));
+  d.emplace_back("lattice_coarsened", z->coarsened ? 1.0 : 0.0);
+  d.emplace_back("max_error", z->max_error);
+  d.emplace_back("max_error_diag_pct", z->diag > 0 ? 100.0 * z->max_error / z->diag : 0.0);
+  d.emplace_back("rms_error", z->rms_error);
+  // The lossy grids' names for the same figures (bench's error columns).
+  d.emplace_back("diag_avg_pct", z->diag > 0 ? 100.0 * z->mean_error / z->diag : 0.0);
+  d.emplace_back("diag_max_pct", z->diag > 0 ? 100.0 * z->max_error / z->diag : 0.0);
+  return s;
+}
+
+}  // namespace
+
+ClusterTriangles cluster_triangles(const std::vector<const PolyMesh*>& meshes,
+                                   const BuildOptions& opt) {
+  for (const PolyMesh* m : meshes) check_mesh(*m);
+  if (opt.leaf != Leaf::Clusters && opt.leaf != Leaf::LosslessClusters)
+    throw Error("cluster_triangles: " + opt.config_name() + " is not a cluster configuration");
+  TriangleMesh tm = triangulate_fan(meshes);
+  const cluster::Quantized z =
+      cluster::quantize(tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(),
+                        opt.cluster_error, opt.leaf == Leaf::LosslessClusters);
+  ClusterTriangles t;
+  t.vertices.reserve(3 * tm.tri_count());
+  for (size_t i = 0; i < tm.tri_count(); ++i) {
+    for (int k = 0; k < 3; ++k) t.vertices.push_back(z.decoded[tm.tris[3 * i + k]]);
+    t.geom.push_back(tm.geom_ids[i]);
+    t.face.push_back(tm.prim_ids[i]);
+  }
+  t.max_error = z.max_error;
+  return t;
+}
+
+std::unique_ptr<Scene::Impl> build_cluster_scene(const std::vector<const PolyMesh*>& meshes,
+                                                 const BuildOptions& opt) {
+  TriangleMesh tm = triangulate_fan(meshes);
+  std::unique_ptr<Scene::Impl> s =
+      opt.leaf == Leaf::LosslessClusters ? build_with<true>(tm, opt) : build_with<false>(tm, opt);
+  s->stats.input_faces = tm.input_faces;
+  s->stats.triangles = tm.input_triangles;
+  s->stats.skipped_faces = tm.skipped_faces;
+  s->mem.triangles = tm.input_triangles;
+  return s;
+}
+
+}  // namespace slim

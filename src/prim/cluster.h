@@ -1,0 +1,411 @@
+// Compressed triangle clusters (configurations `cluster` and `cluster-lossless`), after AMD's Dense
+// Geometry Format (DGF, HPG 2024): positions on one scene-wide integer lattice with a power-of-two
+// step, each cluster an anchor plus per-axis bit widths and bit-packed offsets, local vertex
+// indices as topology, and ids stored as small offsets from a per-cluster base.
+//
+// A cluster is one multi-leaf of the compressed-leaf BVH (bvh8.h): its 72-byte header holds the
+// quantized boxes of up to 8 children of up to 8 triangles each (one 8-wide watertight test per
+// child); the cluster data follows it:
+//   ClusterHeader (36 B)
+//   bit stream, LSB first from the byte after the header:
+//     topology: 3 local vertex indices per triangle, `ib` bits each (triangles in child order)
+//     vertices: per vertex bx + by + bz bits (offsets from the anchor)
+//     ids:      per triangle pb bits (primID - prim_base) then gb bits (geomID - geom_base)
+// A child's triangles are [end[i-1], end[i]) (end[-1] = 0). Children with fewer than 8 triangles
+// repeat their last triangle in the padding lanes (the duplicate gives the same hit).
+//
+// Lossy (`cluster`): a vertex's code is its lattice integer q = round((x - origin) / step) per
+// axis, decoded as origin + float(q) * step. Every cluster decodes a vertex with the same float
+// operations from the same integer (the product is exact: q < 2^24, step a power of two), so a
+// vertex shared by clusters decodes bit-identically in all of them and the watertight test
+// (core/watertight.h) sees one closed surface.
+// Lossless (`cluster-lossless`): the code is the float's bit pattern mapped to an order-preserving
+// unsigned integer, so the per-cluster offsets are the low bits below the shared high bits.
+//
+// An isolated BVH leaf (a one-triangle cluster, or a whole scene of at most 8 triangles) is an
+// 8-byte block holding the offset of a one-child cluster record in the scene's side arena
+// (Context::side).
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <cstring>
+#include <mutex>
+#include <string>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "core/ray.h"
+#include "core/simd.h"
+#include "core/watertight.h"
+#include "prim/triangles.h"
+#include "slimrt/math.h"
+#include "slimrt/scene.h"
+
+namespace slim {
+
+// The scene-wide lattice of the lossy variant.
+struct ClusterLattice {
+  float origin[3] = {0, 0, 0};
+  float step = 1.0f;  // a power of two
+};
+
+struct ClusterHeader {
+  uint8_t nverts;   // distinct vertices (codes) in the cluster, <= 255
+  uint8_t ntris;    // triangles, <= 64
+  uint8_t bits[3];  // per-axis offset widths (lossy <= 24, lossless <= 32)
+  uint8_t ib;       // bits per local vertex index (<= 8)
+  uint8_t pb, gb;   // bits per primID / geomID offset (<= 32)
+  uint8_t end[8];   // end[i]: one past the last triangle of child i
+  uint32_t anchor[3];
+  uint32_t prim_base, geom_base;
+};
+static_assert(sizeof(ClusterHeader) == 36, "cluster header is 36 bytes");
+
+// Bytes a decoder may read past the end of a cluster's data (64-bit bit-stream loads).
+constexpr uint32_t kClusterReadSlack = 8;
+
+namespace cluster {
+
+SLIM_INLINE uint32_t read_bits(const uint8_t* p, uint64_t pos, uint32_t w) {
+  uint64_t x;
+  std::memcpy(&x, p + (pos >> 3), 8);
+  return uint32_t((x >> (pos & 7)) & ((uint64_t(1) << w) - 1));
+}
+
+// Order-preserving map of float bit patterns to unsigned integers (and back).
+SLIM_INLINE uint32_t float_key(float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, 4);
+  return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+}
+SLIM_INLINE float key_float(uint32_t k) {
+  uint32_t u = (k & 0x80000000u) ? (k & 0x7fffffffu) : ~k;
+  float f;
+  std::memcpy(&f, &u, 4);
+  return f;
+}
+
+// The one decoding of a lossy coordinate (build and traversal use this function only).
+SLIM_INLINE float lattice_coord(const ClusterLattice& lat, int axis, uint32_t q) {
+  return lat.origin[axis] + float(q) * lat.step;  // the product is exact (power-of-two step)
+}
+
+template <bool kLossless>
+SLIM_INLINE float decode_coord(const ClusterLattice& lat, int axis, uint32_t code) {
+  if constexpr (kLossless)
+    return key_float(code);
+  else
+    return lattice_coord(lat, axis, code);
+}
+
+// Bit positions of the streams of a cluster.
+struct Layout {
+  uint64_t topo = 0, verts = 0, ids = 0, end = 0;  // bit offsets from the stream start
+  uint32_t vbits = 0;                              // bits per vertex
+};
+SLIM_INLINE Layout layout(const ClusterHeader& h) {
+  Layout l;
+  l.vbits = uint32_t(h.bits[0]) + h.bits[1] + h.bits[2];
+  l.topo = 0;
+  l.verts = uint64_t(h.ntris) * 3 * h.ib;
+  l.ids = l.verts + uint64_t(h.nverts) * l.vbits;
+  l.end = l.ids + uint64_t(h.ntris) * (uint32_t(h.pb) + h.gb);
+  return l;
+}
+// Total bytes of a cluster's data (header + stream), without the read slack.
+SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h) {
+  return sizeof(ClusterHeader) + (layout(h).end + 7) / 8;
+}
+
+// The triangles of child i decoded: v[corner][axis][lane], lanes >= n repeat the last triangle.
+struct Decoded8 {
+  alignas(32) float v[3][3][8];
+  int first = 0, n = 0;  // first triangle of the child in the cluster, its triangle count
+};
+
+template <bool kLossless>
+SLIM_INLINE void decode_vertex(const ClusterLattice& lat, const ClusterHeader& h,
+                               const uint8_t* bits, const Layout& L, uint32_t vi, float out[3]) {
+  uint64_t pos = L.verts + uint64_t(vi) * L.vbits;
+  for (int a = 0; a < 3; ++a) {
+    uint32_t off = read_bits(bits, pos, h.bits[a]);
+    pos += h.bits[a];
+    out[a] = decode_coord<kLossless>(lat, a, h.anchor[a] + off);
+  }
+}
+
+#if defined(SLIM_SIMD_AVX2)
+// The 8 lanes at once with 32-bit gathers (unaligned 4-byte loads at each field's byte, shifted
+// by its bit) for fields of up to 25 bits, 64-bit gathers for wider ones. The float operations are
+// the scalar decode's, lane by lane (the same conversion, product and sum), so both give the same
+// bits.
+template <bool kLossless>
+SLIM_INLINE void decode_child_avx2(const ClusterLattice& lat, const ClusterHeader& h,
+                                   const uint8_t* bits, const Layout& L, Decoded8& d) {
+  const auto* base = reinterpret_cast<const int*>(bits);
+  auto field = [&](__m256i pos, uint32_t w) {
+    const __m256i word = _mm256_i32gather_epi32(base, _mm256_srli_epi32(pos, 3), 1);
+    const __m256i v = _mm256_srlv_epi32(word, _mm256_and_si256(pos, _mm256_set1_epi32(7)));
+    return _mm256_and_si256(v, _mm256_set1_epi32(int((1u << w) - 1)));
+  };
+  // Fields of up to 32 bits: 64-bit gathers (4 lanes each), the low 32 bits of each.
+  const auto* base64 = reinterpret_cast<const long long*>(bits);
+  auto wide_field = [&](__m256i pos, uint32_t w) {
+    const __m256i byte = _mm256_srli_epi32(pos, 3);
+    const __m256i sh = _mm256_and_si256(pos, _mm256_set1_epi32(7));
+    const __m256i lo =
+        _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_castsi256_si128(byte), 1),
+                          _mm256_cvtepu32_epi64(_mm256_castsi256_si128(sh)));
+    const __m256i hi =
+        _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_extracti128_si256(byte, 1), 1),
+                          _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sh, 1)));
+    const __m256i even = _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6);
+    const __m256i v = _mm256_permute2x128_si256(_mm256_permutevar8x32_epi32(lo, even),
+                                                _mm256_permutevar8x32_epi32(hi, even), 0x20);
+    return _mm256_and_si256(v, _mm256_set1_epi32(int(uint32_t((uint64_t(1) << w) - 1))));
+  };
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  const __m256i t = _mm256_add_epi32(_mm256_set1_epi32(d.first),
+                                     _mm256_min_epi32(lane, _mm256_set1_epi32(d.n - 1)));
+  const __m256i t3 = _mm256_mullo_epi32(t, _mm256_set1_epi32(3));
+  for (int k = 0; k < 3; ++k) {
+    const __m256i ipos =
+        _mm256_mullo_epi32(_mm256_add_epi32(t3, _mm256_set1_epi32(k)), _mm256_set1_epi32(h.ib));
+    const __m256i idx = field(ipos, h.ib);
+    __m256i vpos = _mm256_add_epi32(_mm256_set1_epi32(int(L.verts)),
+                                    _mm256_mullo_epi32(idx, _mm256_set1_epi32(int(L.vbits))));
+    for (int a = 0; a < 3; ++a) {
+      const __m256i off = h.bits[a] <= 25 ? field(vpos, h.bits[a]) : wide_field(vpos, h.bits[a]);
+      const __m256i code = _mm256_add_epi32(off, _mm256_set1_epi32(int(h.anchor[a])));
+      vpos = _mm256_add_epi32(vpos, _mm256_set1_epi32(h.bits[a]));
+      __m256 x;
+      if constexpr (kLossless) {
+        const __m256i neg = _mm256_srai_epi32(code, 31);  // key's top bit: a positive float
+        const __m256i pos_bits = _mm256_and_si256(code, _mm256_set1_epi32(0x7fffffff));
+        const __m256i neg_bits = _mm256_xor_si256(code, _mm256_set1_epi32(-1));
+        x = _mm256_castsi256_ps(_mm256_blendv_epi8(neg_bits, pos_bits, neg));
+      } else {
+        // q < 2^24: the signed conversion is the scalar float(q).
+        x = _mm256_add_ps(_mm256_set1_ps(lat.origin[a]),
+                          _mm256_mul_ps(_mm256_cvtepi32_ps(code), _mm256_set1_ps(lat.step)));
+      }
+      _mm256_store_ps(d.v[k][a], x);
+    }
+  }
+}
+#endif
+
+template <bool kLossless>
+SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, int child,
+                              Decoded8& d) {
+  ClusterHeader h;
+  std::memcpy(&h, data, sizeof(h));
+  const uint8_t* bits = data + sizeof(ClusterHeader);
+  const Layout L = layout(h);
+  d.first = child ? h.end[child - 1] : 0;
+  d.n = int(h.end[child]) - d.first;
+#if defined(SLIM_SIMD_AVX2)
+  decode_child_avx2<kLossless>(lat, h, bits, L, d);
+#else
+  for (int l = 0; l < 8; ++l) {
+    const uint32_t t = uint32_t(d.first + (l < d.n ? l : d.n - 1));
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t vi = read_bits(bits, (uint64_t(t) * 3 + k) * h.ib, h.ib);
+      float p[3];
+      decode_vertex<kLossless>(lat, h, bits, L, vi, p);
+      d.v[k][0][l] = p[0];
+      d.v[k][1][l] = p[1];
+      d.v[k][2][l] = p[2];
+    }
+  }
+#endif
+}
+
+// primID and geomID of triangle t of a cluster.
+SLIM_INLINE void decode_ids(const uint8_t* data, uint32_t t, uint32_t& geom, uint32_t& prim) {
+  ClusterHeader h;
+  std::memcpy(&h, data, sizeof(h));
+  const uint8_t* bits = data + sizeof(ClusterHeader);
+  const uint64_t pos = layout(h).ids + uint64_t(t) * (uint32_t(h.pb) + h.gb);
+  prim = h.prim_base + read_bits(bits, pos, h.pb);
+  geom = h.geom_base + read_bits(bits, pos + h.pb, h.gb);
+}
+
+// Checks that `size` bytes at `data` hold a well-formed cluster of `children` children (header
+// fields in range, child ranges of 1..8 triangles, every local index below nverts, the stream
+// inside `size`). The decoders read only what this accepts (plus kClusterReadSlack bytes).
+bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless, std::string* why);
+
+// Per-scene encoding figures (info --clusters).
+struct EncodeStats {
+  std::mutex m;
+  uint64_t clusters = 0, triangles = 0, vertices = 0;
+  uint64_t position_bits = 0;  // sum over clusters of nverts * (bx + by + bz)
+  uint64_t topology_bits = 0;  // index bits + the 8 child end bytes
+  uint64_t id_bits = 0;        // id offset bits + the bases
+  uint64_t header_bytes = 0;
+};
+
+}  // namespace cluster
+
+// Build-time source: decoded positions (what the leaves return) and the per-vertex codes.
+struct ClusterSource {
+  const Vec3f* vertices = nullptr;  // decoded position per vertex
+  const uint32_t* codes = nullptr;  // 3 per vertex: lattice integers or order keys
+  const uint32_t* tris = nullptr;
+  const uint32_t* geom_ids = nullptr;
+  const uint32_t* prim_ids = nullptr;
+  bool lossless = false;
+  std::vector<uint8_t>* side = nullptr;  // isolated leaves' cluster records
+  std::mutex* side_mutex = nullptr;
+  cluster::EncodeStats* stats = nullptr;
+  // Blocks encoded ahead (keyed by their first triangle), taken by encode_multileaf.
+  // Each with its triangles in child order.
+  std::unordered_map<uint32_t, std::pair<std::vector<uint32_t>, std::vector<uint8_t>>>* encoded =
+      nullptr;
+};
+
+namespace cluster {
+// Encodes the triangles prims[c][0..counts[c]) of k <= 8 children (each <= 8 triangles) as one
+// cluster: header + stream, followed by kClusterReadSlack zero bytes only if `slack`.
+std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims,
+                            const uint32_t* counts, int k, bool slack);
+
+// Codes and decoded positions of the vertices that the triangles use (others: code 0, position
+// unchanged). Lossy: origin = the used vertices' box minimum, step = the largest power of two with
+// step * sqrt(3) / 2 <= rel_error x the box diagonal, coarsened (doubled) until the box extent
+// spans fewer than 2^24 - 1 steps (so that every offset fits a block's 24 bits and float(q) is
+// exact). Lossless: the order keys of the exact floats.
+struct Quantized {
+  ClusterLattice lattice;
+  bool coarsened = false;
+  std::vector<uint32_t> codes;  // 3 per vertex
+  std::vector<Vec3f> decoded;
+  double diag = 0, max_error = 0, rms_error = 0,
+         mean_error = 0;  // error: |decoded - input| over used vertices
+};
+Quantized quantize(const Vec3f* vertices, size_t vertex_count, const uint32_t* tris,
+                   size_t tri_count, double rel_error, bool lossless);
+}  // namespace cluster
+
+template <bool kLossless>
+struct ClusterLeaf {
+  struct Context {
+    ClusterLattice lattice;
+    const uint8_t* side = nullptr;
+  };
+  static constexpr uint32_t kBlockPrims = 8;
+  static constexpr uint32_t kBlockBytes = 8;
+  static constexpr bool kMultiLeafLayout = true;
+
+  // ---- build side ----
+  // A block encoded ahead was made of exactly these children (the cache is keyed by the first
+  // triangle only).
+  static bool same_children(const std::vector<uint32_t>& order, const uint32_t* const* prims,
+                            const uint32_t* counts, int k) {
+    size_t i = 0;
+    for (int c = 0; c < k; ++c)
+      for (uint32_t j = 0; j < counts[c]; ++j, ++i)
+        if (i >= order.size() || order[i] != prims[c][j]) return false;
+    return i == order.size();
+  }
+  static Box3f source_bounds(const ClusterSource& s, uint32_t t) {
+    Box3f b;
+    for (int k = 0; k < 3; ++k) b.extend(s.vertices[s.tris[3 * size_t(t) + k]]);
+    return b;
+  }
+  static uint64_t source_key(const ClusterSource& s, uint32_t t) {
+    const uint32_t* v = &s.tris[3 * size_t(t)];
+    return triangle_key(s.vertices[v[0]], s.vertices[v[1]], s.vertices[v[2]], s.geom_ids[t],
+                        s.prim_ids[t]);
+  }
+  static std::vector<uint8_t> encode_multileaf(const ClusterSource& s, const uint32_t* const* prims,
+                                               const uint32_t* counts, int k) {
+    if (s.encoded) {
+      auto it = s.encoded->find(prims[0][0]);
+      if (it != s.encoded->end()) {
+        std::vector<uint8_t> block = std::move(it->second.second);
+        const bool same = same_children(it->second.first, prims, counts, k);
+        s.encoded->erase(it);
+        if (same) return block;
+      }
+    }
+    return cluster::encode(s, prims, counts, k, false);
+  }
+  static void encode(const ClusterSource& s, const uint32_t* prims, uint32_t n, uint8_t* out) {
+    std::vector<uint8_t> rec = cluster::encode(s, &prims, &n, 1, false);
+    std::lock_guard<std::mutex> lock(*s.side_mutex);
+    const uint64_t off = s.side->size();
+    s.side->insert(s.side->end(), rec.begin(), rec.end());
+    std::memcpy(out, &off, 8);
+  }
+
+  // ---- traversal side ----
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect_in_multileaf(const Context& ctx, const uint8_t* data,
+                                                 uint32_t /*children*/, int i, TravRay& ray,
+                                                 HitRecord& hit, Stats& st) {
+    using namespace simd;
+    cluster::Decoded8 d;
+    cluster::decode_child<kLossless>(ctx.lattice, data, i, d);
+    st.prims(d.n);
+    const WatertightRay& r = ray.wt;
+    auto vert = [&](int k) {
+      return to_ray_space(r, vfloat8::load(d.v[k][0]), vfloat8::load(d.v[k][1]),
+                          vfloat8::load(d.v[k][2]));
+    };
+    RayVertex<vfloat8> A = vert(0), B = vert(1), C = vert(2);
+    vfloat8 t(0.0f), u(0.0f), v(0.0f);
+    uint32_t m = intersect_triangles(A, B, C, 0xFF, ray.tnear, ray.tfar, t, u, v);
+    if (!m) return false;
+    if constexpr (kAny) return true;
+    alignas(32) float tt[8];
+    t.store(tt);
+    int l = pop_lowest(m);
+    while (m) {
+      int j = pop_lowest(m);
+      if (tt[j] < tt[l]) l = j;
+    }
+    uint32_t geom, prim;
+    cluster::decode_ids(data, uint32_t(d.first + l), geom, prim);
+    auto p = [&](int k) { return Vec3f(d.v[k][0][l], d.v[k][1][l], d.v[k][2][l]); };
+    detail::record_hit(tt[l], u[l], v[l], p(0), p(1), p(2), geom, prim, ray, hit);
+    return true;
+  }
+
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect(const Context& ctx, const uint8_t* block, TravRay& ray,
+                                    HitRecord& hit, Stats& st) {
+    uint64_t off;
+    std::memcpy(&off, block, 8);
+    return intersect_in_multileaf<kAny>(ctx, ctx.side + off, 1, 0, ray, hit, st);
+  }
+
+  template <class F>
+  static void visit_in_multileaf(const Context& ctx, const uint8_t* data, uint32_t /*children*/,
+                                 int i, F&& fn) {
+    cluster::Decoded8 d;
+    cluster::decode_child<kLossless>(ctx.lattice, data, i, d);
+    for (int l = 0; l < d.n; ++l) {
+      Vec3f c[3];
+      Box3f box;
+      for (int k = 0; k < 3; ++k) {
+        c[k] = Vec3f(d.v[k][0][l], d.v[k][1][l], d.v[k][2][l]);
+        box.extend(c[k]);
+      }
+      uint32_t geom, prim;
+      cluster::decode_ids(data, uint32_t(d.first + l), geom, prim);
+      fn(box, triangle_key(c[0], c[1], c[2], geom, prim));
+    }
+  }
+  template <class F>
+  static void visit(const Context& ctx, const uint8_t* block, F&& fn) {
+    uint64_t off;
+    std::memcpy(&off, block, 8);
+    visit_in_multileaf(ctx, ctx.side + off, 1, 0, fn);
+  }
+};
+
+}  // namespace slim

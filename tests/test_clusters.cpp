@@ -1,0 +1,334 @@
+// Compressed triangle clusters (prim/cluster.h, configurations `cluster` and `cluster-lossless`):
+// the block codec bit for bit, the checker, hits against bvh8-tri4v (lossless) and a brute force
+// over the decoded triangles (lossy), watertightness across cluster borders, statistics.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <numeric>
+#include <random>
+
+#include "mesh/triangulate.h"
+#include "prim/cluster.h"
+#include "slimrt/clusters.h"
+#include "test_util.h"
+
+using namespace slim;
+using namespace slim::test;
+
+namespace {
+
+uint32_t bits_of(float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, 4);
+  return u;
+}
+
+double detail(const Scene& s, const std::string& key) {
+  for (const auto& [k, v] : s.stats().details)
+    if (k == key) return v;
+  ADD_FAILURE() << "no detail " << key;
+  return -1;
+}
+
+// Encodes the triangles of `tm` in clusters of random shape (1..8 children of 1..8 triangles, in
+// the order of `order`) and checks that every child decodes to the source's positions and ids bit
+// for bit.
+void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32_t seed,
+                 bool shuffle) {
+  const cluster::Quantized z = cluster::quantize(
+      tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(), rel_error, lossless);
+  ClusterSource src;
+  src.vertices = z.decoded.data();
+  src.codes = z.codes.data();
+  src.tris = tm.tris.data();
+  src.geom_ids = tm.geom_ids.data();
+  src.prim_ids = tm.prim_ids.data();
+  src.lossless = lossless;
+  std::vector<uint32_t> order(tm.tri_count());
+  std::iota(order.begin(), order.end(), 0u);
+  std::mt19937 rng(seed);
+  if (shuffle) std::shuffle(order.begin(), order.end(), rng);
+  size_t pos = 0, clusters = 0;
+  while (pos < order.size()) {
+    const int k = 1 + int(rng() % 8);
+    const uint32_t* prims[8];
+    uint32_t counts[8];
+    int kk = 0;
+    for (; kk < k && pos < order.size(); ++kk) {
+      counts[kk] = std::min<uint32_t>(1 + rng() % 8, uint32_t(order.size() - pos));
+      prims[kk] = &order[pos];
+      pos += counts[kk];
+    }
+    std::vector<uint8_t> data = cluster::encode(src, prims, counts, kk, true);
+    std::string why;
+    ASSERT_TRUE(
+        cluster::check(data.data(), data.size() - kClusterReadSlack, uint32_t(kk), lossless, &why))
+        << why;
+    for (int c = 0; c < kk; ++c) {
+      cluster::Decoded8 d;
+      if (lossless)
+        cluster::decode_child<true>(z.lattice, data.data(), c, d);
+      else
+        cluster::decode_child<false>(z.lattice, data.data(), c, d);
+      ASSERT_EQ(d.n, int(counts[c]));
+      for (int l = 0; l < 8; ++l) {
+        const uint32_t t = prims[c][std::min(l, d.n - 1)];
+        for (int j = 0; j < 3; ++j) {
+          const uint32_t vi = tm.tris[3 * size_t(t) + j];
+          for (int a = 0; a < 3; ++a) {
+            ASSERT_EQ(bits_of(d.v[j][a][l]), bits_of(z.decoded[vi][a]));
+            if (lossless) {
+              ASSERT_EQ(bits_of(d.v[j][a][l]), bits_of(tm.vertices[vi][a]));
+            }
+          }
+        }
+        if (l < d.n) {
+          uint32_t g, p;
+          cluster::decode_ids(data.data(), uint32_t(d.first + l), g, p);
+          ASSERT_EQ(g, tm.geom_ids[t]);
+          ASSERT_EQ(p, tm.prim_ids[t]);
+        }
+      }
+    }
+    clusters++;
+  }
+  EXPECT_GT(clusters, 0u);
+}
+
+TEST(ClusterCodec, DecodeEqualsEncodeRandomMeshes) {
+  PolyMesh soup = random_soup(3000, 11);
+  PolyMesh sphere = icosphere(3);
+  // A third mesh with ids and coordinates far from the others (wide id and code ranges).
+  PolyMesh far = random_soup(500, 12, 0.3f);
+  for (Vec3f& p : far.positions) p = p * 1000.0f - Vec3f(5000.0f, -20.0f, 3.0f);
+  for (bool lossless : {false, true}) {
+    TriangleMesh tm = triangulate_fan({&soup, &sphere, &far});
+    check_codec(tm, lossless, 1e-5, 1, true);
+    check_codec(tm, lossless, 1e-5, 2, false);
+    check_codec(tm, lossless, 1e-2, 3, false);
+  }
+}
+
+TEST(ClusterCodec, DecodeEqualsEncodeRealMesh) {
+  SLIM_REQUIRE_SHARED_DATA();
+  PolyMesh m = load(shared_data_dir() + "/stanford_bunny.obj.xz");
+  TriangleMesh tm = triangulate_fan({&m});
+  for (bool lossless : {false, true}) check_codec(tm, lossless, 1e-5, 4, false);
+}
+
+TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
+  PolyMesh sphere = icosphere(2);
+  TriangleMesh tm = triangulate_fan({&sphere});
+  const cluster::Quantized z = cluster::quantize(tm.vertices.data(), tm.vertices.size(),
+                                                 tm.tris.data(), tm.tri_count(), 1e-5, false);
+  ClusterSource src;
+  src.vertices = z.decoded.data();
+  src.codes = z.codes.data();
+  src.tris = tm.tris.data();
+  src.geom_ids = tm.geom_ids.data();
+  src.prim_ids = tm.prim_ids.data();
+  std::vector<uint32_t> t(16);
+  std::iota(t.begin(), t.end(), 0u);
+  const uint32_t* prims[2] = {t.data(), t.data() + 8};
+  const uint32_t counts[2] = {8, 8};
+  const std::vector<uint8_t> good = cluster::encode(src, prims, counts, 2, false);
+  std::string why;
+  ASSERT_TRUE(cluster::check(good.data(), good.size(), 2, false, &why)) << why;
+  EXPECT_FALSE(cluster::check(good.data(), good.size() - 1, 2, false, &why));  // truncated
+  EXPECT_FALSE(cluster::check(good.data(), good.size(), 3, false, &why));      // a third child
+  auto corrupt = [&](size_t off, uint8_t value) {
+    std::vector<uint8_t> b = good;
+    b[off] = value;
+    return cluster::check(b.data(), b.size(), 2, false, &why);
+  };
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nverts), 1));    // indices beyond the vertices
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ntris), 65));    // too many triangles
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, bits), 25));     // lossy axis wider than 24 bits
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ib), 9));        // index wider than 8 bits
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, end), 0));       // empty first child
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, end) + 1, 20));  // second child of 12
+}
+
+struct Built {
+  std::vector<PolyMesh> meshes;
+  std::vector<const PolyMesh*> ptrs() const {
+    std::vector<const PolyMesh*> v;
+    for (const PolyMesh& m : meshes) v.push_back(&m);
+    return v;
+  }
+};
+
+Built test_scene() {
+  Built b;
+  b.meshes.push_back(icosphere(4));
+  b.meshes.push_back(random_soup(2000, 21));
+  PolyMesh quads = load("torus:24");  // quads: two fan triangles per face
+  for (Vec3f& p : quads.positions) p = p * 0.4f + Vec3f(0.5f, 0.5f, 0.5f);
+  b.meshes.push_back(std::move(quads));
+  return b;
+}
+
+TEST(ClusterScene, LosslessHitsEqualTri4v) {
+  Built b = test_scene();
+  Scene ref = Scene::build(b.ptrs(), BuildOptions::from_config("bvh8-tri4v"));
+  Scene s = Scene::build(b.ptrs(), BuildOptions::from_config("cluster-lossless"));
+  std::string why;
+  ASSERT_TRUE(s.validate(&why)) << why;
+  Rng rng(5);
+  int hits = 0, other_face = 0;
+  const int n = 20000;
+  for (int i = 0; i < n; ++i) {
+    Ray r = random_ray(rng, ref.bounds());
+    Hit a = ref.intersect(r), h = s.intersect(r);
+    ASSERT_EQ(a.valid(), h.valid()) << "ray " << i;
+    EXPECT_EQ(s.occluded(r), h.valid());
+    if (!a.valid()) continue;
+    hits++;
+    ASSERT_EQ(bits_of(a.t), bits_of(h.t)) << "ray " << i;
+    // Equal t on two faces (a shared edge or vertex): either face is the closest.
+    if (a.primID != h.primID || a.geomID != h.geomID) {
+      other_face++;
+      continue;
+    }
+    EXPECT_EQ(bits_of(a.u), bits_of(h.u));
+    EXPECT_EQ(bits_of(a.v), bits_of(h.v));
+    EXPECT_EQ(bits_of(a.Ng.x), bits_of(h.Ng.x));
+  }
+  EXPECT_GT(hits, n / 4);
+  EXPECT_LE(other_face, hits / 1000);
+}
+
+TEST(ClusterScene, LossyHitsEqualBruteForceOnDecodedTriangles) {
+  Built b = test_scene();
+  for (double err : {1e-5, 1e-3}) {
+    BuildOptions opt = BuildOptions::from_config("cluster");
+    opt.cluster_error = err;
+    Scene s = Scene::build(b.ptrs(), opt);
+    std::string why;
+    ASSERT_TRUE(s.validate(&why)) << why;
+    ClusterTriangles ct = cluster_triangles(b.ptrs(), opt);
+    const double diag = length(s.bounds().size());
+    EXPECT_LE(ct.max_error, err * diag);
+    EXPECT_LE(detail(s, "max_error_diag_pct"), 100 * err);
+    std::vector<RefTri> ref(ct.size());
+    for (size_t i = 0; i < ct.size(); ++i) {
+      for (int k = 0; k < 3; ++k)
+        for (int a = 0; a < 3; ++a) ref[i].v[k][a] = ct.vertices[3 * i + k][a];
+      ref[i].geom = ct.geom[i];
+      ref[i].prim = ct.face[i];
+    }
+    Rng rng(6);
+    const int n = 3000;
+    int agree = 0, same = 0, hits = 0;
+    for (int i = 0; i < n; ++i) {
+      Ray r = random_ray(rng, s.bounds());
+      Hit h = s.intersect(r);
+      RefHit rh = reference_intersect(ref, r);
+      agree += agrees(h, rh);
+      hits += rh.valid();
+      same += h.valid() && rh.valid() && h.primID == rh.prim && h.geomID == rh.geom;
+      EXPECT_EQ(s.occluded(r), h.valid());
+    }
+    EXPECT_GT(hits, n / 4);
+    EXPECT_GE(agree, n - n / 1000) << "error bound " << err;
+    EXPECT_GE(same, hits - hits / 200) << "error bound " << err;
+  }
+}
+
+// Rays from inside a closed mesh cut into many clusters must all hit: a shared vertex decodes to
+// the same bits in every cluster, so the watertight test sees a closed surface.
+TEST(ClusterScene, WatertightAcrossClusterBorders) {
+  PolyMesh sphere = icosphere(6);  // 81920 triangles
+  PolyMesh torus = load("torus:256");
+  for (const char* config : {"cluster", "cluster-lossless"}) {
+    for (double err : {1e-5, 1e-3}) {
+      BuildOptions opt = BuildOptions::from_config(config);
+      opt.cluster_error = err;
+      Scene s = Scene::build(sphere, opt);
+      EXPECT_GT(detail(s, "clusters"), 1000);
+      Rng rng(7);
+      int leaks = 0;
+      for (int i = 0; i < 100000; ++i) {
+        Ray r;
+        r.org = Vec3f(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f) * 0.5f;
+        r.dir = normalize(Vec3f(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f));
+        leaks += !s.intersect(r).valid();
+        leaks += !s.occluded(r);
+      }
+      EXPECT_EQ(leaks, 0) << config << " sphere, error " << err;
+      // Torus: origins on the tube's core circle (major radius 1, minor 0.4 displaced by noise).
+      Scene st = Scene::build(torus, opt);
+      leaks = 0;
+      for (int i = 0; i < 100000; ++i) {
+        const float a = 6.2831853f * rng.uniform();
+        Ray r;
+        r.org = Vec3f(std::cos(a), std::sin(a), 0.0f);
+        r.dir = normalize(Vec3f(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f));
+        leaks += !st.intersect(r).valid();
+      }
+      EXPECT_EQ(leaks, 0) << config << " torus, error " << err;
+    }
+  }
+}
+
+TEST(ClusterScene, StatisticsAndSizes) {
+  PolyMesh torus = load("torus:256");
+  Scene s = Scene::build(torus, BuildOptions::from_config("cluster"));
+  EXPECT_EQ(s.options().config_name(), "cluster");
+  const double tris = double(s.stats().triangles);
+  EXPECT_NEAR(detail(s, "avg_triangles_per_cluster") * detail(s, "clusters"), tris, 0.5);
+  EXPECT_GT(detail(s, "avg_triangles_per_cluster"), 16);
+  EXPECT_GT(detail(s, "position_bits_avg"), 0);
+  EXPECT_LE(detail(s, "position_bits_avg"), 24);
+  EXPECT_NEAR(detail(s, "geometry_bytes_per_triangle") + detail(s, "bvh_bytes_per_triangle"),
+              s.memory().bytes_per_triangle(), 1e-9);
+  EXPECT_EQ(detail(s, "lattice_coarsened"), 0);
+  Scene l = Scene::build(torus, BuildOptions::from_config("cluster-lossless"));
+  EXPECT_EQ(detail(l, "max_error"), 0);
+  EXPECT_GT(l.memory().total(), s.memory().total());
+}
+
+// An error bound finer than 24 lattice bits resolve gets a coarser step (reported), not a failure.
+TEST(ClusterScene, CoarserStepWhenTheLatticeNeedsMoreBits) {
+  PolyMesh sphere = icosphere(3);
+  BuildOptions opt = BuildOptions::from_config("cluster");
+  opt.cluster_error = 1e-9;
+  Scene s = Scene::build(sphere, opt);
+  EXPECT_EQ(detail(s, "lattice_coarsened"), 1);
+  EXPECT_GT(detail(s, "max_error_diag_pct"), 1e-7);
+  EXPECT_LT(detail(s, "max_error_diag_pct"), 1e-5);
+  std::string why;
+  EXPECT_TRUE(s.validate(&why)) << why;
+  opt.cluster_error = 0;
+  EXPECT_THROW(Scene::build(sphere, opt), Error);
+}
+
+TEST(ClusterScene, BadInput) {
+  PolyMesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {NAN, 0, 0}, {1, 1, 0}, {1, 0, 0}};
+  m.face_indices = {0, 1, 2, /*NaN*/ 0, 3, 1, /*degenerate*/ 0, 0, 1, /*duplicate vertex*/ 5, 4, 2};
+  m.face_sizes = {3, 3, 3, 3};
+  for (const char* config : {"cluster", "cluster-lossless"}) {
+    Scene s = Scene::build(m, BuildOptions::from_config(config));
+    EXPECT_EQ(s.stats().skipped_faces, 1u);
+    std::string why;
+    EXPECT_TRUE(s.validate(&why)) << why;
+    Ray r;
+    r.org = Vec3f(0.2f, 0.2f, 1.0f);
+    r.dir = Vec3f(0, 0, -1);
+    Hit h = s.intersect(r);
+    ASSERT_TRUE(h.valid());
+    EXPECT_EQ(h.primID, 0u);
+    r.org = Vec3f(0.8f, 0.6f, 1.0f);
+    EXPECT_EQ(s.intersect(r).primID, 3u);
+  }
+  PolyMesh empty;
+  Scene e = Scene::build(empty, BuildOptions::from_config("cluster"));
+  Ray r;
+  r.dir = Vec3f(0, 0, 1);
+  EXPECT_FALSE(e.intersect(r).valid());
+}
+
+}  // namespace

@@ -78,6 +78,8 @@ nlohmann::json report_json(const BenchReport& report) {
     // (the same in every round, and for every build of the same code).
     j["seconds_primary_rounds"] = r.seconds_primary;
     j["seconds_diffuse_rounds"] = r.seconds_diffuse;
+    j["cpu_seconds_primary_rounds"] = r.cpu_seconds_primary;
+    j["cpu_seconds_diffuse_rounds"] = r.cpu_seconds_diffuse;
     if (r.measured()) {
       j["kept_between_rounds"] = r.kept;
       j["rays_primary"] = r.rays_primary;

@@ -35,7 +35,10 @@ struct BenchRow {
   // Medians over the rounds with their ranges; a ratio is the median of the per-round ratios to
   // embree-tri timed in the same round.
   std::optional<Spread> mrays_primary, mrays_diffuse, ratio_primary, ratio_diffuse;
-  std::vector<double> seconds_primary, seconds_diffuse;               // per round, in round order
+  std::vector<double> seconds_primary, seconds_diffuse;  // per round, in round order
+  // Process CPU seconds of the same runs (every thread, idle workers' spinning included): less
+  // sensitive than wall time to other processes taking the cores.
+  std::vector<double> cpu_seconds_primary, cpu_seconds_diffuse;
   std::optional<double> box_tests_per_ray, prim_tests_per_ray;        // workload 1 (JSON)
   std::optional<double> box_tests_per_ray_w2, prim_tests_per_ray_w2;  // workload 2 sample
   // Primitive records tested (a triangle pair counts once: TraversalCounters::prim_records).

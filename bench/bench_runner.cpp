@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <fstream>
 #include <memory>
 #include <utility>
@@ -46,8 +47,16 @@ struct Workload {
   Ray primary(int x, int y) const { return camera_ray(cam, float(x) + 0.5f, float(y) + 0.5f); }
 };
 
+// CPU seconds of the whole process (every thread), for the rounds' cpu_seconds figures.
+double process_cpu_seconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
 struct RunResult {
   double seconds = 0;
+  double cpu_seconds = 0;  // process CPU time over the run (includes idle workers' spinning)
   uint64_t rays = 0;
   double checksum = 0;
 };
@@ -58,6 +67,7 @@ template <class Body>
 RunResult run_tiles(tbb::task_arena& arena, const Workload& w, Body&& body) {
   std::vector<uint64_t> rays(size_t(w.tiles()), 0);
   std::vector<double> sums(size_t(w.tiles()), 0.0);
+  const double cpu0 = process_cpu_seconds();
   const auto t0 = Clock::now();
   arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<int>(0, w.tiles()), [&](const tbb::blocked_range<int>& r) {
@@ -73,6 +83,7 @@ RunResult run_tiles(tbb::task_arena& arena, const Workload& w, Body&& body) {
   });
   RunResult res;
   res.seconds = seconds_since(t0);
+  res.cpu_seconds = process_cpu_seconds() - cpu0;
   for (size_t i = 0; i < rays.size(); ++i) {
     res.rays += rays[i];
     res.checksum += sums[i];
@@ -432,6 +443,8 @@ struct SceneRun {
     }
     row.seconds_primary.push_back(p.seconds);
     row.seconds_diffuse.push_back(d.seconds);
+    row.cpu_seconds_primary.push_back(p.cpu_seconds);
+    row.cpu_seconds_diffuse.push_back(d.cpu_seconds);
   }
 
   // Part B of bench_runner.h: the interleaved rounds, then the medians and ranges.

@@ -592,6 +592,8 @@ TEST(BenchCli, RoundsKeptOrRebuiltTraceTheSameRays) {
     for (const nlohmann::json* x : {&k, &r}) {
       EXPECT_EQ((*x)["seconds_primary_rounds"].size(), 3u) << config;
       EXPECT_EQ((*x)["seconds_diffuse_rounds"].size(), 3u) << config;
+      EXPECT_EQ((*x)["cpu_seconds_primary_rounds"].size(), 3u) << config;
+      EXPECT_EQ((*x)["cpu_seconds_diffuse_rounds"].size(), 3u) << config;
       const nlohmann::json& range = (*x)["ratio_diffuse_range"];
       EXPECT_LE(range[0].get<double>(), (*x)["ratio_diffuse"].get<double>()) << config;
       EXPECT_GE(range[1].get<double>(), (*x)["ratio_diffuse"].get<double>()) << config;

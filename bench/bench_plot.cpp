@@ -11,6 +11,7 @@
 #include <sstream>
 #include <vector>
 
+#include "slimrt/error.h"
 #include "slimrt/output.h"
 
 namespace slim::bench {

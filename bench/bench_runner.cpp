@@ -5,43 +5,29 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
-#include <sys/wait.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
+#include <ctime>
 #include <fstream>
-#include <functional>
 #include <memory>
-#include <sstream>
 #include <utility>
 
 #include "embree_scene.h"
 #include "slimrt/analysis.h"
-#include "slimrt/output.h"
 
 namespace slim::bench {
 
 namespace {
 
-constexpr int kTile = 32;  // pixels per tile side: the unit of parallel work
-constexpr double kLosslessAgreement = 0.999;
+constexpr int kTile = 32;          // pixels per tile side: the unit of parallel work
 constexpr int kW2CountStride = 4;  // workload-2 counting: pixels with x, y multiples of 4
 
 using Clock = std::chrono::steady_clock;
 
 double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n == 0 ? 0.0 : (n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]));
 }
 
 // The rays of one scene, shared by every configuration.
@@ -61,8 +47,16 @@ struct Workload {
   Ray primary(int x, int y) const { return camera_ray(cam, float(x) + 0.5f, float(y) + 0.5f); }
 };
 
+// CPU seconds of the whole process (every thread), for the rounds' cpu_seconds figures.
+double process_cpu_seconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
 struct RunResult {
   double seconds = 0;
+  double cpu_seconds = 0;  // process CPU time over the run (includes idle workers' spinning)
   uint64_t rays = 0;
   double checksum = 0;
 };
@@ -73,6 +67,7 @@ template <class Body>
 RunResult run_tiles(tbb::task_arena& arena, const Workload& w, Body&& body) {
   std::vector<uint64_t> rays(size_t(w.tiles()), 0);
   std::vector<double> sums(size_t(w.tiles()), 0.0);
+  const double cpu0 = process_cpu_seconds();
   const auto t0 = Clock::now();
   arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<int>(0, w.tiles()), [&](const tbb::blocked_range<int>& r) {
@@ -88,6 +83,7 @@ RunResult run_tiles(tbb::task_arena& arena, const Workload& w, Body&& body) {
   });
   RunResult res;
   res.seconds = seconds_since(t0);
+  res.cpu_seconds = process_cpu_seconds() - cpu0;
   for (size_t i = 0; i < rays.size(); ++i) {
     res.rays += rays[i];
     res.checksum += sums[i];
@@ -180,10 +176,9 @@ std::optional<double> detail(const SceneStats& st, const char* key) {
   return std::nullopt;
 }
 
-void progress(const BenchOptions& opt, const char* fmt, const std::string& a, const std::string& b,
-              const std::string& c) {
+void progress(const BenchOptions& opt, const std::string& line) {
   if (opt.progress) {
-    std::fprintf(stderr, fmt, a.c_str(), b.c_str(), c.c_str());
+    std::fputs(line.c_str(), stderr);
     std::fflush(stderr);
   }
 }
@@ -194,36 +189,24 @@ std::string fmt(const char* f, double v) {
   return buf;
 }
 
-// Formats that intersect other triangles than the input's fan triangulation: lossy grids, costa
-// with V (quantized), costa's GLU tessellation of n-gons, the grid cells' diagonals. They are
-// validated against Embree run on their own decoded geometry (DESIGN.md "Baseline and oracle"),
-// with hits mapped back to the input faces.
-struct OwnGeometry {
-  PolyMesh mesh;  // one triangle per face
-  std::vector<uint32_t> geom, face;
+std::string spread_text(const std::optional<Spread>& s, const char* f) {
+  if (!s) return "-";
+  return fmt(f, s->median) + " (" + fmt(f, s->lo) + "-" + fmt(f, s->hi) + ")" +
+         (s->noisy() ? "!" : "");
+}
+
+// One configuration of a scene: its row, and its built scene between rounds (one of the two
+// pointers, or neither while a scene that does not fit the memory budget waits for its turn).
+struct Slot {
+  size_t row = 0;
+  std::unique_ptr<EmbreeScene> embree;
+  std::unique_ptr<Scene> slim;
+  bool built() const { return embree || slim; }
+  void release() {
+    embree.reset();
+    slim.reset();
+  }
 };
-
-template <class Tris>
-OwnGeometry own_geometry_from(const Tris& t) {
-  OwnGeometry g;
-  g.mesh.name = "decoded";
-  g.mesh.positions = t.vertices;
-  g.mesh.face_sizes.assign(t.size(), 3);
-  g.mesh.face_indices.resize(3 * t.size());
-  for (size_t i = 0; i < g.mesh.face_indices.size(); ++i) g.mesh.face_indices[i] = uint32_t(i);
-  g.geom = t.geom;
-  g.face = t.face;
-  return g;
-}
-
-std::optional<OwnGeometry> own_geometry(const std::vector<const PolyMesh*>& meshes,
-                                        const std::string& config) {
-  if (EmbreeScene::is_config(config)) return std::nullopt;  // Embree reads the input itself
-  if (std::optional<DecodedTriangles> t =
-          decoded_triangles(meshes, BuildOptions::from_config(config)))
-    return own_geometry_from(*t);
-  return std::nullopt;
-}
 
 // Everything of one scene that outlives a single configuration.
 struct SceneRun {
@@ -238,8 +221,10 @@ struct SceneRun {
   std::vector<Hit> reference;  // embree-tri's workload-1 hits
   bool need_psnr_reference = false;
   std::optional<Image> psnr_reference;  // bvh8-tri4v normals render
+  std::vector<Slot> slots;              // the configurations prepared, in configuration order
+  std::vector<uint64_t> slot_bytes;     // their memory() totals, for the keep decision
 
-  void error(BenchRow& row, const std::string& msg) {
+  void error(const BenchRow& row, const std::string& msg) {
     std::string e = row.scene + " " + row.config + ": " + msg;
     std::fprintf(stderr, "ERROR: %s\n", e.c_str());
     report.errors.push_back(e);
@@ -254,71 +239,51 @@ struct SceneRun {
     return render(scene, w.cam, ro);
   }
 
-  // Validation, counting and timing of a built tracer.
+  // Validation of a built tracer's workload-1 hits against embree-tri's (untimed).
   template <class Tracer>
-  void measure(const Tracer& tracer, BenchRow& row) {
+  void validate_hits(const Tracer& tracer, BenchRow& row) {
     std::vector<Hit> hits = primary_hits(tracer, arena, w);
     if (row.config == "embree-tri") {
       reference = std::move(hits);
       row.hit_agreement = 1.0;
       row.same_face = 1.0;
-    } else if (!reference.empty()) {
-      auto agreement = [&](const std::vector<Hit>& ref, double& frac, double& same_frac) {
-        uint64_t agree = 0, both = 0, same = 0;
-        for (size_t i = 0; i < hits.size(); ++i) {
-          agree += hits_agree(hits[i], ref[i]);
-          if (hits[i].valid() && ref[i].valid()) {
-            ++both;
-            same += hits[i].geomID == ref[i].geomID && hits[i].primID == ref[i].primID;
-          }
+      return;
+    }
+    if (reference.empty()) return;
+    auto agreement = [&](const std::vector<Hit>& ref, double& frac, double& same_frac) {
+      uint64_t agree = 0, both = 0, same = 0;
+      for (size_t i = 0; i < hits.size(); ++i) {
+        agree += hits_agree(hits[i], ref[i]);
+        if (hits[i].valid() && ref[i].valid()) {
+          ++both;
+          same += hits[i].geomID == ref[i].geomID && hits[i].primID == ref[i].primID;
         }
-        frac = double(agree) / double(hits.size());
-        same_frac = both ? double(same) / double(both) : 1.0;
-      };
-      double frac, same_frac;
-      agreement(reference, frac, same_frac);
-      row.agreement_embree_tri = frac;
-      std::string against = "embree-tri";
-      if (std::optional<OwnGeometry> own = own_geometry(meshes, row.config)) {
-        // Embree on the format's own decoded triangles, hits mapped back to the input faces.
-        EmbreeScene es({&own->mesh}, "embree-tri");
-        std::vector<Hit> ref = primary_hits(es, arena, w);
-        for (Hit& h : ref)
-          if (h.valid()) {
-            uint32_t t = h.primID;
-            h.geomID = own->geom[t];
-            h.primID = own->face[t];
-          }
-        agreement(ref, frac, same_frac);
-        against = "embree-tri on its own decoded geometry";
       }
-      row.hit_agreement = frac;
-      row.same_face = same_frac;
-      if (*row.hit_agreement < kLosslessAgreement)
-        error(row, "hit agreement with " + against + " " +
-                       fmt("%.4f%%", 100.0 * *row.hit_agreement) + " is under 99.9%");
+      frac = double(agree) / double(hits.size());
+      same_frac = both ? double(same) / double(both) : 1.0;
+    };
+    double frac, same_frac;
+    agreement(reference, frac, same_frac);
+    row.agreement_embree_tri = frac;
+    std::string against = "embree-tri";
+    if (std::optional<OwnGeometry> own = own_geometry(meshes, row.config)) {
+      // Embree on the format's own decoded triangles, hits mapped back to the input faces.
+      EmbreeScene es({&own->mesh}, "embree-tri");
+      std::vector<Hit> ref = primary_hits(es, arena, w);
+      for (Hit& h : ref)
+        if (h.valid()) {
+          uint32_t t = h.primID;
+          h.geomID = own->geom[t];
+          h.primID = own->face[t];
+        }
+      agreement(ref, frac, same_frac);
+      against = "embree-tri on its own decoded geometry";
     }
-    hits = {};
-
-    std::vector<double> t1, t2;
-    for (int r = 0; r < std::max(opt.repeat, 1); ++r) {
-      const RunResult p = run_primary(tracer, arena, w);
-      const RunResult d = run_diffuse(tracer, arena, w);
-      if (r == 0) {
-        row.rays_primary = p.rays;
-        row.checksum_primary = p.checksum;
-        row.rays_diffuse = d.rays;
-        row.checksum_diffuse = d.checksum;
-      } else if (p.rays != row.rays_primary || d.rays != row.rays_diffuse ||
-                 p.checksum != row.checksum_primary || d.checksum != row.checksum_diffuse) {
-        error(row, "repeated runs traced different rays (not deterministic)");
-      }
-      t1.push_back(p.seconds);
-      t2.push_back(d.seconds);
-    }
-    const double m1 = median(t1), m2 = median(t2);
-    if (m1 > 0) row.mrays_primary = double(row.rays_primary) / m1 * 1e-6;
-    if (m2 > 0) row.mrays_diffuse = double(row.rays_diffuse) / m2 * 1e-6;
+    row.hit_agreement = frac;
+    row.same_face = same_frac;
+    if (*row.hit_agreement < kLosslessAgreement)
+      error(row, "hit agreement with " + against + " " + fmt("%.4f%%", 100.0 * *row.hit_agreement) +
+                     " is under 99.9%");
   }
 
   void fill_memory(const MemoryStats& m, BenchRow& row) {
@@ -334,40 +299,47 @@ struct SceneRun {
     if (*row.build_s > 0) row.build_mprims_s = double(triangles) / *row.build_s * 1e-6;
   }
 
-  void run_embree(BenchRow& row) {
-    std::unique_ptr<EmbreeScene> scene;
-    std::vector<double> build;
-    for (int r = 0; r < std::max(opt.repeat, 1); ++r) {
-      scene.reset();
-      arena.execute([&] { scene = std::make_unique<EmbreeScene>(meshes, row.config); });
-      build.push_back(scene->build_seconds());
-    }
-    set_build_time(build, row);
-    fill_memory(scene->memory(), row);
-    measure(*scene, row);
+  void build_embree(const BenchRow& row, Slot& slot) {
+    slot.release();
+    arena.execute([&] { slot.embree = std::make_unique<EmbreeScene>(meshes, row.config); });
   }
 
-  void run_slim(BenchRow& row) {
+  void build_slim(const BenchRow& row, Slot& slot) {
+    slot.release();
     BuildOptions bo = BuildOptions::from_config(row.config);
     bo.threads = report.machine.threads;
-    std::unique_ptr<Scene> scene;
+    arena.execute([&] { slot.slim = std::make_unique<Scene>(Scene::build(meshes, bo)); });
+  }
+
+  void prepare_embree(BenchRow& row, Slot& slot) {
     std::vector<double> build;
-    for (int r = 0; r < std::max(opt.repeat, 1); ++r) {
-      scene.reset();
+    for (int r = 0; r < report.repeat; ++r) {
+      build_embree(row, slot);
+      build.push_back(slot.embree->build_seconds());
+    }
+    set_build_time(build, row);
+    fill_memory(slot.embree->memory(), row);
+    validate_hits(*slot.embree, row);
+  }
+
+  void prepare_slim(BenchRow& row, Slot& slot) {
+    std::vector<double> build;
+    for (int r = 0; r < report.repeat; ++r) {
       const auto t0 = Clock::now();
-      arena.execute([&] { scene = std::make_unique<Scene>(Scene::build(meshes, bo)); });
+      build_slim(row, slot);
       build.push_back(seconds_since(t0));
     }
     set_build_time(build, row);
-    fill_memory(scene->memory(), row);
+    const Scene& scene = *slot.slim;
+    fill_memory(scene.memory(), row);
 
     std::string why;
-    if (!scene->validate(&why)) error(row, "Scene::validate failed: " + why);
-    count_traversal(*scene, arena, w, row);
+    if (!scene.validate(&why)) error(row, "Scene::validate failed: " + why);
+    count_traversal(scene, arena, w, row);
 
-    if (row.config == "bvh8-tri4v" && need_psnr_reference) psnr_reference = normals_image(*scene);
+    if (row.config == "bvh8-tri4v" && need_psnr_reference) psnr_reference = normals_image(scene);
     if (row.lossy) {
-      const SceneStats& st = scene->stats();
+      const SceneStats& st = scene.stats();
       row.error.rms = detail(st, "rms_error");
       row.error.diag_avg_pct = detail(st, "diag_avg_pct");
       row.error.diag_max_pct = detail(st, "diag_max_pct");
@@ -375,86 +347,162 @@ struct SceneRun {
         Scene ref = Scene::build(meshes, BuildOptions::from_config("bvh8-tri4v"));
         psnr_reference = normals_image(ref);
       }
-      const double p = psnr(*psnr_reference, normals_image(*scene));
+      const double p = psnr(*psnr_reference, normals_image(scene));
       if (std::isinf(p))
         row.error.psnr_identical = true;
       else
         row.error.psnr_db = p;
     }
-    measure(*scene, row);
+    validate_hits(scene, row);
   }
 
-  void run_config(const std::string& config) {
+  // A row that was not measured: every figure empty, the reason kept.
+  BenchRow unmeasured(const BenchRow& row, const std::string& reason) {
+    BenchRow r{row.scene, row.config, row.triangles};
+    r.reason = reason;
+    r.embree = row.embree;
+    r.lossy = row.lossy;
+    return r;
+  }
+
+  // Part A of bench_runner.h for one configuration: build, validate, count; keep or free.
+  void prepare(const std::string& config) {
     BenchRow row;
     row.scene = name;
     row.config = config;
     row.triangles = triangles;
     row.embree = EmbreeScene::is_config(config);
     row.lossy = is_lossy_config(config);
-    progress(opt, "%s %s: %s", name, config, "");
+    progress(opt, name + " " + config + ": ");
     const auto t0 = Clock::now();
+    Slot slot;
     try {
       if (row.embree)
-        run_embree(row);
+        prepare_embree(row, slot);
       else
-        run_slim(row);
+        prepare_slim(row, slot);
     } catch (const NotApplicable& e) {
-      row = BenchRow{row.scene, row.config, row.triangles};
-      row.reason = e.what();
-      row.embree = EmbreeScene::is_config(config);
-      row.lossy = is_lossy_config(config);
+      slot.release();
+      row = unmeasured(row, e.what());
     } catch (const Error& e) {
-      row = BenchRow{row.scene, row.config, row.triangles};
-      row.reason = e.what();
-      row.embree = EmbreeScene::is_config(config);
-      row.lossy = is_lossy_config(config);
+      slot.release();
+      row = unmeasured(row, e.what());
       row.build_failed = true;
       error(row, row.reason);
     } catch (const std::exception& e) {
-      row = BenchRow{row.scene, row.config, row.triangles};
-      row.reason = std::string("failed: ") + e.what();
+      slot.release();
+      row = unmeasured(row, std::string("failed: ") + e.what());
       row.build_failed = true;
       error(row, row.reason);
     }
-    if (row.measured())
-      progress(opt, "%s%s%s\n",
-               "build " + fmt("%.3f s", *row.build_s) + ", " +
-                   fmt("%.1f B/tri", row.bytes_per_triangle.value_or(0)) + ", " +
-                   fmt("%.2f", row.mrays_primary.value_or(0)) + " / " +
-                   fmt("%.2f MRays/s", row.mrays_diffuse.value_or(0)),
-               ", agreement " + fmt("%.4f%%", 100.0 * row.hit_agreement.value_or(0)) +
-                   " (same face " + fmt("%.4f%%", 100.0 * row.same_face.value_or(0)) + ")",
-               ", checksums " + fmt("%.6g", row.checksum_primary) + " " +
-                   fmt("%.6g", row.checksum_diffuse) + fmt(" (%.1f s)", seconds_since(t0)));
-    else
-      progress(opt, "%s%s%s\n", row.reason, "", "");
+    if (row.measured()) {
+      slot_bytes.push_back(row.bytes_total.value_or(0));
+      row.kept = keep_between_rounds(slot_bytes, report.memory_budget).back();
+      if (!row.kept) slot.release();
+      progress(opt, "build " + fmt("%.3f s", *row.build_s) + ", " +
+                        fmt("%.1f B/tri", row.bytes_per_triangle.value_or(0)) + ", agreement " +
+                        fmt("%.4f%%", 100.0 * row.hit_agreement.value_or(0)) + " (same face " +
+                        fmt("%.4f%%", 100.0 * row.same_face.value_or(0)) + "), " +
+                        (row.kept ? "kept" : "rebuilt in each round") +
+                        fmt(" (%.1f s)\n", seconds_since(t0)));
+      slot.row = report.rows.size();
+      slots.push_back(std::move(slot));
+    } else {
+      progress(opt, row.reason + "\n");
+    }
     report.rows.push_back(std::move(row));
+  }
+
+  // One configuration's turn in round `round`: both workloads, timed.
+  void time_slot(Slot& slot, int round) {
+    BenchRow& row = report.rows[slot.row];
+    if (!slot.built()) {  // did not fit the memory budget: rebuilt for this round, untimed
+      if (row.embree)
+        build_embree(row, slot);
+      else
+        build_slim(row, slot);
+    }
+    RunResult p, d;
+    if (slot.embree) {
+      p = run_primary(*slot.embree, arena, w);
+      d = run_diffuse(*slot.embree, arena, w);
+    } else {
+      p = run_primary(*slot.slim, arena, w);
+      d = run_diffuse(*slot.slim, arena, w);
+    }
+    if (!row.kept) slot.release();
+    if (round == 0) {
+      row.rays_primary = p.rays;
+      row.checksum_primary = p.checksum;
+      row.rays_diffuse = d.rays;
+      row.checksum_diffuse = d.checksum;
+    } else if (p.rays != row.rays_primary || d.rays != row.rays_diffuse ||
+               p.checksum != row.checksum_primary || d.checksum != row.checksum_diffuse) {
+      error(row, "round " + std::to_string(round + 1) +
+                     " traced different rays than round 1 (not deterministic)");
+    }
+    row.seconds_primary.push_back(p.seconds);
+    row.seconds_diffuse.push_back(d.seconds);
+    row.cpu_seconds_primary.push_back(p.cpu_seconds);
+    row.cpu_seconds_diffuse.push_back(d.cpu_seconds);
+  }
+
+  // Part B of bench_runner.h: the interleaved rounds, then the medians and ranges.
+  void time_rounds() {
+    std::vector<Slot*> active;
+    for (Slot& s : slots) active.push_back(&s);
+    for (int round = 0; round < report.repeat; ++round) {
+      const auto t0 = Clock::now();
+      std::vector<Slot*> failed;
+      for (size_t i : round_order(active.size(), round)) {
+        Slot& slot = *active[i];
+        try {
+          time_slot(slot, round);
+        } catch (const std::exception& e) {  // a rebuild that fails (out of memory)
+          slot.release();
+          BenchRow& row = report.rows[slot.row];
+          row = unmeasured(row, "failed in round " + std::to_string(round + 1) + ": " + e.what());
+          row.build_failed = true;
+          error(row, row.reason);
+          failed.push_back(&slot);
+        }
+      }
+      for (Slot* f : failed) active.erase(std::find(active.begin(), active.end(), f));
+      progress(opt, name + ": round " + std::to_string(round + 1) + "/" +
+                        std::to_string(report.repeat) + fmt(" (%.1f s)\n", seconds_since(t0)));
+    }
+    const BenchRow* ref = nullptr;
+    for (Slot* s : active)
+      if (report.rows[s->row].config == "embree-tri") ref = &report.rows[s->row];
+    for (Slot* s : active) {
+      BenchRow& row = report.rows[s->row];
+      std::vector<double> m1, m2, r1, r2;
+      for (size_t k = 0; k < row.seconds_primary.size(); ++k) {
+        m1.push_back(double(row.rays_primary) / row.seconds_primary[k] * 1e-6);
+        m2.push_back(double(row.rays_diffuse) / row.seconds_diffuse[k] * 1e-6);
+        if (!ref) continue;
+        r1.push_back(m1.back() / (double(ref->rays_primary) / ref->seconds_primary[k] * 1e-6));
+        r2.push_back(m2.back() / (double(ref->rays_diffuse) / ref->seconds_diffuse[k] * 1e-6));
+      }
+      if (m1.empty()) continue;
+      row.mrays_primary = spread_of(m1);
+      row.mrays_diffuse = spread_of(m2);
+      if (ref) {
+        row.ratio_primary = spread_of(r1);
+        row.ratio_diffuse = spread_of(r2);
+      }
+      progress(opt, name + " " + row.config + ": " + spread_text(row.mrays_primary, "%.2f") +
+                        " / " + spread_text(row.mrays_diffuse, "%.2f") + " MRays/s, ratios " +
+                        spread_text(row.ratio_primary, "%.2f") + " / " +
+                        spread_text(row.ratio_diffuse, "%.2f") + ", checksums " +
+                        fmt("%.17g", row.checksum_primary) + " " +
+                        fmt("%.17g", row.checksum_diffuse) + "\n");
+    }
+    slots.clear();
   }
 };
 
 }  // namespace
-
-std::vector<std::string> default_configs() {
-  std::vector<std::string> v = EmbreeScene::config_names();
-  for (const std::string& n : all_config_names()) v.push_back(n);
-  return v;
-}
-
-bool is_lossy_config(const std::string& name) {
-  const ConfigInfo* c = find_config(name);
-  return c && c->lossy;
-}
-
-void check_config_name(const std::string& name) {
-  if (EmbreeScene::is_config(name)) return;
-  try {
-    BuildOptions::from_config(name);
-  } catch (const Error& e) {
-    throw Error(std::string(e.what()) +
-                "; Embree anchors: embree-tri, embree-tri-compact, "
-                "embree-quad, embree-quad-pairs, embree-grid");
-  }
-}
 
 bool hits_agree(const Hit& a, const Hit& b) {
   if (!a.valid() || !b.valid()) return a.valid() == b.valid();
@@ -497,6 +545,7 @@ BenchReport run_bench(const BenchOptions& opt) {
   report.width = opt.width;
   report.height = opt.height;
   report.max_bounces = opt.max_bounces;
+  report.memory_budget = opt.memory_budget > 0 ? opt.memory_budget : default_memory_budget();
   tbb::task_arena arena(report.machine.threads);
   // Start the arena's threads before anything is timed, so that the first build does not pay it.
   arena.execute([&] {
@@ -527,249 +576,14 @@ BenchReport run_bench(const BenchOptions& opt) {
       std::fprintf(stderr, "%s: %llu faces, %llu triangles, loaded in %.2f s\n", scene_name.c_str(),
                    (unsigned long long)run.mesh.face_count(), (unsigned long long)run.triangles,
                    seconds_since(t0));
-    // The PSNR reference is bvh8-tri4v's render, made when bvh8-tri4v runs (it comes before the
-    // lossy formats in the default order) or built on demand by the first lossy configuration.
-    for (const std::string& c : configs) run.run_config(c);
-    const size_t first = report.rows.size() - configs.size();
-    const BenchRow& ref = report.rows[first];
-    for (size_t i = first; i < report.rows.size(); ++i) {
-      BenchRow& row = report.rows[i];
-      if (!row.measured() || !ref.measured()) continue;
-      if (row.mrays_primary && ref.mrays_primary)
-        row.ratio_primary = *row.mrays_primary / *ref.mrays_primary;
-      if (row.mrays_diffuse && ref.mrays_diffuse)
-        row.ratio_diffuse = *row.mrays_diffuse / *ref.mrays_diffuse;
-    }
+    // The PSNR reference is bvh8-tri4v's render, made when bvh8-tri4v is prepared (it comes before
+    // the lossy formats in the default order) or built on demand by the first lossy configuration.
+    for (const std::string& c : configs) run.prepare(c);
+    run.reference = {};
+    run.psnr_reference.reset();
+    run.time_rounds();
   }
   return report;
-}
-
-namespace {
-
-template <class T>
-nlohmann::json opt_json(const std::optional<T>& v) {
-  if (!v || (std::is_floating_point_v<T> && !std::isfinite(double(*v)))) return nullptr;
-  return *v;
-}
-
-}  // namespace
-
-nlohmann::json report_json(const BenchReport& report) {
-  nlohmann::json out;
-  out["machine"] = {{"cpu", report.machine.cpu},
-                    {"threads", report.machine.threads},
-                    {"isa", report.machine.isa}};
-  nlohmann::json results = nlohmann::json::array();
-  for (const BenchRow& r : report.rows) {
-    nlohmann::json j;
-    j["scene"] = r.scene;
-    j["config"] = r.config;
-    j["triangles"] = r.triangles;
-    j["build_s"] = opt_json(r.build_s);
-    j["bytes_geometry"] = opt_json(r.bytes_geometry);
-    j["bytes_bvh"] = opt_json(r.bytes_bvh);
-    j["bytes_other"] = opt_json(r.bytes_other);
-    j["bytes_total"] = opt_json(r.bytes_total);
-    j["bytes_per_triangle"] = opt_json(r.bytes_per_triangle);
-    j["mrays_primary"] = opt_json(r.mrays_primary);
-    j["mrays_diffuse"] = opt_json(r.mrays_diffuse);
-    j["ratio_primary"] = opt_json(r.ratio_primary);
-    j["ratio_diffuse"] = opt_json(r.ratio_diffuse);
-    j["box_tests_per_ray"] = opt_json(r.box_tests_per_ray);
-    j["prim_tests_per_ray"] = opt_json(r.prim_tests_per_ray);
-    // Beyond BENCHMARK.md's schema: primitive records (a pair counts once), and the counts of
-    // the workload-2 sample (the paths of every 16th pixel).
-    j["prim_records_per_ray"] = opt_json(r.prim_records_per_ray);
-    j["box_tests_per_ray_w2s"] = opt_json(r.box_tests_per_ray_w2);
-    j["prim_tests_per_ray_w2s"] = opt_json(r.prim_tests_per_ray_w2);
-    j["prim_records_per_ray_w2s"] = opt_json(r.prim_records_per_ray_w2);
-    j["hit_agreement"] = opt_json(r.hit_agreement);
-    j["hit_agreement_embree_tri"] = opt_json(r.agreement_embree_tri);
-    j["error"] = {{"rms", opt_json(r.error.rms)},
-                  {"diag_avg_pct", opt_json(r.error.diag_avg_pct)},
-                  {"diag_max_pct", opt_json(r.error.diag_max_pct)},
-                  {"psnr_db", opt_json(r.error.psnr_db)}};
-    if (!r.measured()) j["reason"] = r.reason;
-    results.push_back(std::move(j));
-  }
-  out["results"] = std::move(results);
-  return out;
-}
-
-namespace {
-
-std::string cell(const std::optional<double>& v, const char* f) {
-  return v ? fmt(f, *v) : std::string("—");
-}
-
-std::string markdown_escape(std::string s) {
-  std::string out;
-  for (char c : s) {
-    if (c == '|') out += '\\';
-    out += c == '\n' ? ' ' : c;
-  }
-  return out;
-}
-
-}  // namespace
-
-std::string report_markdown(const BenchReport& report) {
-  std::ostringstream o;
-  o << "slimrt bench: " << report.machine.cpu << ", " << report.machine.threads << " threads, isa "
-    << report.machine.isa << "; camera " << report.width << "x" << report.height << "; medians of "
-    << report.repeat << " runs; Embree kernels: " << EmbreeScene::kernel_isa() << ".\n"
-    << "W1 = one primary ray per pixel, W2 = diffuse path tracing (up to " << report.max_bounces
-    << " bounces, every ray counted). ratio = MRays/s over embree-tri's. box/prim = tests per ray "
-       "(slimrt only, untimed counting pass): W1 over all workload-1 rays, W2s over the paths of "
-       "every 16th pixel. agree = workload-1 hits agreeing with Embree on the same geometry "
-       "(BENCHMARK.md): embree-tri, or for grid, lossy-grid* and costa-* embree-tri run on the "
-       "format's own decoded triangles; vs tri = agreement with embree-tri on the input's fan "
-       "triangles. MB = geometry + BVH + side tables.\n\n";
-  o << "| scene | config | build s | Mtri/s | MB | B/tri | W1 MRays/s | W2 MRays/s | W1 ratio | "
-       "W2 ratio | box/ray W1 | prim/ray W1 | box/ray W2s | prim/ray W2s | agree % | vs tri % | "
-       "PSNR dB | note |\n";
-  o << "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | "
-       "---: | ---: | ---: | ---: | --- |\n";
-  for (const BenchRow& r : report.rows) {
-    o << "| " << markdown_escape(r.scene) << " | " << r.config << " | ";
-    if (!r.measured()) {
-      for (int i = 0; i < 15; ++i) o << "— | ";
-      o << markdown_escape(r.reason) << " |\n";
-      continue;
-    }
-    std::optional<double> mb;
-    if (r.bytes_total) mb = double(*r.bytes_total) / 1e6;
-    std::optional<double> agree;
-    if (r.hit_agreement) agree = 100.0 * *r.hit_agreement;
-    std::optional<double> vs_tri;
-    if (r.agreement_embree_tri) vs_tri = 100.0 * *r.agreement_embree_tri;
-    if (r.config == "embree-tri") vs_tri = agree;
-    std::string note;
-    if (r.hit_agreement && *r.hit_agreement < kLosslessAgreement) note = "ERROR: agreement < 99.9%";
-    std::string psnr_cell = r.error.psnr_identical ? "inf" : cell(r.error.psnr_db, "%.2f");
-    o << cell(r.build_s, "%.3f") << " | " << cell(r.build_mprims_s, "%.2f") << " | "
-      << cell(mb, "%.2f") << " | " << cell(r.bytes_per_triangle, "%.1f") << " | "
-      << cell(r.mrays_primary, "%.2f") << " | " << cell(r.mrays_diffuse, "%.2f") << " | "
-      << cell(r.ratio_primary, "%.3f") << " | " << cell(r.ratio_diffuse, "%.3f") << " | "
-      << cell(r.box_tests_per_ray, "%.1f") << " | " << cell(r.prim_tests_per_ray, "%.1f") << " | "
-      << cell(r.box_tests_per_ray_w2, "%.1f") << " | " << cell(r.prim_tests_per_ray_w2, "%.1f")
-      << " | " << cell(agree, "%.3f") << " | " << cell(vs_tri, "%.3f") << " | " << psnr_cell
-      << " | " << note << " |\n";
-  }
-  return o.str();
-}
-
-// Runs gnuplot on `script` (whose "set output" names SLIM_PLOT_OUTPUT) through write_atomically:
-// the PNG appears complete or not at all. gnuplot's own error lines are kept for the message.
-static bool run_gnuplot(const std::string& script, const std::string& png_path, std::string* why) {
-  try {
-    write_atomically(png_path, [&](const std::string& tmp) {
-      std::string quoted = "'";
-      for (char c : tmp) quoted += c == '\'' ? std::string("''") : std::string(1, c);
-      quoted += "'";
-      std::string full = script;
-      const std::string marker = "SLIM_PLOT_OUTPUT";
-      if (const size_t at = full.find(marker); at != std::string::npos)
-        full.replace(at, marker.size(), quoted);
-      const std::string log = tmp + ".log";
-      FILE* pipe = popen(("gnuplot 2> '" + log + "'").c_str(), "w");
-      if (!pipe) throw Error("could not start gnuplot: " + std::string(std::strerror(errno)));
-      std::fwrite(full.data(), 1, full.size(), pipe);
-      const int status = pclose(pipe);
-      std::string said;
-      if (FILE* f = std::fopen(log.c_str(), "r")) {
-        char line[512];
-        while (std::fgets(line, sizeof line, f)) {
-          std::string l(line);
-          while (!l.empty() && (l.back() == '\n' || l.back() == ' ')) l.pop_back();
-          if (!l.empty()) said = l;  // the last non-empty line holds gnuplot's error
-        }
-        std::fclose(f);
-      }
-      std::remove(log.c_str());
-      if (status != 0) {
-        std::string what =
-            status == -1 ? std::string("could not wait for gnuplot")
-            : WIFEXITED(status)
-                ? "gnuplot exited with code " + std::to_string(WEXITSTATUS(status)) + ", expected 0"
-            : WIFSIGNALED(status)
-                ? "gnuplot was killed by signal " + std::to_string(WTERMSIG(status))
-                : "gnuplot failed";
-        throw Error(what + (said.empty() ? std::string() : ": " + said));
-      }
-    });
-  } catch (const Error& e) {
-    if (why) *why = e.what();
-    return false;
-  }
-  return true;
-}
-
-bool write_plot(const BenchReport& report, const std::string& png_path, std::string* why) {
-  auto fail = [&](const std::string& msg) {
-    if (why) *why = msg;
-    return false;
-  };
-  if (std::system("gnuplot --version > /dev/null 2>&1") != 0)
-    return fail("gnuplot not found (Debian package gnuplot-nox; scripts/setup.sh installs it)");
-
-  // One panel per scene with at least one point.
-  std::vector<std::string> scenes;
-  for (const BenchRow& r : report.rows)
-    if (r.bytes_per_triangle && r.mrays_diffuse && *r.bytes_per_triangle > 0 &&
-        std::find(scenes.begin(), scenes.end(), r.scene) == scenes.end())
-      scenes.push_back(r.scene);
-  if (scenes.empty()) return fail("no configuration has both bytes/triangle and diffuse MRays/s");
-
-  auto quote = [](const std::string& s) {  // gnuplot single-quoted string
-    std::string out = "'";
-    for (char c : s) out += c == '\'' ? std::string("''") : std::string(1, c);
-    return out + "'";
-  };
-  std::ostringstream g;
-  const int panel_h = 520;
-  g << "if (strstrt(GPVAL_TERMINALS, 'pngcairo') > 0) {\n"
-    << "  set terminal pngcairo size 960," << panel_h * int(scenes.size()) << " font ',10'\n"
-    << "} else {\n"
-    << "  set terminal png size 960," << panel_h * int(scenes.size()) << "\n"
-    << "}\n"
-    << "set output SLIM_PLOT_OUTPUT\n"
-    << "set multiplot layout " << scenes.size() << ",1\n"
-    << "set logscale x\nset grid\nset key top right\n"
-    << "set xlabel 'memory: bytes per input triangle (log scale)'\n"
-    << "set ylabel 'diffuse MRays/s (workload 2)'\n"
-    << "set offsets graph 0.05, graph 0.25, graph 0.1, graph 0.05\n";
-  for (size_t s = 0; s < scenes.size(); ++s) {
-    std::ostringstream emb, sli;
-    for (const BenchRow& r : report.rows) {
-      if (r.scene != scenes[s] || !r.bytes_per_triangle || !r.mrays_diffuse ||
-          *r.bytes_per_triangle <= 0)
-        continue;
-      (r.embree ? emb : sli) << "\"" << r.config << "\" " << *r.bytes_per_triangle << " "
-                             << *r.mrays_diffuse << "\n";
-    }
-    std::vector<std::string> parts;
-    auto block = [&](const std::string& data, const char* tag, const char* colour,
-                     const char* title) {
-      if (data.empty()) return;
-      const std::string name = "$" + std::string(tag) + std::to_string(s);
-      g << name << " << EOD\n" << data << "EOD\n";
-      parts.push_back(name + " using 2:3 with points pt 7 ps 1.3 lc rgb '" + colour + "' title '" +
-                      title + "'");
-      parts.push_back(name + " using 2:3:1 with labels left offset char 0.8,0.4 font ',8' notitle");
-    };
-    block(emb.str(), "embree", "#c0392b", "Embree 3");
-    block(sli.str(), "slim", "#1f5fbf", "slimrt");
-    g << "set title "
-      << quote(scenes[s] + ": " + std::to_string(report.machine.threads) + " threads, " +
-               report.machine.cpu)
-      << "\nplot ";
-    for (size_t i = 0; i < parts.size(); ++i) g << (i ? ", \\\n     " : "") << parts[i];
-    g << "\n";
-  }
-  g << "unset multiplot\n";
-
-  return run_gnuplot(g.str(), png_path, why);
 }
 
 }  // namespace slim::bench

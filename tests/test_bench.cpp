@@ -1,5 +1,6 @@
-// The benchmark instrument (issue 3): the Embree adapter against slimrt, and `slimrt bench --json`
-// against the BENCHMARK.md schema. No test asserts a timing.
+// The benchmark instrument (issue 3): the Embree adapter against slimrt, the interleaved rounds and
+// their statistics (issue 23), and `slimrt bench --json` against the BENCHMARK.md schema. No test
+// asserts a timing.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -12,7 +13,10 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "bench_json.h"
+#include "bench_markdown.h"
 #include "bench_runner.h"
+#include "bench_stats.h"
 #include "embree_scene.h"
 #include "slimrt/pairing.h"
 #include "test_util.h"
@@ -325,6 +329,114 @@ TEST(BenchRunner, LossyNamesAndAgreement) {
   EXPECT_FALSE(bench::hits_agree(a, b));
 }
 
+TEST(BenchRounds, EveryConfigOncePerRoundInRotatingOrder) {
+  for (size_t n : {size_t(1), size_t(2), size_t(3), size_t(7)}) {
+    std::vector<int> opened(n, 0);
+    for (int round = 0; round < int(3 * n); ++round) {
+      const std::vector<size_t> order = bench::round_order(n, round);
+      ASSERT_EQ(order.size(), n);
+      std::vector<int> seen(n, 0);
+      for (size_t c : order) {
+        ASSERT_LT(c, n);
+        ++seen[c];
+      }
+      for (size_t c = 0; c < n; ++c) EXPECT_EQ(seen[c], 1) << "n " << n << " round " << round;
+      // Each round starts one configuration further, the rest following in configuration order.
+      EXPECT_EQ(order[0], size_t(round) % n);
+      for (size_t i = 1; i < n; ++i) EXPECT_EQ(order[i], (order[i - 1] + 1) % n);
+      if (round > 0 && n > 1) {
+        EXPECT_NE(order, bench::round_order(n, round - 1));
+      }
+      ++opened[order[0]];
+    }
+    for (size_t c = 0; c < n; ++c) EXPECT_EQ(opened[c], 3) << "n " << n;  // each opens in turn
+  }
+  EXPECT_TRUE(bench::round_order(0, 4).empty());
+}
+
+TEST(BenchRounds, MedianRangeAndNoisyFlag) {
+  EXPECT_EQ(bench::median({}), 0.0);
+  EXPECT_EQ(bench::median({3.0}), 3.0);
+  EXPECT_EQ(bench::median({4.0, 1.0, 2.0}), 2.0);
+  EXPECT_EQ(bench::median({4.0, 1.0, 2.0, 3.0}), 2.5);
+
+  bench::Spread s = bench::spread_of({1.05, 0.97, 1.0, 1.08, 1.02});
+  EXPECT_EQ(s.median, 1.02);
+  EXPECT_EQ(s.lo, 0.97);
+  EXPECT_EQ(s.hi, 1.08);
+  EXPECT_FALSE(s.noisy());
+  // Either end further than 10% of the median from it is flagged.
+  EXPECT_TRUE(bench::spread_of({1.0, 1.0, 1.11}).noisy());
+  EXPECT_TRUE(bench::spread_of({1.0, 1.0, 0.89}).noisy());
+  EXPECT_FALSE(bench::spread_of({1.0, 1.0, 1.09, 0.91}).noisy());
+  EXPECT_FALSE(bench::spread_of({2.0}).noisy());  // one round: an empty range
+  // The figures of the issue's three back-to-back runs (bvh8-pairs W2 2.36, 0.65, 0.97).
+  const bench::Spread pairs = bench::spread_of({2.36, 0.65, 0.97});
+  EXPECT_EQ(pairs.median, 0.97);
+  EXPECT_TRUE(pairs.noisy());
+}
+
+TEST(BenchRounds, ScenesKeptWithinTheMemoryBudget) {
+  using V = std::vector<bool>;
+  EXPECT_EQ(bench::keep_between_rounds({10, 20, 30, 5}, 35), (V{true, true, false, true}));
+  EXPECT_EQ(bench::keep_between_rounds({10, 20, 30, 5}, 1000), (V{true, true, true, true}));
+  EXPECT_EQ(bench::keep_between_rounds({10, 20}, 0), (V{false, false}));
+  EXPECT_EQ(bench::keep_between_rounds({40, 20}, 30), (V{false, true}));
+  EXPECT_GT(bench::default_memory_budget(), 0u);
+}
+
+TEST(BenchReport, RatiosAsMedianWithRangeInJsonAndMarkdown) {
+  bench::BenchReport rep;
+  rep.repeat = 5;
+  bench::BenchRow a;
+  a.scene = "s";
+  a.config = "bvh8-tri4v";
+  a.triangles = 10;
+  a.mrays_primary = bench::spread_of({4.0, 4.2, 3.9, 4.1, 4.0});
+  a.mrays_diffuse = bench::spread_of({2.0, 2.1, 2.0, 1.9, 2.0});
+  a.ratio_primary = bench::spread_of({1.02, 0.97, 1.08, 1.0, 1.05});
+  a.ratio_diffuse = bench::spread_of({1.02, 0.85, 1.08, 1.0, 1.05});
+  a.seconds_primary = {0.25, 0.24, 0.26, 0.25, 0.25};
+  a.checksum_primary = 123.5;
+  rep.rows.push_back(a);
+  bench::BenchRow b;
+  b.scene = "s";
+  b.config = "embree-grid";
+  b.reason = "does not apply: not a lattice";
+  rep.rows.push_back(b);
+
+  const nlohmann::json j = bench::report_json(rep);
+  EXPECT_EQ(j["rounds"].get<int>(), 5);
+  const nlohmann::json& r = j["results"][0];
+  for (const char* f : {"mrays_primary", "mrays_diffuse", "ratio_primary", "ratio_diffuse"}) {
+    const std::string n = f;
+    ASSERT_TRUE(r[n].is_number()) << n;
+    ASSERT_TRUE(r[n + "_range"].is_array()) << n;
+    ASSERT_EQ(r[n + "_range"].size(), 2u) << n;
+    ASSERT_TRUE(r[n + "_noisy"].is_boolean()) << n;
+    EXPECT_LE(r[n + "_range"][0].get<double>(), r[n].get<double>()) << n;
+    EXPECT_GE(r[n + "_range"][1].get<double>(), r[n].get<double>()) << n;
+  }
+  EXPECT_EQ(r["ratio_primary"].get<double>(), 1.02);
+  EXPECT_EQ(r["ratio_primary_range"][0].get<double>(), 0.97);
+  EXPECT_EQ(r["ratio_primary_range"][1].get<double>(), 1.08);
+  EXPECT_FALSE(r["ratio_primary_noisy"].get<bool>());
+  EXPECT_TRUE(r["ratio_diffuse_noisy"].get<bool>());
+  EXPECT_EQ(r["seconds_primary_rounds"].size(), 5u);
+  EXPECT_EQ(r["checksum_primary"].get<double>(), 123.5);
+  const nlohmann::json& u = j["results"][1];
+  for (const char* f : {"ratio_primary", "ratio_primary_range", "ratio_primary_noisy"})
+    EXPECT_TRUE(u[f].is_null()) << f;
+  EXPECT_TRUE(u["reason"].is_string());
+
+  EXPECT_EQ(bench::ratio_cell(a.ratio_primary), "1.02 (0.97-1.08)");
+  EXPECT_EQ(bench::ratio_cell(a.ratio_diffuse), "1.02 (0.85-1.08) !");
+  EXPECT_EQ(bench::ratio_cell(std::nullopt), "—");
+  const std::string md = bench::report_markdown(rep);
+  EXPECT_NE(md.find("| 1.02 (0.97-1.08) | 1.02 (0.85-1.08) ! |"), std::string::npos) << md;
+  EXPECT_NE(md.find("5 interleaved rounds"), std::string::npos) << md;
+}
+
 // `slimrt bench terrain:64 --repeat 1 --json` against the BENCHMARK.md schema.
 TEST(BenchCli, JsonSchemaOnTerrain64) {
   const std::string json_path = (std::filesystem::temp_directory_path() /
@@ -399,6 +511,23 @@ TEST(BenchCli, JsonSchemaOnTerrain64) {
       ASSERT_TRUE(r[f].is_number()) << config << " " << f;
       EXPECT_GT(r[f].get<double>(), 0.0) << config << " " << f;
     }
+    // The rounds (one here): each MRays/s figure and ratio with its range and flag.
+    for (const char* f : {"mrays_primary", "mrays_diffuse", "ratio_primary", "ratio_diffuse"}) {
+      const std::string n = f;
+      ASSERT_TRUE(r.contains(n + "_range") && r[n + "_range"].is_array()) << config << " " << n;
+      ASSERT_EQ(r[n + "_range"].size(), 2u) << config << " " << n;
+      EXPECT_EQ(r[n + "_range"][0].get<double>(), r[n].get<double>()) << config << " " << n;
+      EXPECT_EQ(r[n + "_range"][1].get<double>(), r[n].get<double>()) << config << " " << n;
+      ASSERT_TRUE(r.contains(n + "_noisy") && r[n + "_noisy"].is_boolean()) << config << " " << n;
+      EXPECT_FALSE(r[n + "_noisy"].get<bool>()) << config << " " << n;
+    }
+    EXPECT_EQ(r["seconds_primary_rounds"].size(), 1u) << config;
+    EXPECT_EQ(r["seconds_diffuse_rounds"].size(), 1u) << config;
+    EXPECT_EQ(r["rays_primary"].get<uint64_t>(), 1024u * 1024u) << config;
+    EXPECT_GE(r["rays_diffuse"].get<uint64_t>(), 1024u * 1024u) << config;
+    EXPECT_GT(r["checksum_primary"].get<double>(), 0.0) << config;
+    EXPECT_GT(r["checksum_diffuse"].get<double>(), 0.0) << config;
+    EXPECT_TRUE(r["kept_between_rounds"].get<bool>()) << config;
     const bool embree = config.rfind("embree-", 0) == 0;
     EXPECT_EQ(r["box_tests_per_ray"].is_null(), embree) << config;
     EXPECT_EQ(r["prim_tests_per_ray"].is_null(), embree) << config;
@@ -431,6 +560,50 @@ TEST(BenchCli, JsonSchemaOnTerrain64) {
       EXPECT_TRUE(r["error"]["psnr_db"].is_number()) << config;
     }
   }
+}
+
+// Three rounds, once with every built scene kept between rounds and once with none kept (a 1-byte
+// budget: each is rebuilt in every round): same rays, same checksums, one time per round.
+TEST(BenchCli, RoundsKeptOrRebuiltTraceTheSameRays) {
+  auto run = [](const std::string& extra) {
+    const std::string json_path = (std::filesystem::temp_directory_path() /
+                                   ("slimrt_bench_rounds_" + std::to_string(getpid()) + ".json"))
+                                      .string();
+    const std::string cmd = std::string(SLIM_CLI_PATH) +
+                            " bench terrain:16 --repeat 3 --threads 2 --config "
+                            "embree-tri,bvh8-tri4v,bvh8-pairs --json " +
+                            json_path + extra + " > /dev/null 2>&1";
+    EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
+    std::ifstream in(json_path);
+    nlohmann::json j = nlohmann::json::parse(in);
+    std::filesystem::remove(json_path);
+    return j;
+  };
+  const nlohmann::json kept = run(""), rebuilt = run(" --memory-budget 0.000001");
+  EXPECT_EQ(kept["rounds"].get<int>(), 3);
+  ASSERT_EQ(kept["results"].size(), 3u);
+  ASSERT_EQ(rebuilt["results"].size(), 3u);
+  for (size_t i = 0; i < 3; ++i) {
+    const nlohmann::json &k = kept["results"][i], &r = rebuilt["results"][i];
+    const std::string config = k["config"];
+    EXPECT_EQ(r["config"], k["config"]);
+    EXPECT_TRUE(k["kept_between_rounds"].get<bool>()) << config;
+    EXPECT_FALSE(r["kept_between_rounds"].get<bool>()) << config;
+    for (const nlohmann::json* x : {&k, &r}) {
+      EXPECT_EQ((*x)["seconds_primary_rounds"].size(), 3u) << config;
+      EXPECT_EQ((*x)["seconds_diffuse_rounds"].size(), 3u) << config;
+      EXPECT_EQ((*x)["cpu_seconds_primary_rounds"].size(), 3u) << config;
+      EXPECT_EQ((*x)["cpu_seconds_diffuse_rounds"].size(), 3u) << config;
+      const nlohmann::json& range = (*x)["ratio_diffuse_range"];
+      EXPECT_LE(range[0].get<double>(), (*x)["ratio_diffuse"].get<double>()) << config;
+      EXPECT_GE(range[1].get<double>(), (*x)["ratio_diffuse"].get<double>()) << config;
+    }
+    for (const char* f : {"rays_primary", "rays_diffuse", "checksum_primary", "checksum_diffuse"})
+      EXPECT_EQ(k[f], r[f]) << config << " " << f;
+  }
+  // embree-tri is its own reference in every round.
+  EXPECT_EQ(kept["results"][0]["config"], "embree-tri");
+  EXPECT_EQ(kept["results"][0]["ratio_primary_range"], nlohmann::json::array({1.0, 1.0}));
 }
 
 TEST(BenchCli, UnknownConfigFails) {

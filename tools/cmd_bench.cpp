@@ -1,14 +1,18 @@
-// `slimrt bench SCENE... [--config NAME...] [--threads N] [--repeat K] [--json FILE] [--plot FILE]
-//                [--strict]`
+// `slimrt bench SCENE... [--config NAME...] [--threads N] [--repeat K] [--memory-budget MB]
+//                [--json FILE] [--plot FILE] [--strict]`
 // Every configuration beside Embree 3 on the same rays in this process (../shared/BENCHMARK.md);
-// the work is done by bench/bench_runner. Prints the markdown table on stdout, progress and ERROR
-// lines on stderr. Exit code 0, or 1 with --strict when an ERROR was reported (a lossless
-// configuration under 99.9% hit agreement, a build failure, a non-deterministic run).
+// the work is done by bench/bench_runner, the output by bench/bench_{markdown,json,plot}. Prints
+// the markdown table on stdout, progress and ERROR lines on stderr. Exit code 0, or 1 with --strict
+// when an ERROR was reported (a lossless configuration under 99.9% hit agreement, a build failure,
+// a non-deterministic run).
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <string>
 #include <vector>
 
+#include "bench_json.h"
+#include "bench_markdown.h"
+#include "bench_plot.h"
 #include "bench_runner.h"
 #include "commands.h"
 #include "slimrt/analysis.h"
@@ -33,8 +37,16 @@ int cmd_bench(int argc, char** argv) {
   app.add_option("--threads", opt.threads, "threads for builds and rays, 0 = all cores")
       ->check(CLI::Range(0, 4096))
       ->capture_default_str();
-  app.add_option("--repeat", opt.repeat, "timed runs and builds per configuration (medians)")
+  app.add_option("--repeat", opt.repeat,
+                 "interleaved timed rounds (each runs every configuration once; medians and "
+                 "ranges over the rounds), and builds per configuration")
       ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  double budget_mb = 0;
+  app.add_option("--memory-budget", budget_mb,
+                 "MB of built scenes kept between rounds (the others are rebuilt in each round); "
+                 "0 = half of MemAvailable")
+      ->check(CLI::Range(0.0, 1e9))
       ->capture_default_str();
   app.add_option("--json", json_path, "write the figures as JSON (BENCHMARK.md schema)");
   app.add_option("--plot", plot_path,
@@ -46,6 +58,7 @@ int cmd_bench(int argc, char** argv) {
     return app.exit(e);
   }
   for (const std::string& c : opt.configs) bench::check_config_name(c);  // before any work
+  opt.memory_budget = uint64_t(budget_mb * 1e6);
   if (!json_path.empty()) check_output_path(json_path);
   if (!plot_path.empty()) check_output_path(plot_path);
 
@@ -53,9 +66,7 @@ int cmd_bench(int argc, char** argv) {
   std::fputs(bench::report_markdown(report).c_str(), stdout);
   std::fflush(stdout);
 
-  if (!json_path.empty()) {
-    write_file_atomically(json_path, bench::report_json(report).dump(1) + "\n");
-  }
+  if (!json_path.empty()) bench::write_json(report, json_path);
   if (!plot_path.empty()) {
     std::string why;
     if (!bench::write_plot(report, plot_path, &why))

@@ -40,18 +40,8 @@ GridStats grid_stats(const std::vector<const PolyMesh*>& meshes) {
 
 GridErrorStats grid_error(const std::vector<const PolyMesh*>& meshes, int encoding) {
   if (encoding != 1 && encoding != 2) throw Error("grid_error: encoding must be 1 or 2");
-  const GridExtraction x = extract_grid_scene(
+  return extract_grid_scene(
       meshes, BuildOptions::from_config(encoding == 1 ? "lossy-grid" : "lossy-grid-e2"), nullptr);
-  GridErrorStats e;
-  e.rms = x.rms;
-  e.max_error = x.max_error;
-  e.diag_avg_pct = x.diag_avg_pct;
-  e.diag_max_pct = x.diag_max_pct;
-  e.vertices = x.vertices;
-  e.subgrids = x.subgrids;
-  e.exact_vertices = x.exact_vertices;
-  e.leftovers = x.leftovers;
-  return e;
 }
 
 GridTriangles grid_triangles(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {

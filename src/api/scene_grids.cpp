@@ -676,7 +676,7 @@ std::unique_ptr<Scene::Impl> build_grid_scene(const std::vector<const PolyMesh*>
   return build_lossy_any(p, meshes, opt, int(opt.grid_encoding), layout);
 }
 
-GridExtraction extract_grid_scene(const std::vector<const PolyMesh*>& meshes,
+GridErrorStats extract_grid_scene(const std::vector<const PolyMesh*>& meshes,
                                   const BuildOptions& opt, DecodedTriangles* triangles) {
   for (const PolyMesh* m : meshes) {
     if (!m) throw Error("grid statistics: null mesh");
@@ -693,7 +693,7 @@ GridExtraction extract_grid_scene(const std::vector<const PolyMesh*>& meshes,
     build_uncompressed(p, meshes, opt, &x);
   else
     build_lossy_any(p, meshes, opt, int(opt.grid_encoding), layout, &x);
-  GridExtraction e;
+  GridErrorStats e;
   const ErrorTotals& et = x.errors;
   e.rms = et.rms;
   e.max_error = et.max_error;

@@ -96,6 +96,11 @@ SpecBound spec_bound(const std::string& config, const PolyMesh& m) {
     b.known = true;
     b.e = 8.0 * kGridK * max_face_diameter(m) + rounding(box);
     b.why = "0.06 x 8 x the largest face diameter";
+  } else if (config == "cluster") {
+    b.known = true;
+    b.e = BuildOptions::from_config(config).cluster_error * double(length(box.size())) +
+          rounding(box);
+    b.why = "cluster_error (1e-5) x the box diagonal";
   }
   return b;
 }

@@ -25,6 +25,7 @@
 //       costa-*V*: half a quantization step per axis, |step| / 2 with step = (box size) / 65535
 //         (Costa et al., Listing 4: 16 bits per component in the scene box; codes round to
 //         nearest);
+//       cluster: BuildOptions::cluster_error (1e-5) x the box diagonal (one scene-wide lattice);
 //       lossy-grid*: 0.06 * 8 * L, L the largest distance between two vertices of one input face
 //         (a vertex is its sub-grid's bilinear patch plus a displacement d quantized to within
 //         0.057 |d| by encoding 1 and 0.055 |d| by encoding 2, and |d| is at most the distance to
@@ -271,14 +272,23 @@ double max_face_diameter(const PolyMesh& m) {
 // the header comment); -1 for a lossy configuration this command knows no bound for.
 double spec_error_bound(const std::string& name, const PolyMesh& mesh) {
   const Box3f box = mesh.bounds();
-  if (name.rfind("costa", 0) == 0 && name.find('V') != std::string::npos) {
-    double h2 = 0;
-    for (int a = 0; a < 3; ++a) h2 += std::pow(0.5 * double(box.size()[a]) / 65535.0, 2);
-    return std::sqrt(h2) + coordinate_rounding(box);
+  const BuildOptions o = BuildOptions::from_config(name);
+  if (!describe(o).lossy) return 0;
+  switch (o.leaf) {
+    case Leaf::Costa: {
+      double h2 = 0;
+      for (int a = 0; a < 3; ++a) h2 += std::pow(0.5 * double(box.size()[a]) / 65535.0, 2);
+      return std::sqrt(h2) + coordinate_rounding(box);
+    }
+    case Leaf::LossyGrids:
+    case Leaf::SharedLossyGrids:
+      return 0.06 * 8.0 * max_face_diameter(mesh) + coordinate_rounding(box);
+    case Leaf::Clusters:
+      // One scene-wide lattice whose step puts every vertex within cluster_error x the diagonal.
+      return o.cluster_error * double(length(box.size())) + coordinate_rounding(box);
+    default:
+      return -1;
   }
-  if (name.rfind("lossy-grid", 0) == 0)
-    return 0.06 * 8.0 * max_face_diameter(mesh) + coordinate_rounding(box);
-  return -1;
 }
 
 // The input's fan triangles in double, for exact point-to-surface distances (brute force).

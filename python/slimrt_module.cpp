@@ -563,6 +563,21 @@ PYBIND11_MODULE(slimrt, m) {
   m.def("configs", &slim::all_config_names,
         "Every configuration name (the formats of the README).");
   m.def(
+      "config_info",
+      [](const std::string& name) {
+        const slim::ConfigInfo& c = slim::config_info(name);
+        py::dict d;
+        d["name"] = c.name;
+        d["lossy"] = c.lossy;
+        d["own_geometry"] = c.own_geometry;
+        d["error_bound"] = c.error_bound;
+        d["summary"] = c.summary;
+        return d;
+      },
+      py::arg("name"),
+      "The registry row of a configuration: name, lossy, own_geometry, error_bound (what the "
+      "format promises), summary. Raises slimrt.Error for an unknown name.");
+  m.def(
       "simd_isa", [] { return std::string(slim::simd_isa()); },
       "The SIMD path slimrt was compiled for.");
   m.def("load_triangles", &load_triangles, py::arg("path"),

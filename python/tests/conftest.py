@@ -24,9 +24,8 @@ def import_slimrt():
 
 
 def is_lossy(config):
-    """Formats that quantize positions: lossy grids and costa with V."""
-    return "lossy" in config or (config.startswith("costa") and "V" in config.split("-")[-1]
-                                 and config != "costa")
+    """Formats whose decoded positions may differ from the input (the registry's row)."""
+    return import_slimrt().config_info(config)["lossy"]
 
 
 def brute_force(vertices, triangles, rays, tnear=0.0, tfar=np.inf, edge_eps=1e-6):

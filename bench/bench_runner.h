@@ -1,5 +1,5 @@
 // `slimrt bench`: every configuration beside Embree, on the same rays, in one process
-// (BENCHMARK.md is the specification; issue 3 parts 1-4, issue 23 part 7).
+// (the benchmark specification: docs/benchmark.md).
 //
 // Per scene: load it, frame it with the benchmark camera (frame_box, 1024 x 1024), then
 // A. prepare every configuration (embree-tri first, the reference), one after the other:

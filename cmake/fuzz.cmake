@@ -36,7 +36,7 @@ if(SLIM_FUZZ)
   # SLIM_FUZZ_SOURCES_<t>: library sources a decoder target compiles besides its own file.
   set(SLIM_FUZZ_TARGETS obj ply gltf glb xz lossy_subgrid quantized_mesh pairing scene cluster)
   set(SLIM_FUZZ_SOURCES_lossy_subgrid src/prim/lossy_subgrid.cpp)
-  set(SLIM_FUZZ_SOURCES_cluster src/prim/cluster.cpp)  # issue 26: the cluster block decoder
+  set(SLIM_FUZZ_SOURCES_cluster src/prim/cluster.cpp)  # the cluster block decoder
   set(SLIM_FUZZ_SOURCES_quantized_mesh src/prim/quantized_mesh.cpp src/mesh/tessellate.cpp)
   set(SLIM_FUZZ_LIBS_quantized_mesh ${SLIM_GLU_LIB})
   # pairing: the pairing and the fan triangulation Scene::build runs first, against the test

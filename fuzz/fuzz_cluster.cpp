@@ -1,4 +1,4 @@
-// libFuzzer target: the compressed triangle cluster block (src/prim/cluster.h, issue 26).
+// libFuzzer target: the compressed triangle cluster block (src/prim/cluster.h).
 //
 // Input bytes:
 //   [0]      bits 0-2: children - 1 (1..8); bit 3: lossless; bits 4-7: round-trip triangles / 4

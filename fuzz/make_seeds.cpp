@@ -36,7 +36,7 @@ int main(int argc, char** argv) {
       ++n;
     }
   }
-  // Hostile seeds (issue 24): nesting just past the JSON depth limit (1000) and far past it
+  // Hostile seeds: nesting just past the JSON depth limit (1000) and far past it
   // within -max_len, indices beyond 2^32 and floats beyond float's range.
   auto put = [&](const std::string& target, const std::string& name, const std::string& bytes) {
     fs::create_directories(out / target);

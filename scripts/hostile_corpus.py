@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Hostile-input corpus (issue 24): writes crafted inputs into OUT and runs the slimrt CLI on each.
+"""Hostile-input corpus: writes crafted inputs into OUT and runs the slimrt CLI on each.
 
     scripts/hostile_corpus.py --cli build/slimrt --out build/hostile [--big] [--table]
 

@@ -1,5 +1,5 @@
-// The benchmark instrument (issue 3): the Embree adapter against slimrt, the interleaved rounds and
-// their statistics (issue 23), and `slimrt bench --json` against the BENCHMARK.md schema. No test
+// The benchmark instrument: the Embree adapter against slimrt, the interleaved rounds and
+// their statistics, and `slimrt bench --json` against the BENCHMARK.md schema. No test
 // asserts a timing.
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -612,7 +612,7 @@ TEST(BenchCli, UnknownConfigFails) {
   EXPECT_NE(std::system(cmd.c_str()), 0);
 }
 
-// `slimrt info SCENE --pairs --json`: the top-level names other programs read (Issue 5), and
+// `slimrt info SCENE --pairs --json`: the top-level names other programs read, and
 // --repeat's later calls.
 TEST(InfoCli, PairsJsonNames) {
   const std::string json_path = (std::filesystem::temp_directory_path() /

@@ -120,7 +120,7 @@ TEST(Camera, EyeLookAtAndFov) {
   EXPECT_THROW(slim::view_camera(scene.bounds(), v, 8, 8), slim::Error);
 }
 
-// Issue 24 item 5: meshes anywhere in the supported range are found in the image, and their
+// Meshes anywhere in the supported range are found in the image, and their
 // normals are not zero.
 TEST(Camera, WholeCoordinateRange) {
   struct Case {

@@ -1,4 +1,4 @@
-// End-to-end accuracy of every lossy configuration against the INPUT mesh (issue 25, item 1).
+// End-to-end accuracy of every lossy configuration against the INPUT mesh.
 //
 // Oracle: a double-precision brute force over the input's fan triangles (test_util.h), and the
 // error bound each format promises, derived from its specification (never from the scene's own

@@ -1,4 +1,4 @@
-// Concurrency (issue 8, part 6): queries from 8 threads on one scene give bit-identical answers
+// Concurrency: queries from 8 threads on one scene give bit-identical answers
 // to one thread, for every configuration; two scenes built at the same time (from two threads,
 // each build itself parallel with TBB) equal scenes built one after the other. Scene::intersect
 // and occluded are const and documented thread-safe. Run under ThreadSanitizer too:

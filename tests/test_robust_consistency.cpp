@@ -1,6 +1,5 @@
-// Consistency of every configuration with Embree on the benchmark's primary rays (issue 8,
-// part 5): workload 1 (one ray per pixel centre of slim::frame_box, BENCHMARK.md) of every mesh
-// of ../shared/data.
+// Consistency of every configuration with Embree on the benchmark's primary rays: workload 1 (one
+// ray per pixel centre of slim::frame_box) of every mesh of ../shared/data.
 //
 // Size. SLIM_ROBUST_FULL=1: every configuration on every mesh (about 4 minutes on 2 cores with
 // the 2M-triangle terrain). Default (CI, builds dominate the time): bvh8-tri4v on every mesh, and

@@ -1,4 +1,4 @@
-// Hostile inputs and failing disks (issue 24): deep JSON, integers and floats beyond their types,
+// Hostile inputs and failing disks: deep JSON, integers and floats beyond their types,
 // outputs on a full or missing disk, memory limits, messages that say what was expected.
 #include <gtest/gtest.h>
 #include <lzma.h>

@@ -1,4 +1,4 @@
-// Robustness of the readers on untrusted bytes (issue 8): every prefix and every single-byte
+// Robustness of the readers on untrusted bytes: every prefix and every single-byte
 // change of one small valid file per input format, headers that claim 2^31-1 elements, and the
 // inputs the fuzzers (fuzz/, ./fuzz.sh) found, kept as regression tests.
 //

@@ -1,4 +1,4 @@
-// Limits (issue 8, part 7): what every configuration does with meshes of 0 and 1 faces, with
+// Limits: what every configuration does with meshes of 0 and 1 faces, with
 // coordinates near 1e30 and 1e-30, with all-coplanar and all-degenerate input, and with rays that
 // start exactly on a surface. Each result is documented in the test that checks it. (Headers
 // claiming 2^31 - 1 faces: RobustLimits.HeaderClaimingTwoToThe31Faces... in

@@ -1,4 +1,4 @@
-// Watertightness of every configuration (issue 8, part 4), at CI size, through `slimrt verify`
+// Watertightness of every configuration, at CI size, through `slimrt verify`
 // (tools/cmd_verify.cpp): rays from inside closed meshes toward random directions, vertices and
 // edge midpoints never leak, and every hit is where the format's own geometry says it is
 // (within rounding; lossy formats are also measured against the input surface). The same command

@@ -11,7 +11,7 @@
 // Two triangles of area 10 share bc, in the plane z = 1: T0 = (a0, b, c) with a0 = (3, -1) and
 // T1 = (a1, c, b) with a1 = (-3, 1). k is chosen so that 3 cx - cy > 0: the ray is on T1's side,
 // so the exact answer is "T1 at t = 1, T0 missed". Without the fallback, U = 0 counts as inside
-// for both triangles and T0 is hit too (checked by removing the fallback: see the issue 25 note).
+// for both triangles and T0 is hit too (checked by removing the fallback).
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -35,7 +35,7 @@ int cmd_info(int argc, char** argv) {
       ->needs("--pairs");
   app.add_flag("--costa", costa, "quantized n-gon mesh sizes (Costa et al.)");
   app.add_flag("--grids", grids, "grid conversion and lossy grid error statistics");
-  // Issue 26: the compressed triangle clusters' figures.
+  // The compressed triangle clusters' figures.
   app.add_flag("--clusters", clusters, "compressed triangle clusters (cluster, cluster-lossless)");
   app.add_option("--cluster-error", cluster_error,
                  "--clusters: the lossy error bound, a fraction of the box diagonal")

@@ -1,4 +1,4 @@
-// Compressed triangle clusters (configurations `cluster`, `cluster-lossless`; issue 26).
+// Compressed triangle clusters (configurations `cluster`, `cluster-lossless`).
 #pragma once
 
 #include <cstdint>

@@ -44,7 +44,7 @@ enum class Leaf : uint8_t {
   LossyGrids,        // 128-byte lossy sub-grids (bilinear patch + 21 quantized displacements)
   SharedLossyGrids,  // 68-byte lossy sub-grids over shared corner lattices (CompressedLeaf only)
   Costa,             // quantized n-gon mesh (letters in BuildOptions::costa)
-  // Compressed triangle clusters (issue 26, prim/cluster.h; CompressedLeaf only): positions on one
+  // Compressed triangle clusters (prim/cluster.h; CompressedLeaf only): positions on one
   // scene-wide lattice within BuildOptions::cluster_error, or exact floats.
   Clusters,
   LosslessClusters,

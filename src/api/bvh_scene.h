@@ -116,7 +116,7 @@ class BvhScene : public Scene::Impl {
 
   // Builds the BVH over `prim_count` primitives of `src` (Leaf::encode, Leaf::source_key and
   // Leaf::source_bounds read it), fills bvh, expected, bounds and the BVH part of stats/mem.
-  // Optional hooks (cluster formats, issue 26): the BVH2's leaf shape, and a pass that restructures
+  // Optional hooks (cluster formats): the BVH2's leaf shape, and a pass that restructures
   // the BVH2 before the collapse.
   struct Bvh2Hooks {
     uint32_t max_leaf_size = 0, block_prims = 0;  // override the BVH2 config when nonzero

@@ -29,7 +29,7 @@ void describe_format(ConfigInfo& c) {
   c.own_geometry = c.lossy || o.leaf == Leaf::Costa;
   if (!c.lossy)
     c.error_bound = "0 (positions are stored exactly)";
-  else if (o.leaf == Leaf::Clusters)  // issue 26
+  else if (o.leaf == Leaf::Clusters)
     c.error_bound =
         "the largest |decoded - input| over the vertices, measured at build (at most "
         "BuildOptions::cluster_error x the box diagonal unless the lattice had to be coarsened: "
@@ -106,7 +106,7 @@ std::vector<ConfigInfo> make_rows() {
                      "128-byte lossy sub-grids under the quantized BVH8"),
       lossy_grid_row("lossy-grid-shared", Nodes::CompressedLeaf, Leaf::SharedLossyGrids,
                      GridEncoding::Octahedral, "68-byte lossy sub-grids over shared corners"),
-      // Issue 26: compressed triangle clusters (prim/cluster.h), one per multi-leaf.
+      // Compressed triangle clusters (prim/cluster.h), one per multi-leaf.
       row("cluster", Nodes::CompressedLeaf, Leaf::Clusters,
           "compressed triangle clusters on one scene-wide lattice (lossy, cluster_error)"),
       row("cluster-lossless", Nodes::CompressedLeaf, Leaf::LosslessClusters,

@@ -178,7 +178,7 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
   z.decoded.assign(vertices, vertices + nv);
   if (!lossless) {
     if (!(rel_error > 0.0) || !std::isfinite(rel_error))
-      throw Error("cluster: BuildOptions::cluster_error must be positive and finite");
+      throw Error("cluster: the error bound (BuildOptions::cluster_error) must be positive and finite");
     // Rounding to the nearest lattice point moves a vertex by at most step * sqrt(3) / 2.
     const double bound = rel_error * z.diag;
     double step = bound > 0 ? std::exp2(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) : 1.0;

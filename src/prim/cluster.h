@@ -41,7 +41,8 @@
 #include "core/watertight.h"
 #include "prim/triangles.h"
 #include "slimrt/math.h"
-#include "slimrt/scene.h"
+#include "slimrt/error.h"
+#include "slimrt/ray.h"
 
 namespace slim {
 

@@ -301,10 +301,7 @@ std::unique_ptr<Scene::Impl> build_cluster_scene(const std::vector<const PolyMes
   TriangleMesh tm = triangulate_fan(meshes);
   std::unique_ptr<Scene::Impl> s =
       opt.leaf == Leaf::LosslessClusters ? build_with<true>(tm, opt) : build_with<false>(tm, opt);
-  s->stats.input_faces = tm.input_faces;
-  s->stats.triangles = tm.input_triangles;
-  s->stats.skipped_faces = tm.skipped_faces;
-  s->mem.triangles = tm.input_triangles;
+  s->set_input(tm.input_faces, tm.input_triangles, tm.skipped_faces);
   return s;
 }
 

@@ -2,6 +2,7 @@
 // interface (one indirect call per query).
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -22,6 +23,14 @@ struct Scene::Impl {
   double error_bound = 0;
 
   virtual ~Impl() = default;
+  // The input figures every builder reports: input faces, fan triangles (also the per-triangle
+  // divisor of memory) and faces skipped for a NaN/Inf vertex.
+  void set_input(uint64_t faces, uint64_t triangles, uint64_t skipped) {
+    stats.input_faces = faces;
+    stats.triangles = triangles;
+    stats.skipped_faces = skipped;
+    mem.triangles = triangles;
+  }
   virtual void intersect(TravRay& ray, HitRecord& hit) const = 0;
   virtual bool occluded(TravRay& ray) const = 0;
   virtual void intersect_counted(TravRay& ray, HitRecord& hit, TraversalCounters& c) const = 0;

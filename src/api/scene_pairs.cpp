@@ -69,10 +69,7 @@ std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>
     d.emplace_back("half_edges", double(ps.half_edges));
     d.emplace_back("nonmanifold_edges", double(ps.nonmanifold_edges));
   }
-  s->stats.input_faces = tm.input_faces;
-  s->stats.triangles = tm.input_triangles;
-  s->stats.skipped_faces = tm.skipped_faces;
-  s->mem.triangles = tm.input_triangles;
+  s->set_input(tm.input_faces, tm.input_triangles, tm.skipped_faces);
   return s;
 }
 

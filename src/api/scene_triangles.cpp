@@ -36,10 +36,7 @@ std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMe
     s = build_with<Tri4i>(tm, opt);
   else
     s = build_with<Tri4v>(tm, opt);
-  s->stats.input_faces = tm.input_faces;
-  s->stats.triangles = tm.input_triangles;
-  s->stats.skipped_faces = tm.skipped_faces;
-  s->mem.triangles = tm.input_triangles;
+  s->set_input(tm.input_faces, tm.input_triangles, tm.skipped_faces);
   return s;
 }
 

@@ -13,4 +13,4 @@ mkdir -p out
 ./build/slimrt info canyon:1024 --accel lossy-grid-shared
 ./build/slimrt bench terrain:1024 --repeat 3 --json out/default-bench.json --plot out/default-bench.png \
   --config embree-tri,embree-tri-compact,embree-quad,embree-grid,bvh8-tri4v,bvh8-tri4i,qbvh8-tri4v \
-  --config clbvh-tri4v,clbvh-compact,bvh8-pairs,clbvh-pairs,grid,lossy-grid,lossy-grid-e2,lossy-grid-shared,costa-PFV
+  --config clbvh-tri4v,clbvh-compact,bvh8-pairs,clbvh-pairs,grid,lossy-grid,lossy-grid-e2,lossy-grid-shared,costa-PFV,cluster,cluster-lossless

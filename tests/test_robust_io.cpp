@@ -298,6 +298,11 @@ TEST(RobustFuzzFindings, CrashingInputsStayFixed) {
       // to int: UBSan "inf is outside the range of representable values of type 'int'").
       {"obj", "v 0 0 0\nvw 0 111111111111111111111111111111111111111111111111 8 4\n"},
       {"obj", "v 0 0 0\nvw 0 1e300 0.5\n"},
+      // fuzz_obj, CI: an exponent of 10 digits overflowed tinyobjloader's int exponent (UBSan
+      // "signed integer overflow: 2147483640 + 9").
+      {"obj", "v 0e2147483649 0 0\n"},
+      {"obj", "v 0 0 0\nvt 1e-2147483649 0\n"},
+      {"obj", "t crease 0/1/0 1e+0002147483649\n"},
       {"ply",
        "ply\nformat binary_little_endian 1.0\nelement face 1\n"
        "property list uchar int vertex_indices\nend_header\n\x03"},

@@ -156,6 +156,29 @@ void check_floats(const std::string& src, uint64_t line, std::string_view rest, 
   });
 }
 
+// Refuses a number whose exponent has more than kMaxExponentDigits significant digits, in any
+// token of the lines whose numbers tinyobjloader parses (v, vt, vn, vw, t). Its parser multiplies
+// the exponent by 10 per digit in an int with a check that still lets 2147483640 + 9 overflow
+// (undefined behaviour, found by fuzz/fuzz_obj.cpp with "0e2147483649"). Such exponents mean
+// 0 or an overflow, and the overflow is refused by check_floats anyway.
+constexpr int kMaxExponentDigits = 6;
+void check_exponents(const std::string& src, uint64_t line, std::string_view rest) {
+  for_each_token(rest, [&](int64_t, std::string_view t) {
+    for (size_t i = 0; i < t.size(); ++i) {
+      if (t[i] != 'e' && t[i] != 'E') continue;
+      size_t j = i + 1;
+      if (j < t.size() && (t[j] == '+' || t[j] == '-')) ++j;
+      while (j < t.size() && t[j] == '0') ++j;
+      int digits = 0;
+      while (j < t.size() && t[j] >= '0' && t[j] <= '9') ++j, ++digits;
+      if (digits > kMaxExponentDigits)
+        throw_at_line(src, line,
+                      "number " + excerpt(t) + " has an exponent of " + std::to_string(digits) +
+                          " digits; expected at most " + std::to_string(kMaxExponentDigits));
+    }
+  });
+}
+
 // Checks one face corner "v", "v/t", "v//n" or "v/t/n" of face line `text` against the counts of
 // v, vt and vn lines read so far (OBJ indices: 1..N, or -N..-1 counting back from the last one).
 // tinyobjloader reads them into int, so 4294967297 would wrap around to 1.
@@ -237,16 +260,19 @@ PolyMesh read_obj(const std::string& src, std::string_view data) {
         throw_at_line(src, line,
                       "vertex has " + std::to_string(coords) + " coordinates; expected x y z");
       if (bad >= 0) throw_at_line(src, line, "vertex coordinate is not a number; expected x y z");
+      check_exponents(src, line, rest);
       check_floats(src, line, rest, "vertex coordinate");
       ++defined[0];
       return true;
     }
     if (statement2(text, "vt", rest)) {
+      check_exponents(src, line, rest);
       check_floats(src, line, rest, "texture coordinate");
       ++defined[1];
       return true;
     }
     if (statement2(text, "vn", rest)) {
+      check_exponents(src, line, rest);
       check_floats(src, line, rest, "normal coordinate");
       ++defined[2];
       return true;
@@ -255,12 +281,17 @@ PolyMesh read_obj(const std::string& src, std::string_view data) {
       // tinyobjloader converts the joint ids of 'vw' lines from float to int unchecked (undefined
       // behaviour for huge values, found by fuzz/fuzz_obj.cpp); slimrt ignores vertex weights, so
       // numbers that do not fit an int are refused here.
+      check_exponents(src, line, rest);
       for_each_token(rest, [&](int64_t, std::string_view t) {
         const std::string tok(t.substr(0, 64));
         const double v = std::strtod(tok.c_str(), nullptr);
         if (t.size() > 32 || !(std::fabs(v) < 2147483647.0))
           throw_at_line(src, line, "vertex weight line has a number out of range: " + excerpt(t));
       });
+      return true;
+    }
+    if (statement(text, 't', rest)) {  // tinyobjloader's tags: "t name ints/reals/strings ..."
+      check_exponents(src, line, rest);
       return true;
     }
     int64_t n = face_corners(text);

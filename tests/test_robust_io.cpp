@@ -303,6 +303,9 @@ TEST(RobustFuzzFindings, CrashingInputsStayFixed) {
       {"obj", "v 0e2147483649 0 0\n"},
       {"obj", "v 0 0 0\nvt 1e-2147483649 0\n"},
       {"obj", "t crease 0/1/0 1e+0002147483649\n"},
+      // fuzz_obj: "0e3805" is 0 to strtod but 0 * 5^3805 = NaN to tinyobjloader, whose 'vw' joint
+      // id was then converted to int (UBSan "-nan is outside the range of ... 'int'").
+      {"obj", "vt \nvw 1 0e3805\n\n"},
       {"ply",
        "ply\nformat binary_little_endian 1.0\nelement face 1\n"
        "property list uchar int vertex_indices\nend_header\n\x03"},

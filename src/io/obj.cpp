@@ -14,6 +14,7 @@
 
 #include "io/obj.h"
 
+#include <algorithm>
 #include <cfloat>
 #include <cmath>
 #include <cstdlib>
@@ -156,25 +157,27 @@ void check_floats(const std::string& src, uint64_t line, std::string_view rest, 
   });
 }
 
-// Refuses a number whose exponent has more than kMaxExponentDigits significant digits, in any
-// token of the lines whose numbers tinyobjloader parses (v, vt, vn, vw, t). Its parser multiplies
-// the exponent by 10 per digit in an int with a check that still lets 2147483640 + 9 overflow
-// (undefined behaviour, found by fuzz/fuzz_obj.cpp with "0e2147483649"). Such exponents mean
-// 0 or an overflow, and the overflow is refused by check_floats anyway.
-constexpr int kMaxExponentDigits = 6;
+// Refuses a number whose exponent lies beyond +-kMaxExponent, in any token of the lines whose
+// numbers tinyobjloader parses (v, vt, vn, vw, t). Its parser is not strtod: it multiplies the
+// exponent by 10 per digit in an int with a check that still lets 2147483640 + 9 overflow, and it
+// computes mantissa * 5^e, which is 0 * inf = NaN for "0e3805" (a zero to strtod); a NaN joint id
+// of a 'vw' line is then converted to int (both undefined behaviour, found by fuzz/fuzz_obj.cpp).
+// Up to 400 every such product is finite, and float's range ends near 1e38 and 1e-45 anyway.
+constexpr int kMaxExponent = 400;
 void check_exponents(const std::string& src, uint64_t line, std::string_view rest) {
   for_each_token(rest, [&](int64_t, std::string_view t) {
     for (size_t i = 0; i < t.size(); ++i) {
       if (t[i] != 'e' && t[i] != 'E') continue;
       size_t j = i + 1;
       if (j < t.size() && (t[j] == '+' || t[j] == '-')) ++j;
-      while (j < t.size() && t[j] == '0') ++j;
-      int digits = 0;
-      while (j < t.size() && t[j] >= '0' && t[j] <= '9') ++j, ++digits;
-      if (digits > kMaxExponentDigits)
+      int exponent = 0;
+      for (; j < t.size() && t[j] >= '0' && t[j] <= '9'; ++j)
+        exponent = std::min(exponent * 10 + (t[j] - '0'), kMaxExponent + 1);
+      if (exponent > kMaxExponent)
         throw_at_line(src, line,
-                      "number " + excerpt(t) + " has an exponent of " + std::to_string(digits) +
-                          " digits; expected at most " + std::to_string(kMaxExponentDigits));
+                      "number " + excerpt(t) + " has an exponent beyond " +
+                          std::to_string(kMaxExponent) + "; expected one from -" +
+                          std::to_string(kMaxExponent) + " to " + std::to_string(kMaxExponent));
     }
   });
 }

@@ -1,11 +1,19 @@
 // slimrt info SCENE [--json] [--accel CONFIG] [--pairs [--repeat K]] [--costa] [--grids]
 //                   [--clusters [--cluster-error E]]
+//        slimrt info SCENE --chunks MAX_TRIANGLES [--spill-dir D] [--memory-budget MIB]
+//                   [--chunk-accel CONFIG] [--json]
+#include <sys/resource.h>
+
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "build/chunks.h"
 #include "commands.h"
+#include "io/face_stream.h"
 #include "slimrt/analysis.h"
+#include "slimrt/output.h"
 
 namespace slim::cli {
 
@@ -14,6 +22,87 @@ namespace {
 nlohmann::json box_json(const Box3f& b) {
   if (b.empty()) return nullptr;
   return {{"min", {b.lo.x, b.lo.y, b.lo.z}}, {"max", {b.hi.x, b.hi.y, b.hi.z}}};
+}
+
+uint64_t peak_rss_bytes() {
+  struct rusage u;
+  getrusage(RUSAGE_SELF, &u);
+  return uint64_t(u.ru_maxrss) * 1024;
+}
+
+// --chunks: the scene streamed (never loaded whole) and partitioned into spatial chunks of at
+// most `max_triangles` (build/chunks.h); each chunk is then read back, and built with
+// `accel` if given, one at a time. Prints the chunks and the peak resident memory.
+int info_chunks(const std::string& scene_name, uint64_t max_triangles, const std::string& dir,
+                uint64_t budget_mib, const std::string& accel, bool json) {
+  detail::ChunkOptions opt;
+  opt.max_triangles = max_triangles;
+  opt.memory_budget = budget_mib << 20;
+  opt.spill_dir = dir.empty() ? std::filesystem::temp_directory_path().string() : dir;
+  auto stream = detail::open_face_stream(scene_name);
+  detail::ChunkSet set(*stream, opt);
+  const detail::ChunkingStats& st = set.stats();
+  const uint64_t rss_partition = peak_rss_bytes();
+  nlohmann::json out;
+  out["scene"] = scene_name;
+  out["faces"] = st.faces;
+  out["triangles"] = st.triangles;
+  out["bounds"] = box_json(st.bounds);
+  out["chunks"] = set.size();
+  out["max_triangles"] = max_triangles;
+  out["cells_used"] = st.cells_used;
+  out["bytes_histogram"] = st.histogram_bytes;
+  out["bytes_spill_buffers"] = st.buffer_bytes;
+  out["bytes_stream"] = st.stream_bytes;
+  out["bytes_spilled"] = st.spilled_bytes;
+  out["pass_s"] = {st.seconds[0], st.seconds[1], st.seconds[2]};
+  out["peak_rss_after_partition"] = rss_partition;
+  if (!json) {
+    std::printf("scene            %s (streamed)\n", scene_name.c_str());
+    std::printf("faces            %llu, %llu fan triangles\n", (unsigned long long)st.faces,
+                (unsigned long long)st.triangles);
+    std::printf("chunks           %zu of at most %llu triangles (%llu Morton cells used)\n",
+                set.size(), (unsigned long long)max_triangles, (unsigned long long)st.cells_used);
+    std::printf("passes           bounds %.2f s, histogram %.2f s, spill %.2f s\n", st.seconds[0],
+                st.seconds[1], st.seconds[2]);
+    std::printf("memory           histogram %s, spill buffers %s, stream %s, spilled %s\n",
+                format_bytes(st.histogram_bytes).c_str(), format_bytes(st.buffer_bytes).c_str(),
+                format_bytes(st.stream_bytes).c_str(), format_bytes(st.spilled_bytes).c_str());
+    std::printf("peak RSS         %llu B after partitioning\n", (unsigned long long)rss_partition);
+  }
+  uint64_t max_chunk_tris = 0, scene_bytes = 0;
+  for (size_t i = 0; i < set.size(); ++i) {
+    const detail::ChunkInfo& ci = set.info(i);
+    max_chunk_tris = std::max(max_chunk_tris, ci.triangles);
+    nlohmann::json c = {
+        {"faces", ci.faces}, {"triangles", ci.triangles}, {"bounds", box_json(ci.bounds)}};
+    detail::Chunk chunk = set.load(i);
+    if (!accel.empty()) {
+      const Scene scene = Scene::build(chunk.mesh, BuildOptions::from_config(accel));
+      c["bytes_scene"] = scene.memory().total();
+      scene_bytes += scene.memory().total();
+    }
+    out["chunk"].push_back(c);
+    if (!json && (i < 8 || i + 8 >= set.size()))
+      std::printf("  chunk %5zu  %9llu triangles  [%g %g %g] - [%g %g %g]\n", i,
+                  (unsigned long long)ci.triangles, ci.bounds.lo.x, ci.bounds.lo.y, ci.bounds.lo.z,
+                  ci.bounds.hi.x, ci.bounds.hi.y, ci.bounds.hi.z);
+    else if (!json && i == 8)
+      std::printf("  ...\n");
+  }
+  out["peak_rss"] = peak_rss_bytes();
+  if (!accel.empty()) out["bytes_chunk_scenes"] = scene_bytes;
+  if (json) {
+    std::printf("%s\n", out.dump(2).c_str());
+  } else {
+    if (!accel.empty())
+      std::printf("chunk scenes     %s: %llu B in all\n", accel.c_str(),
+                  (unsigned long long)scene_bytes);
+    std::printf("largest chunk    %llu triangles\n", (unsigned long long)max_chunk_tris);
+    std::printf("peak RSS         %llu B after reading back%s every chunk\n",
+                (unsigned long long)peak_rss_bytes(), accel.empty() ? "" : " and building");
+  }
+  return 0;
 }
 
 }  // namespace
@@ -40,11 +129,26 @@ int cmd_info(int argc, char** argv) {
   app.add_option("--cluster-error", cluster_error,
                  "--clusters: the lossy error bound, a fraction of the box diagonal")
       ->needs("--clusters");
+  // Chunked, streamed input (issue 27): the mesh is never loaded whole.
+  uint64_t chunks = 0, budget_mib = 256;
+  std::string spill_dir, chunk_accel;
+  app.add_option("--chunks", chunks,
+                 "stream the scene and split it into spatial chunks of at most this many "
+                 "triangles; print them and the peak resident memory")
+      ->check(CLI::Range(uint64_t(1), uint64_t(1) << 31));
+  app.add_option("--spill-dir", spill_dir, "--chunks: directory for the temporary chunk files")
+      ->needs("--chunks");
+  app.add_option("--memory-budget", budget_mib, "--chunks: MiB of spill buffers (default 256)")
+      ->check(CLI::Range(uint64_t(1), uint64_t(1) << 30))
+      ->needs("--chunks");
+  app.add_option("--chunk-accel", chunk_accel, "--chunks: build every chunk with this config")
+      ->needs("--chunks");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
+  if (chunks > 0) return info_chunks(scene_name, chunks, spill_dir, budget_mib, chunk_accel, json);
 
   PolyMesh mesh = load(scene_name);
   MeshSummary s = summarize(mesh);

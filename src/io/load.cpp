@@ -9,6 +9,7 @@
 #include "io/obj.h"
 #include "io/ply.h"
 #include "io/xz.h"
+#include "mesh/procedural.h"
 #include "slimrt/mesh.h"
 
 namespace slim {
@@ -22,22 +23,10 @@ const char* const kAccepted =
     "terrain:N, torus:N or canyon:N";
 
 PolyMesh make_procedural(const std::string& spec) {
-  const size_t colon = spec.find(':');
-  const std::string kind = spec.substr(0, colon), digits = spec.substr(colon + 1);
-  // Strict: decimal digits only, no sign, blanks or leading zeros.
-  bool ok = !digits.empty() && digits.size() <= 6 && digits[0] != '0' &&
-            std::all_of(digits.begin(), digits.end(), [](char c) { return c >= '0' && c <= '9'; });
-  const int n = ok ? std::stoi(digits) : 0;
-  // A torus needs N even and N/2 >= 3 (make_torus): one range stated, the one that holds.
-  if (kind == "torus" && (!ok || n > kMaxProceduralN || n < 6 || n % 2 != 0))
-    throw Error(spec + ": expected torus:N with N an even integer from 6 to " +
-                std::to_string(kMaxProceduralN));
-  if (!ok || n > kMaxProceduralN)
-    throw Error(spec + ": expected " + kind + ":N with N an integer from 1 to " +
-                std::to_string(kMaxProceduralN));
-  PolyMesh mesh = kind == "terrain" ? make_terrain(n)
-                  : kind == "torus" ? make_torus(n)
-                                    : make_canyon(n);
+  const detail::ProceduralSpec p = detail::parse_procedural(spec, kMaxProceduralN);
+  PolyMesh mesh = p.kind == "terrain" ? make_terrain(p.n)
+                  : p.kind == "torus" ? make_torus(p.n)
+                                      : make_canyon(p.n);
   if (mesh.name.empty()) mesh.name = spec;
   return mesh;
 }

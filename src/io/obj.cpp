@@ -18,9 +18,14 @@
 #include <cfloat>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
+#include <memory>
 #include <streambuf>
 #include <unordered_map>
 
+#include "io/byte_window.h"
+#include "io/face_stream.h"
+#include "io/xz.h"
 #include "slimrt/error.h"
 
 namespace slim::detail {
@@ -238,6 +243,74 @@ void check_corner(const std::string& src, uint64_t line, std::string_view text,
   }
 }
 
+// The checks of one line, shared by read_obj and the face stream: control bytes, 'v' lines with 3
+// numeric coordinates, float overflow, exponents tinyobjloader cannot take, and every face corner
+// against the v/vt/vn lines before it (`defined`, updated here). Returns the number of corners of
+// a face line (>= 3), -1 for any other line.
+int64_t prescan_line(const std::string& src, uint64_t line, std::string_view text,
+                     uint64_t defined[3]) {
+  for (char c : text) {
+    unsigned char u = static_cast<unsigned char>(c);
+    if (u < 32 && c != '\t' && c != '\v' && c != '\f' && u != 0x1a)
+      throw_at_line(src, line,
+                    "control byte " + std::to_string(u) + " in an OBJ file; expected text");
+  }
+  std::string_view rest;
+  if (statement(text, 'v', rest)) {
+    // tinyobjloader reads a missing or non-numeric coordinate as 0: refuse it here.
+    int64_t bad = -1;
+    int64_t coords = for_each_token(rest, [&](int64_t k, std::string_view t) {
+      if (k < 3 && bad < 0 && std::string_view("+-.0123456789").find(t[0]) == t.npos) bad = k;
+    });
+    if (coords < 3)
+      throw_at_line(src, line,
+                    "vertex has " + std::to_string(coords) + " coordinates; expected x y z");
+    if (bad >= 0) throw_at_line(src, line, "vertex coordinate is not a number; expected x y z");
+    check_exponents(src, line, rest);
+    check_floats(src, line, rest, "vertex coordinate");
+    ++defined[0];
+    return -1;
+  }
+  if (statement2(text, "vt", rest)) {
+    check_exponents(src, line, rest);
+    check_floats(src, line, rest, "texture coordinate");
+    ++defined[1];
+    return -1;
+  }
+  if (statement2(text, "vn", rest)) {
+    check_exponents(src, line, rest);
+    check_floats(src, line, rest, "normal coordinate");
+    ++defined[2];
+    return -1;
+  }
+  if (vertex_weight_statement(text, rest)) {
+    // tinyobjloader converts the joint ids of 'vw' lines from float to int unchecked (undefined
+    // behaviour for huge values, found by fuzz/fuzz_obj.cpp); slimrt ignores vertex weights, so
+    // numbers that do not fit an int are refused here.
+    check_exponents(src, line, rest);
+    for_each_token(rest, [&](int64_t, std::string_view t) {
+      const std::string tok(t.substr(0, 64));
+      const double v = std::strtod(tok.c_str(), nullptr);
+      if (t.size() > 32 || !(std::fabs(v) < 2147483647.0))
+        throw_at_line(src, line, "vertex weight line has a number out of range: " + excerpt(t));
+    });
+    return -1;
+  }
+  if (statement(text, 't', rest)) {  // tinyobjloader's tags: "t name ints/reals/strings ..."
+    check_exponents(src, line, rest);
+    return -1;
+  }
+  int64_t n = face_corners(text);
+  if (n < 0) return -1;
+  statement(text, 'f', rest);
+  for_each_token(rest,
+                 [&](int64_t, std::string_view t) { check_corner(src, line, text, t, defined); });
+  if (n < 3)
+    throw_at_line(src, line, "face has " + std::to_string(n) + " vertices; expected at least 3");
+  if (n > int64_t(UINT32_MAX)) throw_at_line(src, line, "face has too many vertices");
+  return n;
+}
+
 }  // namespace
 
 PolyMesh read_obj(const std::string& src, std::string_view data) {
@@ -246,66 +319,8 @@ PolyMesh read_obj(const std::string& src, std::string_view data) {
   // Pre-scan: corners per face, control bytes, float overflow, index ranges.
   uint64_t defined[3] = {0, 0, 0};  // v, vt, vn lines so far
   for_each_line(data, [&](uint64_t line, std::string_view text) {
-    for (char c : text) {
-      unsigned char u = static_cast<unsigned char>(c);
-      if (u < 32 && c != '\t' && c != '\v' && c != '\f' && u != 0x1a)
-        throw_at_line(src, line,
-                      "control byte " + std::to_string(u) + " in an OBJ file; expected text");
-    }
-    std::string_view rest;
-    if (statement(text, 'v', rest)) {
-      // tinyobjloader reads a missing or non-numeric coordinate as 0: refuse it here.
-      int64_t bad = -1;
-      int64_t coords = for_each_token(rest, [&](int64_t k, std::string_view t) {
-        if (k < 3 && bad < 0 && std::string_view("+-.0123456789").find(t[0]) == t.npos) bad = k;
-      });
-      if (coords < 3)
-        throw_at_line(src, line,
-                      "vertex has " + std::to_string(coords) + " coordinates; expected x y z");
-      if (bad >= 0) throw_at_line(src, line, "vertex coordinate is not a number; expected x y z");
-      check_exponents(src, line, rest);
-      check_floats(src, line, rest, "vertex coordinate");
-      ++defined[0];
-      return true;
-    }
-    if (statement2(text, "vt", rest)) {
-      check_exponents(src, line, rest);
-      check_floats(src, line, rest, "texture coordinate");
-      ++defined[1];
-      return true;
-    }
-    if (statement2(text, "vn", rest)) {
-      check_exponents(src, line, rest);
-      check_floats(src, line, rest, "normal coordinate");
-      ++defined[2];
-      return true;
-    }
-    if (vertex_weight_statement(text, rest)) {
-      // tinyobjloader converts the joint ids of 'vw' lines from float to int unchecked (undefined
-      // behaviour for huge values, found by fuzz/fuzz_obj.cpp); slimrt ignores vertex weights, so
-      // numbers that do not fit an int are refused here.
-      check_exponents(src, line, rest);
-      for_each_token(rest, [&](int64_t, std::string_view t) {
-        const std::string tok(t.substr(0, 64));
-        const double v = std::strtod(tok.c_str(), nullptr);
-        if (t.size() > 32 || !(std::fabs(v) < 2147483647.0))
-          throw_at_line(src, line, "vertex weight line has a number out of range: " + excerpt(t));
-      });
-      return true;
-    }
-    if (statement(text, 't', rest)) {  // tinyobjloader's tags: "t name ints/reals/strings ..."
-      check_exponents(src, line, rest);
-      return true;
-    }
-    int64_t n = face_corners(text);
-    if (n < 0) return true;
-    statement(text, 'f', rest);
-    for_each_token(rest,
-                   [&](int64_t, std::string_view t) { check_corner(src, line, text, t, defined); });
-    if (n < 3)
-      throw_at_line(src, line, "face has " + std::to_string(n) + " vertices; expected at least 3");
-    if (n > int64_t(UINT32_MAX)) throw_at_line(src, line, "face has too many vertices");
-    mesh.face_sizes.push_back(uint32_t(n));
+    const int64_t n = prescan_line(src, line, text, defined);
+    if (n >= 0) mesh.face_sizes.push_back(uint32_t(n));
     return true;
   });
 
@@ -413,6 +428,124 @@ PolyMesh read_obj(const std::string& src, std::string_view data) {
   if (mesh.object_names.size() > 1) mesh.face_object = std::move(shape_object);
   if (face_count == 0) mesh.object_names.clear();
   return mesh;
+}
+
+namespace {
+
+// Reads an OBJ file line by line through a window, in one pass: OBJ faces can only use vertices
+// defined before them (prescan_line checks that), so the positions read so far (12 bytes per
+// vertex) are all a face needs. Lines are split and checked exactly as read_obj does, and the
+// coordinates are parsed by tinyobjloader's own parseReal, so every position has the same bits.
+class ObjFaceStream final : public FaceStream {
+ public:
+  ObjFaceStream(const std::string& path, size_t max_corners, size_t window_bytes)
+      : FaceStream(path), max_corners_(std::max<size_t>(max_corners, 1)) {
+    if (has_xz_suffix(path)) {
+      bytes_ = read_file(path);
+      window_ = std::make_unique<ByteWindow>(bytes_.view(), 0);
+    } else {
+      window_ = std::make_unique<ByteWindow>(path, 0, window_bytes, true);
+    }
+  }
+
+  bool next(FaceBatch& out) override {
+    out.clear();
+    std::string_view text, rest;
+    while (out.corners.size() < max_corners_ && next_line(text)) {
+      ++line_;
+      const uint64_t vertices_before = defined_[0];
+      const int64_t n = prescan_line(name_, line_, text, defined_);
+      if (n < 0) {
+        if (defined_[0] != vertices_before) positions_.push_back(parse_vertex(text));
+        continue;
+      }
+      out.sizes.push_back(uint32_t(n));
+      out.face_ids.push_back(faces_++);
+      statement(text, 'f', rest);
+      for_each_token(rest, [&](int64_t, std::string_view corner) {
+        // "v", "v/t", "v//n" or "v/t/n", already checked by prescan_line (1..N or -N..-1).
+        std::string_view d = corner.substr(0, corner.find('/'));
+        const bool negative = d[0] == '-';
+        if (d[0] == '-' || d[0] == '+') d.remove_prefix(1);
+        uint64_t value = 0;
+        for (char c : d) value = value * 10 + uint64_t(c - '0');
+        const uint64_t idx = negative ? positions_.size() - value : value - 1;
+        out.corners.push_back(positions_[idx]);
+      });
+    }
+    return out.face_count() > 0;
+  }
+
+  void rewind() override {
+    window_->seek(0);
+    line_ = faces_ = 0;
+    defined_[0] = defined_[1] = defined_[2] = 0;
+    positions_.clear();
+    pending_cr_ = false;
+  }
+
+  uint64_t resident_bytes() const override {
+    return positions_.capacity() * sizeof(Vec3f) + window_->buffer_bytes() + bytes_.size() +
+           linebuf_.capacity();
+  }
+
+ private:
+  // The next line, split as for_each_line does (\n, \r\n or \r); valid until the next call.
+  bool next_line(std::string_view& text) {
+    ByteWindow& w = *window_;
+    for (;;) {
+      if (w.cur == w.end && !w.more()) return false;
+      if (pending_cr_) {  // a \r ended the last window: a \n right after it belongs to it
+        pending_cr_ = false;
+        if (*w.cur == '\n') {
+          ++w.cur;
+          continue;
+        }
+      }
+      break;
+    }
+    const char* b = w.cur;
+    const char* j = b;
+    while (j < w.end && *j != '\n' && *j != '\r') ++j;
+    text = std::string_view(b, size_t(j - b));
+    if (j == w.end) {
+      w.cur = j;
+    } else if (*j == '\r' && j + 1 == w.end) {
+      w.cur = j + 1;
+      pending_cr_ = true;
+    } else {
+      w.cur = (*j == '\r' && j[1] == '\n') ? j + 2 : j + 1;
+    }
+    return true;
+  }
+
+  // x, y, z of a 'v' line, parsed by tinyobjloader's parseReal as LoadObj does.
+  Vec3f parse_vertex(std::string_view text) {
+    linebuf_.assign(text);
+    const char* token = linebuf_.c_str();
+    token += strspn(token, " \t");
+    token += 2;  // "v" and the blank (checked by prescan_line)
+    const float x = tinyobj::parseReal(&token, 0.0);
+    const float y = tinyobj::parseReal(&token, 0.0);
+    const float z = tinyobj::parseReal(&token, 0.0);
+    return {x, y, z};
+  }
+
+  size_t max_corners_;
+  FileBytes bytes_;
+  std::unique_ptr<ByteWindow> window_;
+  std::vector<Vec3f> positions_;
+  std::string linebuf_;
+  uint64_t defined_[3] = {0, 0, 0};
+  uint64_t line_ = 0, faces_ = 0;
+  bool pending_cr_ = false;
+};
+
+}  // namespace
+
+std::unique_ptr<FaceStream> open_obj_stream(const std::string& path, size_t max_corners,
+                                            size_t window_bytes) {
+  return std::make_unique<ObjFaceStream>(path, max_corners, window_bytes);
 }
 
 }  // namespace slim::detail

@@ -12,6 +12,7 @@
 // names the file with the header/ascii line or the binary byte offset.
 #include "io/ply.h"
 
+#include <algorithm>
 #include <cfloat>
 #include <charconv>
 #include <cmath>
@@ -19,9 +20,13 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <vector>
 
+#include "io/byte_window.h"
+#include "io/face_stream.h"
+#include "io/xz.h"
 #include "slimrt/error.h"
 
 namespace slim::detail {
@@ -298,108 +303,126 @@ double load_real(const uint8_t* p, Ty t) {
   return double(load_int<BE>(p, t));
 }
 
-// Per-element state while parsing the body.
-struct Target {
+// What the body parsers hand their records to: `Sink` has vertex(const float v[kRoleCount]),
+// face(uint64_t record, uint32_t corners) followed by `corners` calls to corner(uint32_t index).
+// Indices reach the sink checked against the vertex count.
+
+// Builds the whole PolyMesh (read_ply).
+struct MeshSink {
   PolyMesh* mesh;
-  uint64_t vertex_count;
   bool has_normals, has_uvs;
+  void vertex(const float* v) {
+    mesh->positions.push_back({v[kX], v[kY], v[kZ]});
+    if (has_normals) mesh->normals.push_back({v[kNX], v[kNY], v[kNZ]});
+    if (has_uvs) mesh->uvs.push_back({v[kU], v[kV]});
+  }
+  void face(uint64_t, uint32_t n) { mesh->face_sizes.push_back(n); }
+  void corner(uint32_t idx) { mesh->face_indices.push_back(idx); }
+};
+
+// Reads and checks records without keeping anything.
+struct SkipSink {
+  void vertex(const float*) {}
+  void face(uint64_t, uint32_t) {}
+  void corner(uint32_t) {}
 };
 
 template <bool BE>
 class BinaryBody {
  public:
-  BinaryBody(const std::string& src, std::string_view data, size_t pos)
-      : src_(src),
-        p_(reinterpret_cast<const uint8_t*>(data.data())),
-        size_(data.size()),
-        pos_(pos) {}
+  BinaryBody(const std::string& src, ByteWindow& w) : src_(src), w_(w) {}
 
-  void element(const Elem& e, Target& t, bool is_vertex) {
-    for (uint64_t r = 0; r < e.count; ++r) {
+  // Parses records [r0, r1) of element `e` (the window is at the start of record r0).
+  template <class Sink>
+  void element(const Elem& e, uint64_t r0, uint64_t r1, uint64_t vertex_count, Sink& sink,
+               bool is_vertex) {
+    for (uint64_t r = r0; r < r1; ++r) {
       float v[kRoleCount] = {};
       for (const Prop& p : e.props) {
         if (!p.list) {
           need(ty_bytes(p.type), e, r);
-          if (p.role != kSkip) v[p.role] = to_float(load_real<BE>(p_ + pos_, p.type), p);
-          pos_ += ty_bytes(p.type);
+          if (p.role != kSkip) v[p.role] = to_float(load_real<BE>(at(), p.type), p);
+          w_.cur += ty_bytes(p.type);
           continue;
         }
-        const size_t count_pos = pos_;
+        const uint64_t count_pos = w_.offset(w_.cur);
         need(ty_bytes(p.count_type), e, r);
-        int64_t n = load_int<BE>(p_ + pos_, p.count_type);
-        pos_ += ty_bytes(p.count_type);
+        int64_t n = load_int<BE>(at(), p.count_type);
+        w_.cur += ty_bytes(p.count_type);
         if (n < 0) throw_at_byte(src_, count_pos, "negative list count " + std::to_string(n));
         if (p.face_indices && n < 3)
           throw_at_byte(src_, count_pos,
                         "face " + std::to_string(r) + " has " + std::to_string(n) +
                             " vertices; expected at least 3");
         const int item = ty_bytes(p.type);
-        if (uint64_t(n) > (size_ - pos_) / item) truncated(e, r, uint64_t(n) * item);
+        if (uint64_t(n) > w_.left() / item) truncated(e, r, uint64_t(n) * item);
         if (!p.face_indices) {
-          pos_ += size_t(n) * item;
+          skip(uint64_t(n) * item);
           continue;
         }
-        PolyMesh& m = *t.mesh;
-        m.face_sizes.push_back(uint32_t(n));
-        for (int64_t k = 0; k < n; ++k, pos_ += item) {
-          int64_t idx = load_int<BE>(p_ + pos_, p.type);
-          if (idx < 0 || uint64_t(idx) >= t.vertex_count) bad_index(r, idx, t.vertex_count);
-          m.face_indices.push_back(uint32_t(idx));
+        sink.face(r, uint32_t(n));
+        for (int64_t k = 0; k < n; ++k) {
+          need(item, e, r);
+          int64_t idx = load_int<BE>(at(), p.type);
+          if (idx < 0 || uint64_t(idx) >= vertex_count) bad_index(r, idx, vertex_count);
+          sink.corner(uint32_t(idx));
+          w_.cur += item;
         }
       }
-      if (is_vertex) push_vertex(v, t);
+      if (is_vertex) sink.vertex(v);
     }
   }
 
-  size_t pos() const { return pos_; }
-
  private:
+  const uint8_t* at() const { return reinterpret_cast<const uint8_t*>(w_.cur); }
   // A finite double beyond the float range (1e300) would become inf and its faces be dropped
   // later without a word: refused here.
   float to_float(double d, const Prop& p) const {
     if (std::isfinite(d) && std::fabs(d) > double(FLT_MAX))
-      throw_at_byte(src_, pos_,
+      throw_at_byte(src_, w_.offset(w_.cur),
                     "vertex property '" + p.name + "' is " + shortest(d) +
                         ", which overflows float; expected a magnitude of at most 3.4e38");
     return float(d);
   }
   void need(size_t n, const Elem& e, uint64_t r) {
-    if (n > size_ - pos_) truncated(e, r, n);
+    if (!w_.ensure(n)) truncated(e, r, n);
+  }
+  // Skips n bytes known to be in the file (checked against left()).
+  void skip(uint64_t n) {
+    while (n > 0) {
+      const uint64_t step = std::min<uint64_t>(n, uint64_t(w_.end - w_.cur));
+      w_.cur += step;
+      n -= step;
+      if (n > 0 && !w_.ensure(1)) return;  // cannot happen: n <= left()
+    }
   }
   [[noreturn]] void truncated(const Elem& e, uint64_t r, uint64_t n) {
-    throw_at_byte(src_, pos_,
+    throw_at_byte(src_, w_.offset(w_.cur),
                   "file ends inside element '" + e.name + "' (record " + std::to_string(r) +
                       " of " + std::to_string(e.count) + "); expected " + std::to_string(n) +
-                      " more bytes, " + std::to_string(size_ - pos_) + " left");
+                      " more bytes, " + std::to_string(w_.left()) + " left");
   }
   [[noreturn]] void bad_index(uint64_t face, int64_t idx, uint64_t nv) {
-    throw_at_byte(src_, pos_,
+    throw_at_byte(src_, w_.offset(w_.cur),
                   "face " + std::to_string(face) + " has vertex index " + std::to_string(idx) +
                       "; expected 0 <= index < " + std::to_string(nv) + " (the vertex count)");
   }
 
   const std::string& src_;
-  const uint8_t* p_;
-  size_t size_, pos_;
-
- public:
-  static void push_vertex(const float* v, Target& t) {
-    PolyMesh& m = *t.mesh;
-    m.positions.push_back({v[kX], v[kY], v[kZ]});
-    if (t.has_normals) m.normals.push_back({v[kNX], v[kNY], v[kNZ]});
-    if (t.has_uvs) m.uvs.push_back({v[kU], v[kV]});
-  }
+  ByteWindow& w_;
 };
 
 // ---- ascii ----
 
 class AsciiBody {
  public:
-  AsciiBody(const std::string& src, std::string_view data, size_t pos, uint64_t line)
-      : src_(src), p_(data.data() + pos), end_(data.data() + data.size()), line_(line) {}
+  // `line`: the line number of the window's position.
+  AsciiBody(const std::string& src, ByteWindow& w, uint64_t line) : src_(src), w_(w), line_(line) {}
 
-  void element(const Elem& e, Target& t, bool is_vertex) {
-    for (uint64_t r = 0; r < e.count; ++r) {
+  template <class Sink>
+  void element(const Elem& e, uint64_t r0, uint64_t r1, uint64_t vertex_count, Sink& sink,
+               bool is_vertex) {
+    for (uint64_t r = r0; r < r1; ++r) {
       float v[kRoleCount] = {};
       for (const Prop& p : e.props) {
         if (!p.list) {
@@ -421,10 +444,10 @@ class AsciiBody {
                             " vertices; expected at least 3");
         // Each value needs at least 2 bytes (digit + separator): a huge count fails here,
         // before the loop, instead of spinning on a short file.
-        if (uint64_t(n) > uint64_t(end_ - p_) / 2 + 1)
+        if (uint64_t(n) > w_.left() / 2 + 1)
           throw_at_line(src_, tok_line_,
                         "list count " + std::to_string(n) + " is larger than the rest of the file");
-        if (p.face_indices) t.mesh->face_sizes.push_back(uint32_t(n));
+        if (p.face_indices) sink.face(r, uint32_t(n));
         for (int64_t k = 0; k < n; ++k) {
           next(e, r);
           if (!ty_is_int(p.type)) {
@@ -433,39 +456,50 @@ class AsciiBody {
           }
           int64_t idx = integer(p.type);
           if (!p.face_indices) continue;
-          if (idx < 0 || uint64_t(idx) >= t.vertex_count)
+          if (idx < 0 || uint64_t(idx) >= vertex_count)
             throw_at_line(src_, tok_line_,
                           "face " + std::to_string(r) + " has vertex index " + std::to_string(idx) +
-                              "; expected 0 <= index < " + std::to_string(t.vertex_count) +
+                              "; expected 0 <= index < " + std::to_string(vertex_count) +
                               " (the vertex count)");
-          t.mesh->face_indices.push_back(uint32_t(idx));
+          sink.corner(uint32_t(idx));
         }
       }
-      if (is_vertex) BinaryBody<false>::push_vertex(v, t);
+      if (is_vertex) sink.vertex(v);
     }
   }
 
-  size_t remaining() const { return size_t(end_ - p_); }
   uint64_t line() const { return line_; }
+  void set_line(uint64_t line) {
+    line_ = line;
+    tok_ = nullptr;
+  }
 
  private:
   static bool is_space(char c) {
     return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f';
   }
+  // The window ends after a '\n' (or at the end of the file), so a token never straddles two.
   void next(const Elem& e, uint64_t r) {
-    while (p_ < end_ && is_space(*p_)) {
-      if (*p_ == '\n') ++line_;
-      ++p_;
+    for (;;) {
+      const char* p = w_.cur;
+      while (p < w_.end && is_space(*p)) {
+        if (*p == '\n') ++line_;
+        ++p;
+      }
+      w_.cur = p;
+      if (p < w_.end) break;
+      if (!w_.more())  // report the line of the last value read, not of trailing blank lines
+        throw_at_line(src_, tok_ ? tok_line_ : line_,
+                      "file ends inside element '" + e.name + "' (record " + std::to_string(r) +
+                          " of " + std::to_string(e.count) + "); expected more values");
     }
-    if (p_ == end_)  // report the line of the last value read, not of trailing blank lines
-      throw_at_line(src_, tok_ ? tok_line_ : line_,
-                    "file ends inside element '" + e.name + "' (record " + std::to_string(r) +
-                        " of " + std::to_string(e.count) + "); expected more values");
-    tok_ = p_;
-    while (p_ < end_ && !is_space(*p_)) ++p_;
+    tok_ = w_.cur;
+    const char* p = w_.cur;
+    while (p < w_.end && !is_space(*p)) ++p;
+    w_.cur = p;
     tok_line_ = line_;
   }
-  std::string_view token() const { return {tok_, size_t(p_ - tok_)}; }
+  std::string_view token() const { return {tok_, size_t(w_.cur - tok_)}; }
   float to_float(double d, const Prop& p) const {
     if (std::isfinite(d) && std::fabs(d) > double(FLT_MAX))
       throw_at_line(src_, tok_line_,
@@ -475,10 +509,11 @@ class AsciiBody {
   }
   int64_t integer(Ty t) {
     const char* b = tok_;
-    if (b < p_ && *b == '+') ++b;
+    const char* e = w_.cur;
+    if (b < e && *b == '+') ++b;
     int64_t v = 0;
-    auto [q, ec] = std::from_chars(b, p_, v);
-    if (ec != std::errc() || q != p_)
+    auto [q, ec] = std::from_chars(b, e, v);
+    if (ec != std::errc() || q != e)
       throw_at_line(src_, tok_line_, "expected an integer, got " + quoted(token()));
     if (v < ty_min(t) || v > ty_max(t))
       throw_at_line(src_, tok_line_,
@@ -488,26 +523,26 @@ class AsciiBody {
   double real(Ty t) {
     if (ty_is_int(t)) return double(integer(t));
     const char* b = tok_;
-    if (b < p_ && *b == '+') ++b;
+    const char* e = w_.cur;
+    if (b < e && *b == '+') ++b;
     double v = 0;
-    auto [q, ec] = std::from_chars(b, p_, v);
+    auto [q, ec] = std::from_chars(b, e, v);
     // Out of range: overflow (1e999) is an error naming the line; underflow (1e-999) gives 0
     // (or a denormal), as strtod decides.
     if (ec == std::errc::result_out_of_range) {
-      const double d = std::strtod(std::string(b, p_).c_str(), nullptr);
+      const double d = std::strtod(std::string(b, e).c_str(), nullptr);
       if (!std::isfinite(d))
         throw_at_line(src_, tok_line_,
                       "number " + quoted(token()) + " overflows double; expected a finite number");
       return d;
     }
-    if (ec != std::errc() || q != p_)
+    if (ec != std::errc() || q != e)
       throw_at_line(src_, tok_line_, "expected a number, got " + quoted(token()));
     return v;
   }
 
   const std::string& src_;
-  const char* p_;
-  const char* end_;
+  ByteWindow& w_;
   const char* tok_ = nullptr;
   uint64_t line_, tok_line_ = 0;
 };
@@ -588,29 +623,26 @@ void assign_roles(const std::string& src, Header& h, Elem*& vertex, Elem*& face,
   list->face_indices = true;
 }
 
-}  // namespace
+// The body of a PLY file behind a window: one parser per format, the element count checks, and
+// the element loop, shared by read_ply and the face stream.
+class PlyBody {
+ public:
+  PlyBody(const std::string& src, Header& h, ByteWindow& w)
+      : src_(src), h_(h), w_(w), le_(src, w), be_(src, w), ascii_(src, w, h.body_line) {
+    assign_roles(src, h, vertex_, face_, normals_, uvs_);
+  }
+  const Elem* vertex() const { return vertex_; }
+  const Elem* face() const { return face_; }
+  bool normals() const { return normals_; }
+  bool uvs() const { return uvs_; }
+  uint64_t ascii_line() const { return ascii_.line(); }
+  void set_ascii_line(uint64_t line) { ascii_.set_line(line); }
 
-PolyMesh read_ply(const std::string& src, std::string_view data) {
-  Header h = parse_header(src, data);
-  Elem* vertex;
-  Elem* face;
-  bool normals, uvs;
-  assign_roles(src, h, vertex, face, normals, uvs);
-
-  PolyMesh mesh;
-  Target t{&mesh, vertex->count, normals, uvs};
-  const bool binary = h.format != Format::Ascii;
-
-  BinaryBody<false> le(src, data, h.body_offset);
-  BinaryBody<true> be(src, data, h.body_offset);
-  AsciiBody ascii(src, data, h.body_offset, h.body_line);
-
-  for (const Elem& e : h.elems) {
-    if (e.props.empty() || e.count == 0) continue;  // nothing to read
-    // Counts against the file size before allocating: a header claiming 2^40 vertices fails here.
-    const uint64_t left = h.format == Format::BinaryLE   ? data.size() - le.pos()
-                          : h.format == Format::BinaryBE ? data.size() - be.pos()
-                                                         : ascii.remaining();
+  // Counts against the bytes left in the file before anything is allocated: a header claiming
+  // 2^40 vertices fails here. The window must be at the element's first record.
+  void check_count(const Elem& e) {
+    const bool binary = h_.format != Format::Ascii;
+    const uint64_t left = w_.left();
     const uint64_t min_rec = min_record(e, binary);
     // ascii: every value takes at least one character and one separator (bar the last).
     const uint64_t min_bytes_each = binary ? min_rec : 2 * min_rec;
@@ -619,28 +651,209 @@ PolyMesh read_ply(const std::string& src, std::string_view data) {
                          "' elements of at least " + std::to_string(min_bytes_each) +
                          " bytes each, but only " + std::to_string(left) +
                          " bytes are left in the file";
-      if (binary) throw_at_byte(src, h.format == Format::BinaryLE ? le.pos() : be.pos(), what);
-      throw_at_line(src, e.line, what);
+      if (binary) throw_at_byte(src_, w_.offset(w_.cur), what);
+      throw_at_line(src_, e.line, what);
     }
-    if (&e == vertex) {
-      if (e.count > std::numeric_limits<uint32_t>::max())
-        throw_at_line(src, e.line, std::to_string(e.count) + " vertices; at most 2^32-1 supported");
+    if (&e == vertex_ && e.count > std::numeric_limits<uint32_t>::max())
+      throw_at_line(src_, e.line, std::to_string(e.count) + " vertices; at most 2^32-1 supported");
+  }
+
+  // Records [r0, r1) of `e` to `sink`.
+  template <class Sink>
+  void read(const Elem& e, uint64_t r0, uint64_t r1, Sink& sink) {
+    const bool is_vertex = &e == vertex_;
+    if (h_.format == Format::BinaryLE)
+      le_.element(e, r0, r1, vertex_->count, sink, is_vertex);
+    else if (h_.format == Format::BinaryBE)
+      be_.element(e, r0, r1, vertex_->count, sink, is_vertex);
+    else
+      ascii_.element(e, r0, r1, vertex_->count, sink, is_vertex);
+  }
+
+ private:
+  const std::string& src_;
+  Header& h_;
+  ByteWindow& w_;
+  Elem* vertex_ = nullptr;
+  Elem* face_ = nullptr;
+  bool normals_ = false, uvs_ = false;
+  BinaryBody<false> le_;
+  BinaryBody<true> be_;
+  AsciiBody ascii_;
+};
+
+// Vertex positions only (the face stream).
+struct PositionSink {
+  std::vector<Vec3f>* positions;
+  void vertex(const float* v) { positions->push_back({v[kX], v[kY], v[kZ]}); }
+  void face(uint64_t, uint32_t) {}
+  void corner(uint32_t) {}
+};
+
+// Faces with their corner positions (the face stream).
+struct BatchSink {
+  const std::vector<Vec3f>* positions;
+  FaceBatch* batch;
+  void vertex(const float*) {}
+  void face(uint64_t r, uint32_t n) {
+    batch->sizes.push_back(n);
+    batch->face_ids.push_back(r);
+  }
+  void corner(uint32_t idx) { batch->corners.push_back((*positions)[idx]); }
+};
+
+// Reads a PLY file face batch by face batch. The vertex positions are read once and kept (12
+// bytes per vertex); the faces are re-read from the file on every pass.
+class PlyFaceStream final : public FaceStream {
+ public:
+  PlyFaceStream(const std::string& path, size_t max_corners, size_t window_bytes)
+      : FaceStream(path), max_corners_(std::max<size_t>(max_corners, 1)) {
+    const bool xz = has_xz_suffix(path);
+    if (xz) {
+      // Decompressed whole: liblzma cannot seek, and the face pass runs three times.
+      bytes_ = read_file(path);
+      header_ = parse_header(path, bytes_.view());
+      window_ = std::make_unique<ByteWindow>(bytes_.view(), header_.body_offset);
+    } else {
+      std::string head;
+      {
+        ByteWindow w(path, 0, kMaxHeaderBytes + 65536, false);
+        w.ensure(size_t(std::min<uint64_t>(w.total(), kMaxHeaderBytes + 65536)));
+        head.assign(w.cur, w.end);
+      }
+      header_ = parse_header(path, head);
+      window_ = std::make_unique<ByteWindow>(path, header_.body_offset, window_bytes, !binary());
+    }
+    body_ = std::make_unique<PlyBody>(name_, header_, *window_);
+    // Everything before the faces (vertices first if the faces come before them).
+    bool face_before_vertex = false;
+    for (const Elem& e : header_.elems) {
+      if (e.props.empty() || e.count == 0) continue;
+      if (&e == body_->face() && !positions_read_) {
+        face_before_vertex = true;
+        mark_face_start();
+        body_->check_count(e);
+        SkipSink skip;
+        body_->read(e, 0, e.count, skip);
+        continue;
+      }
+      if (&e == body_->face()) {
+        mark_face_start();
+        break;
+      }
+      body_->check_count(e);
+      if (&e == body_->vertex()) {
+        positions_.reserve(e.count);
+        PositionSink sink{&positions_};
+        body_->read(e, 0, e.count, sink);
+        positions_read_ = true;
+      } else {
+        SkipSink skip;
+        body_->read(e, 0, e.count, skip);
+      }
+    }
+    if (!body_->face() || body_->face()->count == 0 || body_->face()->props.empty()) {
+      no_faces_ = true;
+      return;
+    }
+    if (face_before_vertex) {
+      tail_checked_ = true;  // every element was read above
+      rewind();
+    } else {
+      body_->check_count(*body_->face());
+    }
+  }
+
+  bool next(FaceBatch& out) override {
+    out.clear();
+    if (no_faces_) return false;
+    const Elem& f = *body_->face();
+    if (r_ == f.count) {
+      check_tail();
+      return false;
+    }
+    BatchSink sink{&positions_, &out};
+    while (r_ < f.count && out.corners.size() < max_corners_) {
+      const uint64_t step = std::max<uint64_t>(1, (max_corners_ - out.corners.size()) / 8);
+      const uint64_t r1 = std::min(f.count, r_ + step);
+      body_->read(f, r_, r1, sink);
+      r_ = r1;
+    }
+    return true;
+  }
+
+  void rewind() override {
+    r_ = 0;
+    if (no_faces_) return;
+    window_->seek(face_offset_);
+    body_->set_ascii_line(face_line_);
+  }
+
+  uint64_t declared_faces() const override { return no_faces_ ? 0 : body_->face()->count; }
+  uint64_t resident_bytes() const override {
+    return positions_.capacity() * sizeof(Vec3f) + window_->buffer_bytes() + bytes_.size();
+  }
+
+ private:
+  bool binary() const { return header_.format != Format::Ascii; }
+  void mark_face_start() {
+    face_offset_ = window_->offset(window_->cur);
+    face_line_ = body_->ascii_line();
+  }
+  // The elements after the faces are read (and checked) once, as read_ply does.
+  void check_tail() {
+    if (tail_checked_) return;
+    tail_checked_ = true;
+    bool after = false;
+    for (const Elem& e : header_.elems) {
+      if (&e == body_->face()) {
+        after = true;
+        continue;
+      }
+      if (!after || e.props.empty() || e.count == 0) continue;
+      body_->check_count(e);
+      SkipSink skip;
+      body_->read(e, 0, e.count, skip);
+    }
+  }
+
+  size_t max_corners_;
+  FileBytes bytes_;
+  Header header_;
+  std::unique_ptr<ByteWindow> window_;
+  std::unique_ptr<PlyBody> body_;
+  std::vector<Vec3f> positions_;
+  bool positions_read_ = false, no_faces_ = false, tail_checked_ = false;
+  uint64_t face_offset_ = 0, face_line_ = 0, r_ = 0;
+};
+
+}  // namespace
+
+PolyMesh read_ply(const std::string& src, std::string_view data) {
+  Header h = parse_header(src, data);
+  ByteWindow w(data, h.body_offset);
+  PlyBody body(src, h, w);
+  PolyMesh mesh;
+  MeshSink sink{&mesh, body.normals(), body.uvs()};
+  for (const Elem& e : h.elems) {
+    if (e.props.empty() || e.count == 0) continue;  // nothing to read
+    body.check_count(e);
+    if (&e == body.vertex()) {
       mesh.positions.reserve(e.count);
-      if (normals) mesh.normals.reserve(e.count);
-      if (uvs) mesh.uvs.reserve(e.count);
-    } else if (&e == face) {
+      if (sink.has_normals) mesh.normals.reserve(e.count);
+      if (sink.has_uvs) mesh.uvs.reserve(e.count);
+    } else if (&e == body.face()) {
       mesh.face_sizes.reserve(e.count);
       mesh.face_indices.reserve(e.count * 3);
     }
-    const bool is_vertex = &e == vertex;
-    if (h.format == Format::BinaryLE)
-      le.element(e, t, is_vertex);
-    else if (h.format == Format::BinaryBE)
-      be.element(e, t, is_vertex);
-    else
-      ascii.element(e, t, is_vertex);
+    body.read(e, 0, e.count, sink);
   }
   return mesh;
+}
+
+std::unique_ptr<FaceStream> open_ply_stream(const std::string& path, size_t max_corners,
+                                            size_t window_bytes) {
+  return std::make_unique<PlyFaceStream>(path, max_corners, window_bytes);
 }
 
 }  // namespace slim::detail

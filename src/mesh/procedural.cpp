@@ -31,6 +31,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "mesh/procedural.h"
 #include "slimrt/error.h"
 #include "slimrt/mesh.h"
 
@@ -248,99 +249,169 @@ void grid_faces(PolyMesh& m, int nx, int ny, int64_t stride, bool wrap_x, bool w
   });
 }
 
-// (n+1)^2 heightfield vertices over [0,1]^2; height(x, y) is called with x = i/n, y = j/n.
-template <class HeightFn>
-PolyMesh make_heightfield(const char* kind, int n, HeightFn height) {
-  check_n(kind, n, 65534);  // (n+1)^2 vertex indices must fit in 32 bits
+// Terrain height at (x, y) in [0,1]^2. Base frequency 3 cells across the extent; 8 octaves reach
+// 3 * 2^7 = 384 cells, finer than a quad at N = 256 and about 2.7 quads per cell at N = 1024.
+// fbm2 spans about [-0.5, 0.5], so kAmp gives a height range of about 5% of the unit extent.
+float terrain_height(float x, float y, uint32_t s) {
+  constexpr float kFreq = 3.0f, kAmp = 0.07f;
+  return kAmp * fbm2(x * kFreq + 17.25f, y * kFreq + 3.5f, s, 8);
+}
+
+// Mesas cut by canyons: a low-frequency fBm plateau, terraced into flat steps with sharp risers
+// (cliffs), carved down along the crest lines of a ridged multifractal (the network of
+// zero-crossings of the noise: ridged2 > ~0.7 there) into steep-walled canyons, plus rocky
+// high-frequency detail. Heights span about 20% of the extent; about 40% of the faces at N=1024
+// are steeper than 45 degrees, so many rays graze.
+float canyon_height(float x, float y, uint32_t s) {
+  constexpr float kFreq = 2.0f, kAmp = 0.25f, kDetail = 0.015f;
+  constexpr int kSteps = 4;  // terraces
+  float px = x * kFreq + 5.75f, py = y * kFreq + 11.5f;
+  float carve = smoothstep(0.62f, 0.8f, ridged2(px, py, s, 6));
+  float base = 0.5f + 1.6f * fbm2(px * 0.7f, py * 0.7f, s ^ 0x5bd1e995u, 4);
+  float t = std::min(std::max(base, 0.0f), 1.0f) * float(kSteps);
+  float step = std::floor(t);
+  float terrace = (step + smoothstep(0.75f, 1.0f, t - step)) * (1.0f / float(kSteps));
+  float detail = fbm2(px * 6.0f, py * 6.0f, s ^ 0x1b873593u, 5);
+  return kAmp * ((0.35f + 0.65f * terrace) * (1.0f - 0.85f * carve)) + kDetail * detail;
+}
+
+constexpr double kTorusMajor = 1.0, kTorusMinor = 0.4;
+constexpr float kTorusFreq = 2.5f, kTorusAmp = 0.12f;  // displacement spans about +-0.05
+
+// A mesh with the grid's vertices (all rows, in parallel) and quads.
+PolyMesh grid_mesh(const detail::ProceduralGrid& g, const std::string& name) {
   PolyMesh m;
-  m.name = std::string(kind) + ":" + std::to_string(n);
-  size_t side = size_t(n) + 1;
-  m.positions.resize(side * side);
+  m.name = name;
+  m.positions.resize(size_t(g.verts_x) * size_t(g.verts_y));
   Vec3f* pos = m.positions.data();
-  float inv_n = 1.0f / float(n);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, side), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t j = r.begin(); j != r.end(); ++j) {
-      float y = j == size_t(n) ? 1.0f : float(j) * inv_n;
-      for (size_t i = 0; i < side; ++i) {
-        float x = i == size_t(n) ? 1.0f : float(i) * inv_n;
-        pos[j * side + i] = Vec3f(x, y, height(x, y));
-      }
-    }
+  tbb::parallel_for(tbb::blocked_range<int>(0, g.verts_y), [&](const tbb::blocked_range<int>& r) {
+    for (int j = r.begin(); j != r.end(); ++j) g.vertex_row(j, pos + size_t(j) * size_t(g.verts_x));
   });
-  grid_faces(m, n, n, int64_t(side), false, false);
+  grid_faces(m, g.cells_x, g.cells_y, g.verts_x, g.wrap, g.wrap);
   return m;
 }
 
 }  // namespace
 
-PolyMesh make_terrain(int n, uint32_t seed) {
-  // Base frequency 3 cells across the extent; 8 octaves reach 3 * 2^7 = 384 cells, finer than a
-  // quad at N = 256 and about 2.7 quads per cell at N = 1024. fbm2 spans about [-0.5, 0.5], so
-  // kAmp gives a height range of about 5% of the unit extent.
-  constexpr float kFreq = 3.0f, kAmp = 0.07f;
-  uint32_t s = mix32(seed ^ 0x7E44A1Du);
-  return make_heightfield("terrain", n, [s](float x, float y) {
-    return kAmp * fbm2(x * kFreq + 17.25f, y * kFreq + 3.5f, s, 8);
+namespace detail {
+
+ProceduralSpec parse_procedural(const std::string& spec, int max_n) {
+  const size_t colon = spec.find(':');
+  const std::string kind = spec.substr(0, colon),
+                    digits = colon == std::string::npos ? "" : spec.substr(colon + 1);
+  if (kind != "terrain" && kind != "torus" && kind != "canyon")
+    throw Error(spec + ": expected a procedural scene terrain:N, torus:N or canyon:N");
+  // Strict: decimal digits only, no sign, blanks or leading zeros.
+  bool ok = !digits.empty() && digits.size() <= 6 && digits[0] != '0' &&
+            std::all_of(digits.begin(), digits.end(), [](char c) { return c >= '0' && c <= '9'; });
+  const int n = ok ? std::stoi(digits) : 0;
+  // A torus needs N even and N/2 >= 3 (make_torus): one range stated, the one that holds.
+  if (kind == "torus" && (!ok || n > max_n || n < 6 || n % 2 != 0))
+    throw Error(spec + ": expected torus:N with N an even integer from 6 to " +
+                std::to_string(max_n));
+  if (!ok || n > max_n)
+    throw Error(spec + ": expected " + kind + ":N with N an integer from 1 to " +
+                std::to_string(max_n));
+  return {kind, n};
+}
+
+ProceduralGrid::ProceduralGrid(const ProceduralSpec& spec, uint32_t seed) : n_(spec.n) {
+  const int n = spec.n;
+  if (spec.kind == "torus") {
+    // N = 4 would give a 2-gon minor circle: both rows of quads share the same vertical edges,
+    // so the mesh would not be a 2-manifold. N/2 >= 3 is the smallest closed torus.
+    if (n < 6 || n % 2 != 0 || n > 65534)
+      throw Error("torus:" + std::to_string(n) + ": N must be even and in [6, 65534]");
+    kind_ = Kind::Torus;
+    s_ = mix32(seed ^ 0x70A05u);
+    cells_x = verts_x = n;      // around the major circle
+    cells_y = verts_y = n / 2;  // around the minor one
+    wrap = true;
+    // Angle tables: N + N/2 series evaluations instead of one per vertex.
+    su_.resize(verts_x), cu_.resize(verts_x), sv_.resize(verts_y), cv_.resize(verts_y);
+    for (int i = 0; i < verts_x; ++i) sincos_turn(i, verts_x, su_[i], cu_[i]);
+    for (int j = 0; j < verts_y; ++j) sincos_turn(j, verts_y, sv_[j], cv_[j]);
+    return;
+  }
+  const bool terrain = spec.kind == "terrain";
+  if (!terrain && spec.kind != "canyon") throw Error(spec.kind + ": not a procedural scene");
+  check_n(terrain ? "terrain" : "canyon", n, 65534);  // (n+1)^2 indices must fit in 32 bits
+  kind_ = terrain ? Kind::Terrain : Kind::Canyon;
+  s_ = mix32(seed ^ (terrain ? 0x7E44A1Du : 0xCA7107u));
+  cells_x = cells_y = n;
+  verts_x = verts_y = n + 1;
+}
+
+void ProceduralGrid::vertex_row(int j, Vec3f* out) const {
+  if (kind_ == Kind::Torus) {
+    for (int i = 0; i < verts_x; ++i) {
+      // Outward normal and undisplaced point of the torus at (theta_i, phi_j).
+      double nx = cv_[j] * cu_[i], ny = cv_[j] * su_[i], nz = sv_[j];
+      double ring = kTorusMajor + kTorusMinor * cv_[j];
+      double px = ring * cu_[i], py = ring * su_[i], pz = kTorusMinor * sv_[j];
+      // Noise sampled on the 3D position: periodic by construction, and seam vertices are
+      // shared anyway, so the surface closes.
+      double d = kTorusAmp * fbm3(float(px) * kTorusFreq, float(py) * kTorusFreq,
+                                  float(pz) * kTorusFreq, s_, 7);
+      out[i] = Vec3f(float(px + nx * d), float(py + ny * d), float(pz + nz * d));
+    }
+    return;
+  }
+  // (n+1)^2 heightfield vertices over [0,1]^2: x = i/n, y = j/n, the last ones exactly 1.
+  const float inv_n = 1.0f / float(n_);
+  const float y = j == n_ ? 1.0f : float(j) * inv_n;
+  for (int i = 0; i < verts_x; ++i) {
+    const float x = i == n_ ? 1.0f : float(i) * inv_n;
+    out[i] =
+        Vec3f(x, y, kind_ == Kind::Terrain ? terrain_height(x, y, s_) : canyon_height(x, y, s_));
+  }
+}
+
+void ProceduralGrid::tile(int i0, int i1, int j0, int j1, std::vector<uint32_t>& sizes,
+                          std::vector<uint64_t>& face_ids, std::vector<Vec3f>& corners) const {
+  if (i0 < 0 || i1 > cells_x || j0 < 0 || j1 > cells_y || i0 >= i1 || j0 >= j1) return;
+  // Vertex rows j0..j1 (row j1 wraps to 0 on a torus), columns i0..i1 of them used.
+  const int rows = j1 - j0 + 1;
+  std::vector<Vec3f> v(size_t(rows) * size_t(verts_x));
+  tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& r) {
+    for (int k = r.begin(); k != r.end(); ++k) {
+      const int j = (wrap && j0 + k == verts_y) ? 0 : j0 + k;
+      vertex_row(j, v.data() + size_t(k) * size_t(verts_x));
+    }
   });
+  const size_t quads = size_t(i1 - i0) * size_t(j1 - j0);
+  sizes.insert(sizes.end(), quads, 4u);
+  const size_t c0 = corners.size();
+  corners.resize(c0 + 4 * quads);
+  Vec3f* c = corners.data() + c0;
+  for (int j = j0; j < j1; ++j) {
+    const Vec3f* r0 = v.data() + size_t(j - j0) * size_t(verts_x);
+    const Vec3f* r1 = r0 + verts_x;
+    for (int i = i0; i < i1; ++i, c += 4) {
+      const int ii = (wrap && i + 1 == cells_x) ? 0 : i + 1;
+      c[0] = r0[i];
+      c[1] = r0[ii];
+      c[2] = r1[ii];
+      c[3] = r1[i];
+      face_ids.push_back(uint64_t(j) * uint64_t(cells_x) + uint64_t(i));
+    }
+  }
+}
+
+}  // namespace detail
+
+PolyMesh make_terrain(int n, uint32_t seed) {
+  check_n("terrain", n, 65534);
+  return grid_mesh(detail::ProceduralGrid({"terrain", n}, seed), "terrain:" + std::to_string(n));
 }
 
 PolyMesh make_canyon(int n, uint32_t seed) {
-  // Mesas cut by canyons: a low-frequency fBm plateau, terraced into flat steps with sharp risers
-  // (cliffs), carved down along the crest lines of a ridged multifractal (the network of
-  // zero-crossings of the noise: ridged2 > ~0.7 there) into steep-walled canyons, plus rocky
-  // high-frequency detail. Heights span about 20% of the extent; about 40% of the faces at N=1024
-  // are steeper than 45 degrees, so many rays graze.
-  constexpr float kFreq = 2.0f, kAmp = 0.25f, kDetail = 0.015f;
-  constexpr int kSteps = 4;  // terraces
-  uint32_t s = mix32(seed ^ 0xCA7107u);
-  return make_heightfield("canyon", n, [s](float x, float y) {
-    float px = x * kFreq + 5.75f, py = y * kFreq + 11.5f;
-    float carve = smoothstep(0.62f, 0.8f, ridged2(px, py, s, 6));
-    float base = 0.5f + 1.6f * fbm2(px * 0.7f, py * 0.7f, s ^ 0x5bd1e995u, 4);
-    float t = std::min(std::max(base, 0.0f), 1.0f) * float(kSteps);
-    float step = std::floor(t);
-    float terrace = (step + smoothstep(0.75f, 1.0f, t - step)) * (1.0f / float(kSteps));
-    float detail = fbm2(px * 6.0f, py * 6.0f, s ^ 0x1b873593u, 5);
-    return kAmp * ((0.35f + 0.65f * terrace) * (1.0f - 0.85f * carve)) + kDetail * detail;
-  });
+  check_n("canyon", n, 65534);
+  return grid_mesh(detail::ProceduralGrid({"canyon", n}, seed), "canyon:" + std::to_string(n));
 }
 
 PolyMesh make_torus(int n, uint32_t seed) {
-  // N = 4 would give a 2-gon minor circle: both rows of quads share the same vertical edges, so
-  // the mesh would not be a 2-manifold. N/2 >= 3 is the smallest closed torus.
-  if (n < 6 || n % 2 != 0 || n > 65534)
-    throw Error("torus:" + std::to_string(n) + ": N must be even and in [6, 65534]");
-  constexpr double kMajor = 1.0, kMinor = 0.4;
-  constexpr float kFreq = 2.5f, kAmp = 0.12f;  // displacement spans about +-0.05
-  const int nu = n, nv = n / 2;                // nu around the major circle, nv around the minor
-  uint32_t s = mix32(seed ^ 0x70A05u);
-
-  // Angle tables: N + N/2 series evaluations instead of one per vertex.
-  std::vector<double> su(nu), cu(nu), sv(nv), cv(nv);
-  for (int i = 0; i < nu; ++i) sincos_turn(i, nu, su[i], cu[i]);
-  for (int j = 0; j < nv; ++j) sincos_turn(j, nv, sv[j], cv[j]);
-
-  PolyMesh m;
-  m.name = "torus:" + std::to_string(n);
-  m.positions.resize(size_t(nu) * size_t(nv));
-  Vec3f* pos = m.positions.data();
-  tbb::parallel_for(tbb::blocked_range<int>(0, nv), [&](const tbb::blocked_range<int>& r) {
-    for (int j = r.begin(); j != r.end(); ++j) {
-      for (int i = 0; i < nu; ++i) {
-        // Outward normal and undisplaced point of the torus at (theta_i, phi_j).
-        double nx = cv[j] * cu[i], ny = cv[j] * su[i], nz = sv[j];
-        double ring = kMajor + kMinor * cv[j];
-        double px = ring * cu[i], py = ring * su[i], pz = kMinor * sv[j];
-        // Noise sampled on the 3D position: periodic by construction, and seam vertices are
-        // shared anyway, so the surface closes.
-        double d = kAmp * fbm3(float(px) * kFreq, float(py) * kFreq, float(pz) * kFreq, s, 7);
-        pos[size_t(j) * size_t(nu) + size_t(i)] =
-            Vec3f(float(px + nx * d), float(py + ny * d), float(pz + nz * d));
-      }
-    }
-  });
-  grid_faces(m, nu, nv, nu, true, true);
-  return m;
+  return grid_mesh(detail::ProceduralGrid({"torus", n}, seed), "torus:" + std::to_string(n));
 }
 
 PolyMesh make_sphere(int levels, float jitter, uint32_t seed) {

@@ -9,9 +9,9 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
-#include "build/chunks.h"
 #include "commands.h"
 #include "io/face_stream.h"
+#include "mesh/chunks.h"
 #include "slimrt/analysis.h"
 #include "slimrt/output.h"
 
@@ -31,7 +31,7 @@ uint64_t peak_rss_bytes() {
 }
 
 // --chunks: the scene streamed (never loaded whole) and partitioned into spatial chunks of at
-// most `max_triangles` (build/chunks.h); each chunk is then read back, and built with
+// most `max_triangles` (mesh/chunks.h); each chunk is then read back, and built with
 // `accel` if given, one at a time. Prints the chunks and the peak resident memory.
 int info_chunks(const std::string& scene_name, uint64_t max_triangles, const std::string& dir,
                 uint64_t budget_mib, const std::string& accel, bool json) {

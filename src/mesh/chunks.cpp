@@ -1,0 +1,298 @@
+// ChunkSet: see chunks.h.
+#include "mesh/chunks.h"
+
+#include <stdlib.h>  // mkdtemp
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <unordered_map>
+
+#include "slimrt/error.h"
+
+namespace slim::detail {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Spreads the low 10 bits of v to every third bit.
+uint32_t part1by2(uint32_t v) {
+  v &= 0x3ff;
+  v = (v | (v << 16)) & 0x030000ffu;
+  v = (v | (v << 8)) & 0x0300f00fu;
+  v = (v | (v << 4)) & 0x030c30c3u;
+  v = (v | (v << 2)) & 0x09249249u;
+  return v;
+}
+
+// Centroid of a face's corners (the same arithmetic in every pass).
+Vec3f centroid(const Vec3f* c, uint32_t n) {
+  Vec3f s = c[0];
+  for (uint32_t k = 1; k < n; ++k) s = s + c[k];
+  return s * (1.0f / float(n));
+}
+
+bool finite(Vec3f p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
+
+// Morton cell of a point in a box, `bits` per axis; NaN and out-of-box values clamp.
+class CellMap {
+ public:
+  // Cubic cells over the box's largest side: a flat scene (a terrain) gets few cells across its
+  // thickness, so the top Morton bits split it along its large sides, not into thin slabs.
+  CellMap(const Box3f& box, int bits) : lo_(box.lo), side_(1u << bits) {
+    const Vec3f e = box.hi - box.lo;
+    const float extent = std::max(e.x, std::max(e.y, e.z));
+    const float scale = extent > 0 ? float(side_) / extent : 0.0f;
+    for (int a = 0; a < 3; ++a) scale_[a] = scale;
+    if (box.empty()) lo_ = Vec3f(0, 0, 0);
+  }
+  uint32_t operator()(Vec3f p) const {
+    uint32_t q[3];
+    for (int a = 0; a < 3; ++a) {
+      const float t = (p[a] - lo_[a]) * scale_[a];
+      q[a] = t >= 1.0f ? std::min(uint32_t(std::min(t, 1e9f)), side_ - 1) : 0u;  // NaN: 0
+    }
+    return part1by2(q[0]) | part1by2(q[1]) << 1 | part1by2(q[2]) << 2;
+  }
+
+ private:
+  Vec3f lo_;
+  float scale_[3];
+  uint32_t side_;
+};
+
+// Within a cell, faces fill pieces of at most `max` triangles in stream order (a face larger
+// than `max` gets a piece of its own). Returns the piece index of the face within its cell.
+inline uint32_t place(uint32_t& fill, uint32_t& closed, uint64_t tris, uint64_t max) {
+  if (fill > 0 && fill + tris > max) {
+    ++closed;
+    fill = 0;
+  }
+  fill = uint32_t(std::min<uint64_t>(fill + tris, std::numeric_limits<uint32_t>::max()));
+  return closed;
+}
+
+void write_all(const std::string& path, const std::vector<char>& buf) {
+  std::FILE* f = std::fopen(path.c_str(), "ab");
+  if (!f) throw Error(path + ": cannot write a chunk spill file: " + std::strerror(errno));
+  const size_t put = std::fwrite(buf.data(), 1, buf.size(), f);
+  const int err = errno;
+  const bool closed = std::fclose(f) == 0;
+  if (put != buf.size() || !closed)
+    throw Error(path + ": cannot write a chunk spill file (" + std::to_string(buf.size()) +
+                " bytes): " + std::strerror(err ? err : EIO));
+}
+
+}  // namespace
+
+ChunkSet::ChunkSet(FaceStream& in, const ChunkOptions& opt) {
+  if (opt.morton_bits < 1 || opt.morton_bits > 10)
+    throw Error("chunking: morton_bits is " + std::to_string(opt.morton_bits) +
+                "; expected 1 to 10");
+  if (opt.max_triangles < 1 || opt.max_triangles > (uint64_t(1) << 31))
+    throw Error("chunking: max_triangles is " + std::to_string(opt.max_triangles) +
+                "; expected 1 to 2^31");
+  if (opt.spill_dir.empty()) throw Error("chunking: no spill directory given");
+  std::string tmpl = (std::filesystem::path(opt.spill_dir) / "slimrt-chunks-XXXXXX").string();
+  if (!mkdtemp(tmpl.data()))
+    throw Error(opt.spill_dir + ": cannot make a temporary directory for chunk spill files: " +
+                std::strerror(errno));
+  dir_ = tmpl;
+  try {
+    const uint64_t max = opt.max_triangles;
+    FaceBatch b;
+    // Pass 1: bounds of the centroids and of the positions.
+    auto t0 = Clock::now();
+    Box3f cbox;
+    in.rewind();
+    while (in.next(b)) {
+      const Vec3f* c = b.corners.data();
+      for (uint32_t n : b.sizes) {
+        const Vec3f m = centroid(c, n);
+        if (finite(m)) cbox.extend(m);
+        for (uint32_t k = 0; k < n; ++k)
+          if (finite(c[k])) stats_.bounds.extend(c[k]);
+        stats_.triangles += n - 2;
+        c += n;
+      }
+      stats_.faces += b.face_count();
+    }
+    stats_.seconds[0] = since(t0);
+
+    // Pass 2: pieces per Morton cell, then chunks over the cells in Morton order.
+    t0 = Clock::now();
+    const CellMap cell(cbox, opt.morton_bits);
+    const size_t cells = size_t(1) << (3 * opt.morton_bits);
+    std::vector<uint32_t> fill(cells, 0), closed(cells, 0), first(cells, 0);
+    stats_.histogram_bytes = 3 * cells * sizeof(uint32_t);
+    in.rewind();
+    while (in.next(b)) {
+      const Vec3f* c = b.corners.data();
+      for (uint32_t n : b.sizes) {
+        const uint32_t k = cell(centroid(c, n));
+        place(fill[k], closed[k], n - 2, max);
+        c += n;
+      }
+    }
+    uint32_t chunks = 0;
+    uint64_t open_fill = 0;  // triangles in the last chunk, if it may take more cells
+    bool open = false;
+    for (size_t k = 0; k < cells; ++k) {
+      if (fill[k] == 0 && closed[k] == 0) continue;
+      ++stats_.cells_used;
+      if (closed[k] == 0 && open && open_fill + fill[k] <= max) {
+        first[k] = chunks - 1;
+        open_fill += fill[k];
+        continue;
+      }
+      // A new chunk; a cell of several pieces gets one chunk per piece, and its last piece's
+      // chunk may take the next cells.
+      if (uint64_t(chunks) + closed[k] + 1 > std::numeric_limits<uint32_t>::max())
+        throw Error(in.name() + ": more than 2^32 chunks; expected a larger max_triangles");
+      first[k] = chunks;
+      chunks += closed[k] + 1;
+      open = true;
+      open_fill = fill[k];
+    }
+    info_.resize(chunks);
+    stats_.seconds[1] = since(t0);
+
+    // Pass 3: every face to its chunk's spill buffer. Records: face id (u64), corner count
+    // (u32), corners (3 x f32 each), native byte order.
+    t0 = Clock::now();
+    std::fill(fill.begin(), fill.end(), 0);
+    std::fill(closed.begin(), closed.end(), 0);
+    const size_t cap = size_t(std::clamp<uint64_t>(
+        opt.memory_budget / std::max<uint32_t>(chunks, 1), 4096, uint64_t(64) << 20));
+    std::vector<std::vector<char>> buf(chunks);
+    uint64_t held = 0;
+    auto flush = [&](uint32_t k) {
+      write_all(file(k), buf[k]);
+      stats_.spilled_bytes += buf[k].size();
+      buf[k].clear();
+    };
+    in.rewind();
+    while (in.next(b)) {
+      const Vec3f* c = b.corners.data();
+      for (size_t f = 0; f < b.sizes.size(); ++f) {
+        const uint32_t n = b.sizes[f];
+        const uint32_t k = cell(centroid(c, n));
+        const uint32_t id = first[k] + place(fill[k], closed[k], n - 2, max);
+        ChunkInfo& ci = info_[id];
+        ++ci.faces;
+        ci.triangles += n - 2;
+        ci.corners += n;
+        for (uint32_t j = 0; j < n; ++j)
+          if (finite(c[j])) ci.bounds.extend(c[j]);
+        std::vector<char>& out = buf[id];
+        if (out.capacity() == 0) {
+          out.reserve(cap);
+          held += cap;
+          stats_.buffer_bytes = std::max(stats_.buffer_bytes, held);
+        }
+        const size_t bytes = 12 + size_t(n) * sizeof(Vec3f);
+        if (out.size() + bytes > cap && !out.empty()) flush(id);
+        const size_t at = out.size();
+        out.resize(at + bytes);  // within capacity unless one face is larger than a buffer
+        std::memcpy(out.data() + at, &b.face_ids[f], 8);
+        std::memcpy(out.data() + at + 8, &n, 4);
+        std::memcpy(out.data() + at + 12, c, size_t(n) * sizeof(Vec3f));
+        c += n;
+      }
+    }
+    stats_.stream_bytes = in.resident_bytes();
+    for (uint32_t k = 0; k < chunks; ++k) {
+      if (!buf[k].empty()) flush(k);
+      std::vector<char>().swap(buf[k]);
+    }
+    stats_.seconds[2] = since(t0);
+  } catch (...) {
+    remove_files();
+    throw;
+  }
+}
+
+ChunkSet::~ChunkSet() { remove_files(); }
+
+void ChunkSet::remove_files() noexcept {
+  if (dir_.empty()) return;
+  std::error_code ec;
+  std::filesystem::remove_all(dir_, ec);
+  dir_.clear();
+}
+
+std::string ChunkSet::file(size_t i) const { return dir_ + "/chunk-" + std::to_string(i); }
+
+Chunk ChunkSet::load(size_t i) const {
+  const ChunkInfo& ci = info_.at(i);
+  const std::string path = file(i);
+  std::vector<char> data;
+  if (ci.faces > 0) {
+    std::FILE* f = std::fopen(path.c_str(), "rb");
+    if (!f) throw Error(path + ": cannot read a chunk spill file: " + std::strerror(errno));
+    data.resize(size_t(12 * ci.faces + ci.corners * sizeof(Vec3f)));
+    const size_t got = std::fread(data.data(), 1, data.size(), f);
+    const bool extra = std::fgetc(f) != EOF;
+    std::fclose(f);
+    if (got != data.size() || extra)
+      throw Error(path + ": chunk spill file has " + (extra ? "more" : std::to_string(got)) +
+                  " bytes; expected " + std::to_string(data.size()) + " (changed on disk?)");
+  }
+  Chunk out;
+  PolyMesh& m = out.mesh;
+  m.name = "chunk " + std::to_string(i);
+  m.face_sizes.reserve(ci.faces);
+  m.face_indices.reserve(ci.corners);
+  out.face_ids.reserve(ci.faces);
+  struct Key {
+    uint32_t b[3];
+    bool operator==(const Key& o) const {
+      return b[0] == o.b[0] && b[1] == o.b[1] && b[2] == o.b[2];
+    }
+  };
+  struct Hash {
+    size_t operator()(const Key& k) const {
+      uint64_t h = k.b[0] * 0x9E3779B97F4A7C15ull;
+      h = (h ^ k.b[1]) * 0xC2B2AE3D27D4EB4Full;
+      h = (h ^ k.b[2]) * 0x165667B19E3779F9ull;
+      return size_t(h ^ (h >> 29));
+    }
+  };
+  std::unordered_map<Key, uint32_t, Hash> weld;
+  weld.reserve(size_t(ci.corners / 2 + 16));
+  size_t pos = 0;
+  while (pos < data.size()) {
+    uint64_t id;
+    uint32_t n;
+    if (data.size() - pos < 12) throw_at_byte(path, pos, "truncated chunk record");
+    std::memcpy(&id, data.data() + pos, 8);
+    std::memcpy(&n, data.data() + pos + 8, 4);
+    pos += 12;
+    if (n < 3 || (data.size() - pos) / sizeof(Vec3f) < n)
+      throw_at_byte(path, pos - 4, "bad chunk record (corner count " + std::to_string(n) + ")");
+    out.face_ids.push_back(id);
+    m.face_sizes.push_back(n);
+    for (uint32_t k = 0; k < n; ++k, pos += sizeof(Vec3f)) {
+      Key key;
+      std::memcpy(key.b, data.data() + pos, 12);
+      auto [it, added] = weld.try_emplace(key, uint32_t(m.positions.size()));
+      if (added) {
+        Vec3f p;
+        std::memcpy(&p, key.b, 12);
+        m.positions.push_back(p);
+      }
+      m.face_indices.push_back(it->second);
+    }
+  }
+  return out;
+}
+
+}  // namespace slim::detail

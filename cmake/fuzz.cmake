@@ -18,7 +18,8 @@ if(SLIM_FUZZ)
 
   # The readers (src/io/) and what they call.
   add_library(slimrt_fuzz_io STATIC src/io/obj.cpp src/io/ply.cpp src/io/gltf.cpp src/io/xz.cpp
-                                    src/io/output.cpp src/core/error.cpp src/mesh/polymesh.cpp)
+                                    src/io/byte_window.cpp src/io/output.cpp src/core/error.cpp
+                                    src/mesh/polymesh.cpp)
   target_include_directories(slimrt_fuzz_io PUBLIC include src fuzz)
   target_compile_options(slimrt_fuzz_io PRIVATE ${SLIM_WARN} -fsanitize=fuzzer-no-link)
   target_link_libraries(slimrt_fuzz_io PUBLIC LibLZMA::LibLZMA ZLIB::ZLIB

@@ -193,13 +193,16 @@ ChunkSet::ChunkSet(FaceStream& in, const ChunkOptions& opt) {
         for (uint32_t j = 0; j < n; ++j)
           if (finite(c[j])) ci.bounds.extend(c[j]);
         std::vector<char>& out = buf[id];
-        if (out.capacity() == 0) {
-          out.reserve(cap);
-          held += cap;
-          stats_.buffer_bytes = std::max(stats_.buffer_bytes, held);
-        }
         const size_t bytes = 12 + size_t(n) * sizeof(Vec3f);
         if (out.size() + bytes > cap && !out.empty()) flush(id);
+        if (out.size() + bytes > out.capacity()) {
+          // Grows by doubling from 64 KiB up to `cap` (more only for one face larger than cap).
+          const size_t old = out.capacity();
+          out.reserve(
+              std::max(out.size() + bytes, std::min(cap, std::max<size_t>(2 * old, 65536))));
+          held += out.capacity() - old;
+          stats_.buffer_bytes = std::max(stats_.buffer_bytes, held);
+        }
         const size_t at = out.size();
         out.resize(at + bytes);  // within capacity unless one face is larger than a buffer
         std::memcpy(out.data() + at, &b.face_ids[f], 8);

@@ -141,6 +141,11 @@ void expect_chunks_match(const std::string& name, const ChunkOptions& opt, size_
     EXPECT_GE(set.size(), min_chunks);
     EXPECT_EQ(set.stats().faces, ref.face_count());
     EXPECT_EQ(set.stats().triangles, ref.fan_triangle_count());
+    // The spill buffers stay within the budget (each gets at least 4 KiB).
+    if (opt.memory_budget / set.size() >= 4096) {
+      EXPECT_LE(set.stats().buffer_bytes, opt.memory_budget);
+    }
+    EXPECT_GT(set.stats().buffer_bytes, 0u);
     FaceChecker check(ref);
     for (size_t i = 0; i < set.size(); ++i) {
       const Chunk ch = set.load(i);

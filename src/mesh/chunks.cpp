@@ -11,8 +11,8 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
-#include <unordered_map>
 
+#include "io/byte_window.h"
 #include "slimrt/error.h"
 
 namespace slim::detail {
@@ -237,64 +237,74 @@ std::string ChunkSet::file(size_t i) const { return dir_ + "/chunk-" + std::to_s
 Chunk ChunkSet::load(size_t i) const {
   const ChunkInfo& ci = info_.at(i);
   const std::string path = file(i);
-  std::vector<char> data;
-  if (ci.faces > 0) {
-    std::FILE* f = std::fopen(path.c_str(), "rb");
-    if (!f) throw Error(path + ": cannot read a chunk spill file: " + std::strerror(errno));
-    data.resize(size_t(12 * ci.faces + ci.corners * sizeof(Vec3f)));
-    const size_t got = std::fread(data.data(), 1, data.size(), f);
-    const bool extra = std::fgetc(f) != EOF;
-    std::fclose(f);
-    if (got != data.size() || extra)
-      throw Error(path + ": chunk spill file has " + (extra ? "more" : std::to_string(got)) +
-                  " bytes; expected " + std::to_string(data.size()) + " (changed on disk?)");
-  }
   Chunk out;
   PolyMesh& m = out.mesh;
   m.name = "chunk " + std::to_string(i);
+  if (ci.faces == 0) return out;
+  // Read through a 1 MiB window: the chunk in memory is its PolyMesh and the weld table only.
+  ByteWindow w(path, 0, size_t(1) << 20, false);
+  const uint64_t expected = 12 * ci.faces + ci.corners * sizeof(Vec3f);
+  if (w.total() != expected)
+    throw Error(path + ": chunk spill file has " + std::to_string(w.total()) + " bytes; expected " +
+                std::to_string(expected) + " (changed on disk?)");
   m.face_sizes.reserve(ci.faces);
   m.face_indices.reserve(ci.corners);
   out.face_ids.reserve(ci.faces);
-  struct Key {
-    uint32_t b[3];
-    bool operator==(const Key& o) const {
-      return b[0] == o.b[0] && b[1] == o.b[1] && b[2] == o.b[2];
+  // Weld by bit pattern: an open-addressing table of position indices (4 bytes a slot, at most
+  // half full).
+  auto bits = [](const Vec3f& p, uint32_t k) {
+    uint32_t b;
+    std::memcpy(&b, reinterpret_cast<const char*>(&p) + 4 * k, 4);
+    return b;
+  };
+  auto hash = [&](const Vec3f& p) {
+    uint64_t h = bits(p, 0) * 0x9E3779B97F4A7C15ull;
+    h = (h ^ bits(p, 1)) * 0xC2B2AE3D27D4EB4Full;
+    h = (h ^ bits(p, 2)) * 0x165667B19E3779F9ull;
+    return h ^ (h >> 29);
+  };
+  constexpr uint32_t kEmpty = ~uint32_t(0);
+  std::vector<uint32_t> table(1024, kEmpty);
+  auto insert = [&](const Vec3f& p, uint32_t idx, bool rehashing) -> uint32_t {
+    const size_t mask = table.size() - 1;
+    for (size_t s = size_t(hash(p)) & mask;; s = (s + 1) & mask) {
+      if (table[s] == kEmpty) {
+        table[s] = idx;
+        return idx;
+      }
+      if (!rehashing && std::memcmp(&m.positions[table[s]], &p, sizeof p) == 0) return table[s];
     }
   };
-  struct Hash {
-    size_t operator()(const Key& k) const {
-      uint64_t h = k.b[0] * 0x9E3779B97F4A7C15ull;
-      h = (h ^ k.b[1]) * 0xC2B2AE3D27D4EB4Full;
-      h = (h ^ k.b[2]) * 0x165667B19E3779F9ull;
-      return size_t(h ^ (h >> 29));
-    }
-  };
-  std::unordered_map<Key, uint32_t, Hash> weld;
-  weld.reserve(size_t(ci.corners / 2 + 16));
-  size_t pos = 0;
-  while (pos < data.size()) {
+  while (w.left() > 0) {
     uint64_t id;
     uint32_t n;
-    if (data.size() - pos < 12) throw_at_byte(path, pos, "truncated chunk record");
-    std::memcpy(&id, data.data() + pos, 8);
-    std::memcpy(&n, data.data() + pos + 8, 4);
-    pos += 12;
-    if (n < 3 || (data.size() - pos) / sizeof(Vec3f) < n)
-      throw_at_byte(path, pos - 4, "bad chunk record (corner count " + std::to_string(n) + ")");
+    const uint64_t at = w.offset(w.cur);
+    if (!w.ensure(12)) throw_at_byte(path, at, "truncated chunk record");
+    std::memcpy(&id, w.cur, 8);
+    std::memcpy(&n, w.cur + 8, 4);
+    w.cur += 12;
+    if (n < 3 || w.left() / sizeof(Vec3f) < n)
+      throw_at_byte(path, at, "bad chunk record (corner count " + std::to_string(n) + ")");
     out.face_ids.push_back(id);
     m.face_sizes.push_back(n);
-    for (uint32_t k = 0; k < n; ++k, pos += sizeof(Vec3f)) {
-      Key key;
-      std::memcpy(key.b, data.data() + pos, 12);
-      auto [it, added] = weld.try_emplace(key, uint32_t(m.positions.size()));
-      if (added) {
-        Vec3f p;
-        std::memcpy(&p, key.b, 12);
-        m.positions.push_back(p);
+    for (uint32_t k = 0; k < n; ++k) {
+      if (!w.ensure(sizeof(Vec3f))) throw_at_byte(path, w.offset(w.cur), "truncated corner");
+      Vec3f p;
+      std::memcpy(&p, w.cur, sizeof p);
+      w.cur += sizeof p;
+      if (2 * (m.positions.size() + 1) > table.size()) {
+        table.assign(table.size() * 2, kEmpty);
+        for (uint32_t v = 0; v < m.positions.size(); ++v) insert(m.positions[v], v, true);
       }
-      m.face_indices.push_back(it->second);
+      const uint32_t next = uint32_t(m.positions.size());
+      const uint32_t idx = insert(p, next, false);
+      if (idx == next) m.positions.push_back(p);
+      m.face_indices.push_back(idx);
     }
   }
+  if (m.face_sizes.size() != ci.faces)
+    throw Error(path + ": chunk spill file has " + std::to_string(m.face_sizes.size()) +
+                " faces; expected " + std::to_string(ci.faces));
   return out;
 }
 

@@ -11,7 +11,8 @@
 //     face alone has more;
 //  3. every face goes to its chunk's spill buffer; a full buffer is appended to the chunk's
 //     temporary file. The buffers together stay within memory_budget.
-// Each chunk is then read back on its own (load()). The temporary files live in a fresh
+// Each chunk is then read back on its own (load(): through a 1 MiB window, welded with an
+// open-addressing table of 8 to 16 bytes per distinct position). The temporary files live in a fresh
 // directory under ChunkOptions::spill_dir, removed by the destructor and on any error.
 //
 // Memory: the histogram (12 bytes per cell, 24 MiB at bits = 7) + the spill buffers (at most

@@ -57,11 +57,12 @@ bool ByteWindow::refill(size_t need) {
   std::memmove(owned_.data(), cur, kept);
   base_ += cur_off;
   // Read until the buffer is full or the file ends.
-  buf_ = cur = owned_.data();
   size_t have = kept;
+  // Never past the size seen at open: a file that grows meanwhile is read as it was.
   auto read_more = [&]() {
-    while (have < owned_.size()) {
-      const size_t got = std::fread(owned_.data() + have, 1, owned_.size() - have, file_);
+    const size_t limit = size_t(std::min<uint64_t>(owned_.size(), total_ - base_));
+    while (have < limit) {
+      const size_t got = std::fread(owned_.data() + have, 1, limit - have, file_);
       if (got == 0) {
         if (std::ferror(file_))
           throw Error(path_ + ": read error at byte " + std::to_string(base_ + have) + ": " +

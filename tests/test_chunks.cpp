@@ -481,7 +481,6 @@ TEST(Chunks, RealMeshes) {
   TempDir d;
   ChunkOptions opt;
   opt.spill_dir = d.dir();
-  opt.max_triangles = 20000;
   const std::string data = slim::test::shared_data_dir();
   const std::string obj = data + "/spot_quadrangulated.obj", ply = data + "/igea.ply.xz";
   SLIM_REQUIRE_SHARED_FILE(obj);

@@ -346,6 +346,19 @@ TEST(FaceStream, ProceduralTileIsTheRegion) {
   }
 }
 
+// Scenes beyond the in-memory limit (16384) stream: the 1 G-triangle terrain.
+TEST(FaceStream, ProceduralBeyondTheInMemoryLimit) {
+  auto s = open_face_stream("terrain:22361");
+  EXPECT_EQ(s->declared_faces(), uint64_t(22361) * 22361);
+  FaceBatch b;
+  ASSERT_TRUE(s->next(b));
+  ASSERT_GT(b.face_count(), 22361u);
+  EXPECT_EQ(b.face_count() % 22361, 0u);  // whole rows
+  for (size_t f = 0; f < b.face_count(); ++f) ASSERT_EQ(b.face_ids[f], f);
+  EXPECT_LE(b.corners.size(), kDefaultBatchCorners);
+  EXPECT_LT(s->resident_bytes(), uint64_t(16) << 20);
+}
+
 TEST(FaceStream, ProceduralBadSpec) {
   for (const char* spec : {"terrain:0", "terrain:65535", "torus:7", "canyon:-3", "terrain:01"})
     EXPECT_NE(error_of([&] { open_face_stream(spec); }).find(spec), std::string::npos) << spec;

@@ -21,6 +21,14 @@ class NotApplicable : public Error {
   explicit NotApplicable(const std::string& what) : Error(what) {}
 };
 
+// A build stopped because its progress callback (BuildOptions::progress) returned false. Nothing
+// of the build is kept: every structure made so far is freed before the exception leaves
+// Scene::build.
+class Cancelled : public Error {
+ public:
+  explicit Cancelled(const std::string& what) : Error(what) {}
+};
+
 // "file:line: message" for text formats.
 [[noreturn]] void throw_at_line(const std::string& file, uint64_t line, const std::string& msg);
 // "file: byte N: message" for binary formats.

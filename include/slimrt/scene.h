@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <utility>
@@ -98,6 +99,22 @@ enum class GridLeftovers : uint8_t {
   Triangles,  // triangle leaves in a second BVH
 };
 
+// Progress of Scene::build, passed to BuildOptions::progress. A build runs a few phases in
+// order: "prepare" (the format's own work before the BVH: triangulation, pairing, grids, clusters,
+// quantization), "bvh2" (the binary SAH BVH) and "collapse" (the 8-wide BVH and the leaf data);
+// the grid formats with triangle leftovers add "bvh2 leftovers" and "collapse leftovers". Within
+// a phase `done` only grows, from 0 to `total` (its last report has done == total); units are the
+// phase's own (primitives placed in leaves, primitives encoded, steps of the preparation).
+struct BuildProgress {
+  std::string phase;
+  uint64_t done = 0, total = 0;
+  double fraction() const { return total ? double(done) / double(total) : 1.0; }
+};
+// Called a few hundred times per phase at most (about every percent), never per primitive, from
+// any of the build's threads but never concurrently (the calls are serialized). Returning false
+// cancels the build: Scene::build then throws slim::Cancelled (error.h) and keeps nothing.
+using BuildProgressFn = std::function<bool(const BuildProgress&)>;
+
 struct BuildOptions {
   Nodes nodes = Nodes::Bvh8;
   Leaf leaf = Leaf::Triangles;
@@ -116,6 +133,9 @@ struct BuildOptions {
   // Leaf::Clusters: every vertex lies within this fraction of the scene's box diagonal of its
   // input position (the lattice step is the largest power of two meeting it).
   double cluster_error = 1e-5;
+  // Optional progress report and cancellation (BuildProgress above). Empty: nothing is reported
+  // and the build does no extra work.
+  BuildProgressFn progress;
 
   // The options of a registry row ("bvh8-tri4v", "clbvh-compact", "lossy-grid", "costa-PFV",
   // ...). Throws slim::Error for an unknown name, listing the known ones.

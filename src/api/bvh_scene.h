@@ -13,6 +13,7 @@
 #include "bvh/build.h"
 #include "bvh/bvh8.h"
 #include "bvh/traverse.h"
+#include "core/progress.h"
 
 namespace slim {
 
@@ -118,9 +119,13 @@ class BvhScene : public Scene::Impl {
   // Leaf::source_bounds read it), fills bvh, expected, bounds and the BVH part of stats/mem.
   // Optional hooks (cluster formats): the BVH2's leaf shape, and a pass that restructures
   // the BVH2 before the collapse.
+  // Progress (BuildOptions::progress): this build ends the scene's "prepare" phase unless
+  // ends_prepare is false, and its phases are named "bvh2" and "collapse" plus phase_suffix.
   struct Bvh2Hooks {
     uint32_t max_leaf_size = 0, block_prims = 0;  // override the BVH2 config when nonzero
     std::function<void(Bvh2&)> reshape;
+    bool ends_prepare = true;
+    std::string phase_suffix;
   };
   template <class Source>
   void build(const Source& src, uint32_t prim_count, const BuildOptions& opt,
@@ -148,8 +153,16 @@ class BvhScene : public Scene::Impl {
     if (hooks.max_leaf_size) cfg.max_leaf_size = hooks.max_leaf_size;
     if (hooks.block_prims) cfg.block_prims = hooks.block_prims;
     cfg.threads = opt.threads;
+    std::unique_ptr<PhaseProgress> progress;
+    if (opt.progress) {
+      if (hooks.ends_prepare) report_progress(opt.progress, "prepare", 1, 1);
+      progress = std::make_unique<PhaseProgress>(opt.progress, "bvh2" + hooks.phase_suffix,
+                                                 2 * uint64_t(prim_count));
+    }
+    cfg.progress = progress.get();
     Bvh2 b2 = build_bvh2(prim_count, fill, cfg);
     if (hooks.reshape) hooks.reshape(b2);
+    if (progress) progress->finish();
     expected = Fingerprint{};
     for (const Fingerprint& f : keys) expected.merge(f);
     double bvh2_s = secs(t0);
@@ -169,7 +182,11 @@ class BvhScene : public Scene::Impl {
       if (enc.parts_per_block > 1)
         enc.part_bounds = [&](uint32_t prim, Box3f* boxes) { Leaf::part_bounds(src, prim, boxes); };
     }
-    bvh = collapse_bvh8(b2, node_kind(opt.nodes), enc, collapse_rule(opt));
+    if (opt.progress)
+      progress = std::make_unique<PhaseProgress>(opt.progress, "collapse" + hooks.phase_suffix,
+                                                 2 * uint64_t(prim_count));
+    bvh = collapse_bvh8(b2, node_kind(opt.nodes), enc, collapse_rule(opt), progress.get());
+    if (progress) progress->finish();
     double collapse_s = secs(t0);
     bounds = bvh.bounds;
     mem.bvh_bytes = bvh.node_bytes + bvh.multileaf_bytes;

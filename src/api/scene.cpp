@@ -10,6 +10,7 @@
 #include "api/registry.h"
 #include "api/scene_impl.h"
 #include "core/large_array.h"
+#include "core/progress.h"
 #include "mesh/triangulate.h"
 
 #include <tbb/blocked_range.h>
@@ -103,6 +104,8 @@ void check_coordinate_range(const std::vector<const PolyMesh*>& meshes) {
 
 std::unique_ptr<Scene::Impl> build_impl(const std::vector<const PolyMesh*>& meshes,
                                         const BuildOptions& opt) {
+  // The format's builder ends "prepare" when its BVH build starts (api/bvh_scene.h).
+  if (opt.progress) report_progress(opt.progress, "prepare", 0, 1);
   for (const PolyMesh* m : meshes) {
     if (!m) throw Error("Scene::build: null mesh");
     check_mesh(*m);
@@ -111,6 +114,7 @@ std::unique_ptr<Scene::Impl> build_impl(const std::vector<const PolyMesh*>& mesh
   opt.check();
   std::unique_ptr<Scene::Impl> impl = builder_of(opt.leaf)(meshes, opt);
   impl->opt = opt;
+  impl->opt.progress = nullptr;  // the caller's callback may not outlive the build
   impl->ray_setup = RaySetupBounds(impl->bounds);
   return impl;
 }

@@ -229,8 +229,15 @@ Bvh2 build_costa_bvh2(const NgonMesh& loaded, const std::vector<Vec3f>& decoded,
       1, std::min<uint32_t>(opt.max_leaf_size, CostaBlockLeaf::kBlockPrims * kMaxLeafBlocks));
   cfg.block_prims = CostaBlockLeaf::kBlockPrims;
   cfg.threads = opt.threads;
+  std::unique_ptr<PhaseProgress> progress;
+  if (opt.progress) {
+    report_progress(opt.progress, "prepare", 1, 1);
+    progress = std::make_unique<PhaseProgress>(opt.progress, "bvh2", 2 * uint64_t(prim_count));
+  }
+  cfg.progress = progress.get();
   Bvh2 b2 = build_bvh2(refs, cfg);
   if (prim_count) order_leaves_for_prediction(b2, loaded);
+  if (progress) progress->finish();
   return b2;
 }
 
@@ -271,6 +278,10 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
   Bvh2 b2 = build_costa_bvh2(loaded, decoded, opt, &expected);
   decoded = {};
 
+  // "collapse": the store in leaf order, then the BVH8.
+  std::unique_ptr<PhaseProgress> progress;
+  if (opt.progress)
+    progress = std::make_unique<PhaseProgress>(opt.progress, "collapse", 2 * uint64_t(prim_count));
   // Reorder the primitives in leaf order: a leaf block is then a range of the store.
   std::vector<uint32_t> pos(prim_count);
   for (uint32_t k = 0; k < prim_count; ++k) pos[b2.prim_ids[k]] = k;
@@ -304,7 +315,8 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
         throw std::logic_error("costa: a leaf block is not a range of the leaf order");
     std::memcpy(out, &b, sizeof(b));
   };
-  Bvh8 bvh = collapse_bvh8(b2, node_kind(opt.nodes), enc, collapse_rule(opt));
+  Bvh8 bvh = collapse_bvh8(b2, node_kind(opt.nodes), enc, collapse_rule(opt), progress.get());
+  if (progress) progress->finish();
 
   const uint64_t node_bytes = bvh.node_bytes, multileaf_bytes = bvh.multileaf_bytes;
   const uint64_t leaf_data_bytes = bvh.leaf_data_bytes;

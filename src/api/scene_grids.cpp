@@ -247,7 +247,10 @@ std::unique_ptr<BvhScene<Tri4v>> build_leftover_triangles(
   }
   auto s = std::make_unique<BvhScene<Tri4v>>();
   TriangleSource src{v.data(), idx.data(), geom.data(), prim.data()};
-  s->build(src, uint32_t(n), opt);
+  BvhScene<Tri4v>::Bvh2Hooks hooks;  // after the grids' BVH: phases "bvh2 leftovers", ...
+  hooks.ends_prepare = false;
+  hooks.phase_suffix = " leftovers";
+  s->build(src, uint32_t(n), opt, hooks);
   return s;
 }
 

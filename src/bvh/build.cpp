@@ -4,6 +4,7 @@
 // parallel and both halves build as parallel tasks (TBB).
 #include "bvh/build.h"
 
+#include "core/progress.h"
 #include "core/simd.h"
 #include "core/simd_ext.h"
 
@@ -169,6 +170,7 @@ class Builder {
               a.add(refs_[i].row());
             }
           }
+          if (cfg_.progress) cfg_.progress->add(r.size());
           return a;
         },
         Range::merged);
@@ -407,6 +409,7 @@ class Builder {
     if (!split(begin, end, range, depth, mid, left, right)) {
       nd.first = begin;
       nd.count = end - begin;
+      if (cfg_.progress) cfg_.progress->add(end - begin);
       return note_depth(depth);
     }
     const uint32_t first = node_count_.fetch_add(2);
@@ -434,6 +437,7 @@ class Builder {
       out_.nodes[k == 0 ? node : base + k - 1] = x;
     }
     note_depth(max_depth);
+    if (cfg_.progress) cfg_.progress->add(end - begin);
   }
 
   void build_local(std::vector<Bvh2Node>& local, uint32_t li, uint32_t begin, uint32_t end,

@@ -13,6 +13,8 @@
 
 namespace slim {
 
+class PhaseProgress;  // core/progress.h
+
 struct PrimRef {
   Box3f box;
   uint32_t id;  // index of the primitive in its source
@@ -32,6 +34,10 @@ struct Bvh2BuildConfig {
   float trav_cost = 1.0f;      // cost of one node visit relative to one primitive block test
   int max_depth = 96;          // deeper nodes are split at the object median
   int threads = 0;             // 0 = all
+  // Optional: receives 2 x count units, count as the references are made and count as the
+  // primitives are placed in leaves (one add per chunk of references or per subtree, never per
+  // primitive); throws slim::Cancelled out of build_bvh2 when the build is cancelled.
+  PhaseProgress* progress = nullptr;
 };
 
 struct Bvh2 {

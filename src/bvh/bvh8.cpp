@@ -1,6 +1,8 @@
 // BVH2 -> BVH8 collapse and the node encodings of bvh8.h.
 #include "bvh/bvh8.h"
 
+#include "core/progress.h"
+
 #include <algorithm>
 #include <array>
 #include <cassert>
@@ -135,8 +137,9 @@ struct SubtreeStats {
 // depth-first in both arenas (a node's children follow it), identical to a serial collapse.
 class Collapser {
  public:
-  Collapser(const Bvh2& b2, NodeKind kind, const LeafEncoder& enc, CollapseRule rule, Bvh8& out)
-      : b2_(b2), kind_(kind), enc_(enc), rule_(rule), out_(out) {}
+  Collapser(const Bvh2& b2, NodeKind kind, const LeafEncoder& enc, CollapseRule rule, Bvh8& out,
+            PhaseProgress* progress)
+      : b2_(b2), kind_(kind), enc_(enc), rule_(rule), out_(out), progress_(progress) {}
 
   void run() {
     out_.block_bytes = enc_.block_bytes;
@@ -445,6 +448,7 @@ class Collapser {
     // The multi-leaf cache (clbvh-compact) is a map: filled serially.
     for_children(
         i, k, [&](int c) { sub[c] = measure(kids[c], depth + 1); }, !enc_.encode_multileaf);
+    report_small_children(i, kids, k);
     uint64_t nb = node_bytes(), lb = 0;
     for (int c = 0; c < k; ++c) {
       s.add(sub[c]);
@@ -514,6 +518,7 @@ class Collapser {
       lo += leaf_size_[kids[c]];
     }
     for_children(i, k, [&](int c) { refs[c] = emit(kids[c], noff[c], loff[c]); });
+    report_small_children(i, kids, k);
     if (kind_ == NodeKind::QBvh8) {
       auto* q = reinterpret_cast<QNode8*>(out_.nodes.data() + node_off);
       Box3f boxes[8];
@@ -536,6 +541,17 @@ class Collapser {
 
   static constexpr uint32_t kParallelEmit = 1u << 14;  // primitives per subtree to emit as tasks
 
+  // Progress: the primitives of the children of a large node (>= kParallelEmit) that are small
+  // subtrees, once they are done. Each primitive lies in exactly one such child (or, for a small
+  // root, in none: the phase's finish() reports it).
+  void report_small_children(uint32_t i, const uint32_t* kids, int k) const {
+    if (!progress_ || prims_[i] < kParallelEmit) return;
+    uint64_t n = 0;
+    for (int c = 0; c < k; ++c)
+      if (prims_[kids[c]] < kParallelEmit) n += prims_[kids[c]];
+    if (n) progress_->add(n);
+  }
+
   const Bvh2& b2_;
   NodeKind kind_;
   const LeafEncoder& enc_;
@@ -548,13 +564,15 @@ class Collapser {
   LargeArray<uint64_t> node_size_, leaf_size_;
   std::unordered_map<uint32_t, std::vector<uint8_t>> multi_cache_;
   double root_area_ = 1;
+  PhaseProgress* progress_ = nullptr;
 };
 
 }  // namespace
 
-Bvh8 collapse_bvh8(const Bvh2& bvh2, NodeKind kind, const LeafEncoder& enc, CollapseRule rule) {
+Bvh8 collapse_bvh8(const Bvh2& bvh2, NodeKind kind, const LeafEncoder& enc, CollapseRule rule,
+                   PhaseProgress* progress) {
   Bvh8 out;
-  Collapser(bvh2, kind, enc, rule, out).run();
+  Collapser(bvh2, kind, enc, rule, out, progress).run();
   return out;
 }
 

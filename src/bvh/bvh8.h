@@ -20,6 +20,8 @@
 
 namespace slim {
 
+class PhaseProgress;  // core/progress.h
+
 // ---- child references -----------------------------------------------------------------------
 // 64 bits: bits 0-2 tag, bits 3-7 leaf block count (1..31), bits 8-63 byte offset into the
 // node arena (Node8, QNode8) or the leaf arena (Leaf, MultiLeaf).
@@ -172,7 +174,10 @@ inline CollapseRule default_collapse_rule(NodeKind kind) {
 // leaves through the encoder. For CompressedLeaf, every subtree with fewer
 // than 8 x block_prims primitives that can be packed into at most 8 blocks becomes one multi-leaf
 // (compressed-leaf-bvh.txt section 4.3).
-Bvh8 collapse_bvh8(const Bvh2& bvh2, NodeKind kind, const LeafEncoder& enc, CollapseRule rule);
+// `progress` (optional) receives 2 x the primitive count: once as subtrees are measured, once as
+// they are written (one add per subtree of a few thousand primitives).
+Bvh8 collapse_bvh8(const Bvh2& bvh2, NodeKind kind, const LeafEncoder& enc, CollapseRule rule,
+                   PhaseProgress* progress = nullptr);
 
 // Checks a leaf block and returns the bounds of its primitives in `bounds`.
 using LeafValidator = std::function<bool(const uint8_t* block, Box3f& bounds, std::string* why)>;

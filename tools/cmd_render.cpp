@@ -208,8 +208,11 @@ int cmd_render(int argc, char** argv) {
   t0 = std::chrono::steady_clock::now();
   Scene scene;
   {
-    StepProgress p(show_progress, "build " + config + " (" +
-                                      std::to_string(mesh.fan_triangle_count()) + " triangles)");
+    BuildMeter meter(
+        show_progress,
+        "build " + config + " (" + std::to_string(mesh.fan_triangle_count()) + " triangles)",
+        mesh.fan_triangle_count());
+    bopt.progress = meter.callback();
     scene = out_of_memory_context("building " + scene_name + " as " + config,
                                   [&] { return Scene::build(mesh, bopt); });
   }

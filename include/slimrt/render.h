@@ -107,9 +107,11 @@ struct PathResult {
 };
 
 // The benchmark's workload 2: a primary ray and up to `max_bounces` cosine-weighted diffuse
-// bounces, albedo 0.7, lit by a white-blue sky; every ray traced is counted.
+// bounces, albedo 0.7, lit by a white-blue sky, bluest towards `up` (a unit vector; the benchmark
+// keeps +z); every ray traced is counted.
 template <class Tracer>
-PathResult trace_path(const Tracer& tracer, Ray ray, Rng& rng, int max_bounces, float offset) {
+PathResult trace_path(const Tracer& tracer, Ray ray, Rng& rng, int max_bounces, float offset,
+                      Vec3f up = Vec3f(0.0f, 0.0f, 1.0f)) {
   PathResult res;
   Vec3f throughput(1.0f);
   for (int bounce = 0; bounce <= max_bounces; ++bounce) {
@@ -117,8 +119,8 @@ PathResult trace_path(const Tracer& tracer, Ray ray, Rng& rng, int max_bounces, 
     res.rays++;
     if (bounce == 0) res.primary = h;
     if (!h.valid()) {
-      float up = 0.5f + 0.5f * ray.dir.z;
-      Vec3f sky = Vec3f(1.0f) * (1.0f - up) + Vec3f(0.5f, 0.7f, 1.0f) * up;
+      const float a = 0.5f + 0.5f * dot(ray.dir, up);
+      Vec3f sky = Vec3f(1.0f) * (1.0f - a) + Vec3f(0.5f, 0.7f, 1.0f) * a;
       res.radiance += throughput * sky;
       break;
     }
@@ -149,9 +151,10 @@ SLIM_INLINE uint64_t pixel_seed(int x, int y, int sample) {
   return (uint64_t(uint32_t(y)) << 32 | uint32_t(x)) * 0x9E3779B97F4A7C15ULL + uint64_t(sample);
 }
 
-// Diffuse: BENCHMARK.md workload 2 (sky light only). Sun: a low sun from the camera's left (25
-// degrees above the horizon of RenderOptions::up) with a shadow ray, plus one diffuse bounce
-// under the sky: the shading that shows relief. Normals, Kind: debug shadings.
+// Diffuse: BENCHMARK.md workload 2 (sky light only, the sky's zenith at RenderOptions::up). Sun: a
+// low sun from the camera's left (25 degrees above the horizon of RenderOptions::up) with a shadow
+// ray, plus one diffuse bounce under the sky: the shading that shows relief. Normals, Kind: debug
+// shadings.
 enum class Shade { Diffuse, Normals, Kind, Sun };
 
 struct RenderOptions {
@@ -160,7 +163,7 @@ struct RenderOptions {
   int max_bounces = 8;
   Shade shade = Shade::Diffuse;
   int threads = 0;        // 0 = all cores
-  Vec3f up{0.0f, 0.0f, 1.0f};  // Shade::Sun: the scene's up direction (unit)
+  Vec3f up{0.0f, 0.0f, 1.0f};  // Diffuse, Sun: the scene's up direction, the sky's zenith
   bool progress = false;  // progress on stderr (percentage, elapsed, MRays/s) after ~2 s
 };
 

@@ -124,8 +124,8 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
   // Shade::Sun: the sun comes from the camera's left and a little from behind the scene, 25
   // degrees above the horizon, so that slopes facing it are bright and ridges cast shadows.
   Vec3f sun(0.0f, 0.0f, 1.0f);
+  const Vec3f up = sun_up(opt.up);
   if (opt.shade == Shade::Sun) {
-    const Vec3f up = sun_up(opt.up);
     Vec3f right = safe_normalize(cam.du - up * dot(cam.du, up));
     Vec3f fwd = safe_normalize(cross(up, right));  // horizontal, into the picture
     Vec3f h = safe_normalize(right * -0.9f + fwd * 0.45f);
@@ -145,7 +145,7 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
     Ray ray = camera_ray(cam, float(x) + jx, float(y) + jy);
     switch (opt.shade) {
       case Shade::Diffuse: {
-        PathResult p = trace_path(scene, ray, rng, max_bounces, offset);
+        PathResult p = trace_path(scene, ray, rng, max_bounces, offset, up);
         rays += p.rays;
         return p.radiance;
       }
@@ -159,7 +159,7 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
         rays++;
         Hit h = scene.intersect(ray);
         auto sky = [&](Vec3f d) {
-          float a = 0.5f + 0.5f * dot(d, sun_up(opt.up));
+          float a = 0.5f + 0.5f * dot(d, up);
           return Vec3f(0.75f, 0.8f, 0.88f) * (1.0f - a) + Vec3f(0.25f, 0.42f, 0.8f) * a;
         };
         if (!h.valid()) return sky(ray.dir);

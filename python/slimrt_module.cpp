@@ -143,7 +143,10 @@ inline bool load_ray(const float* p, slim::Ray& r) {
 
 class RaycastingScene {
  public:
-  RaycastingScene(const std::string& config, int threads) : threads_(threads) {
+  RaycastingScene(const std::string& config, int threads, py::object progress)
+      : threads_(threads), progress_(std::move(progress)) {
+    if (!progress_.is_none() && !PyCallable_Check(progress_.ptr()))
+      throw py::type_error("progress: expected a callable progress(phase, done, total) or None");
     if (threads < 0)
       throw py::value_error("threads: expected 0 (all cores) or more, got " +
                             std::to_string(threads));
@@ -399,14 +402,38 @@ class RaycastingScene {
   }
 
   // The scene, built now if geometry was added since the last build. Called without the GIL.
+  // With a progress callable, it is called with the GIL taken (and only then); it returning False,
+  // raising, or a signal (Ctrl-C) cancels the build.
   const slim::Scene& built() {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!scene_) {
-      if (meshes_.empty()) {
-        slim::PolyMesh empty;
-        scene_.emplace(slim::Scene::build(empty, options_));
-      } else {
-        scene_.emplace(slim::Scene::build(meshes_, options_));
+      slim::BuildOptions opt = options_;
+      std::unique_ptr<py::error_already_set> raised;
+      if (!progress_.is_none())
+        opt.progress = [this, &raised](const slim::BuildProgress& p) {
+          py::gil_scoped_acquire gil;
+          try {
+            if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+            py::object r = progress_(p.phase, p.done, p.total);
+            if (r.is_none()) return true;
+            const int truth = PyObject_IsTrue(r.ptr());
+            if (truth < 0) throw py::error_already_set();
+            return truth != 0;
+          } catch (py::error_already_set& e) {
+            raised = std::make_unique<py::error_already_set>(std::move(e));
+            return false;
+          }
+        };
+      try {
+        if (meshes_.empty()) {
+          slim::PolyMesh empty;
+          scene_.emplace(slim::Scene::build(empty, opt));
+        } else {
+          scene_.emplace(slim::Scene::build(meshes_, opt));
+        }
+      } catch (const slim::Cancelled&) {
+        if (raised) throw std::move(*raised);  // the callable's own exception
+        throw;
       }
     }
     return *scene_;
@@ -425,6 +452,7 @@ class RaycastingScene {
 
   slim::BuildOptions options_;
   int threads_ = 0;
+  py::object progress_;  // None or progress(phase, done, total)
   std::vector<slim::PolyMesh> meshes_;
   std::optional<slim::Scene> scene_;
   std::mutex mutex_;
@@ -557,7 +585,9 @@ PYBIND11_MODULE(slimrt, m) {
   m.doc() =
       "slimrt: compact CPU ray tracing of triangle and quad meshes. RaycastingScene follows "
       "Open3D's open3d.t.geometry.RaycastingScene.";
-  py::register_exception<slim::Error>(m, "Error", PyExc_RuntimeError);
+  auto& error = py::register_exception<slim::Error>(m, "Error", PyExc_RuntimeError);
+  // After Error: pybind11 tries the most recently registered translator first.
+  py::register_exception<slim::Cancelled>(m, "Cancelled", error.ptr());
   m.attr("INVALID_ID") = kInvalid;
   m.attr("__version__") = SLIMRT_VERSION;
   m.def("configs", &slim::all_config_names,
@@ -590,8 +620,11 @@ PYBIND11_MODULE(slimrt, m) {
                               "A scene of triangle meshes to cast rays against (Open3D's "
                               "RaycastingScene names and conventions). config is a slimrt "
                               "configuration (slimrt.configs()); threads = 0 uses all cores.")
-      .def(py::init<const std::string&, int>(), py::arg("config") = "clbvh-compact",
-           py::arg("threads") = 0)
+      .def(py::init<const std::string&, int, py::object>(), py::arg("config") = "clbvh-compact",
+           py::arg("threads") = 0, py::arg("progress") = py::none(),
+           "progress: optional callable progress(phase, done, total) called during the build "
+           "(phases 'prepare', 'bvh2', 'collapse'; done grows to total in each); returning "
+           "False cancels the build, which raises slimrt.Cancelled.")
       .def_property_readonly_static("INVALID_ID", [](py::object) { return kInvalid; })
       .def("add_triangles", &RaycastingScene::add_triangles, py::arg("vertex_positions"),
            py::arg("triangle_indices"),

@@ -58,7 +58,9 @@ void expect_monotone(const std::vector<BuildProgress>& calls, const std::string&
     for (size_t k = begin; k < i; ++k) {
       EXPECT_EQ(calls[k].total, calls[begin].total) << what << " " << phase;
       EXPECT_LE(calls[k].done, calls[k].total) << what << " " << phase;
-      if (k > begin) EXPECT_GE(calls[k].done, calls[k - 1].done) << what << " " << phase;
+      if (k > begin) {
+        EXPECT_GE(calls[k].done, calls[k - 1].done) << what << " " << phase;
+      }
     }
     EXPECT_EQ(calls[i - 1].done, calls[i - 1].total) << what << " " << phase << " ends below 100%";
     EXPECT_LE(i - begin, 103u) << what << " " << phase << ": too many reports";
@@ -84,11 +86,17 @@ TEST(BuildProgress, EveryPhaseIsMonotoneAndEndsAtTotal) {
       EXPECT_EQ(phases_of(rec.calls), (std::vector<std::string>{"prepare", "bvh2", "collapse"}));
       // The BVH phases count the primitives the BVH is built over, twice.
       for (const BuildProgress& p : rec.calls)
-        if (p.phase != "prepare") EXPECT_EQ(p.total, 2 * s.stats().primitives) << p.phase;
-      // Large enough that the BVH phases report in between, not only their start and end.
+        if (p.phase != "prepare") {
+          EXPECT_EQ(p.total, 2 * s.stats().primitives) << p.phase;
+        }
+      // Over many primitives (the triangle formats' 18432, not the grids' few hundred
+      // sub-grids) the BVH phases also report in between, not only at their start and end.
       std::map<std::string, int> count;
       for (const BuildProgress& p : rec.calls) count[p.phase]++;
-      EXPECT_GT(count["bvh2"], 3);
+      if (s.stats().primitives >= 16384) {
+        EXPECT_GT(count["bvh2"], 10);
+        EXPECT_GE(count["collapse"], 3);  // start, measured, written
+      }
       // The scene keeps no reference to the callback.
       EXPECT_FALSE(s.options().progress);
     }

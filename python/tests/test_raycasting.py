@@ -329,3 +329,47 @@ def test_threads_and_gil_released():
     for o in out:
         np.testing.assert_array_equal(o["t_hit"], ref["t_hit"])
         np.testing.assert_array_equal(o["primitive_ids"], ref["primitive_ids"])
+
+
+def test_build_progress_and_cancel():
+    v, t, _ = slimrt.load_triangles("terrain:64")
+    calls = []
+
+    def record(phase, done, total):
+        calls.append((phase, done, total))
+        # No return value: None continues the build.
+
+    s = slimrt.RaycastingScene("bvh8-tri4v", progress=record)
+    s.add_triangles(v, t)
+    ans = s.cast_rays(np.array([[0.5, 0.5, 5, 0, 0, -1]], np.float32))
+    assert np.isfinite(ans["t_hit"][0])
+    phases = [p for i, (p, _, _) in enumerate(calls) if i == 0 or calls[i - 1][0] != p]
+    assert phases == ["prepare", "bvh2", "collapse"]
+    for phase in phases:
+        run = [(d, n) for p, d, n in calls if p == phase]
+        assert all(a[0] <= b[0] for a, b in zip(run, run[1:])), phase
+        assert run[-1][0] == run[-1][1], phase  # ends at 100%
+
+    # False cancels: slimrt.Cancelled (a slimrt.Error) from the query that built; the scene
+    # builds again on the next query.
+    state = {"cancel": True}
+    s = slimrt.RaycastingScene("clbvh-compact", progress=lambda p, d, n: not (
+        state["cancel"] and p == "bvh2" and d > 0))
+    s.add_triangles(v, t)
+    with pytest.raises(slimrt.Cancelled, match="bvh2"):
+        s.stats()
+    assert issubclass(slimrt.Cancelled, slimrt.Error)
+    state["cancel"] = False
+    assert s.stats()["triangles"] == len(t)
+
+    # An exception in the callable leaves the build as it is.
+    def fail(phase, done, total):
+        if phase == "collapse":
+            raise KeyError("stop")
+
+    s = slimrt.RaycastingScene(progress=fail)
+    s.add_triangles(v, t)
+    with pytest.raises(KeyError, match="stop"):
+        s.memory()
+    with pytest.raises(TypeError, match="callable"):
+        slimrt.RaycastingScene(progress=3)

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <climits>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -65,6 +66,10 @@ struct TileGrid {
     x1 = std::min(x0 + tile, width);
     y1 = std::min(y0 + tile, height);
   }
+  // Floats of the largest tile (a tile no larger than the image).
+  size_t max_floats() const {
+    return size_t(std::min(tile, width)) * size_t(std::min(tile, height)) * 3;
+  }
   size_t floats(int i) const {
     int x0, y0, x1, y1;
     rect(i, x0, y0, x1, y1);
@@ -89,17 +94,24 @@ uint64_t fnv1a(const std::string& s) {
   return h;
 }
 
-// Rank > 0: asks for tiles, renders them and sends them back until rank 0 has none left.
+// Rank > 0: asks for tiles, renders them and sends them back until rank 0 has none left. Results
+// go out with MPI_Isend from two buffers in turn, so that the next tile renders while rank 0 takes
+// in the last one.
 void work(const Scene& scene, const Camera& cam, const RenderOptions& opt, const TileGrid& grid) {
-  std::vector<unsigned char> msg(sizeof(ResultHeader) +
-                                 size_t(grid.tile) * size_t(grid.tile) * 3 * sizeof(float));
-  std::vector<float> px(size_t(grid.tile) * size_t(grid.tile) * 3);
+  const size_t tile_floats = grid.max_floats();
+  std::vector<unsigned char> msg[2];
+  MPI_Request sent[2] = {MPI_REQUEST_NULL, MPI_REQUEST_NULL};
+  int turn = 0;
+  std::vector<float> px(tile_floats);
   auto send = [&](int tile, uint64_t rays, size_t floats) {
-    ResultHeader h{tile, 0, rays};
-    std::memcpy(msg.data(), &h, sizeof h);
-    std::memcpy(msg.data() + sizeof h, px.data(), floats * sizeof(float));
-    MPI_Send(msg.data(), int(sizeof h + floats * sizeof(float)), MPI_BYTE, 0, kTagResult,
-             MPI_COMM_WORLD);
+    MPI_Wait(&sent[turn], MPI_STATUS_IGNORE);  // this buffer's previous message is out
+    std::vector<unsigned char>& m = msg[turn];
+    const ResultHeader h{tile, 0, rays};
+    m.resize(sizeof h + floats * sizeof(float));
+    std::memcpy(m.data(), &h, sizeof h);
+    std::memcpy(m.data() + sizeof h, px.data(), floats * sizeof(float));
+    MPI_Isend(m.data(), int(m.size()), MPI_BYTE, 0, kTagResult, MPI_COMM_WORLD, &sent[turn]);
+    turn ^= 1;
   };
   int pending = 0;  // requests not answered yet: every message to rank 0 is one
   std::deque<int> queue;
@@ -111,7 +123,7 @@ void work(const Scene& scene, const Camera& cam, const RenderOptions& opt, const
       --pending;
       if (tile >= 0) queue.push_back(tile);
     }
-    if (queue.empty()) return;
+    if (queue.empty()) break;
     const int tile = queue.front();
     queue.pop_front();
     if (tile >= grid.count())
@@ -124,6 +136,7 @@ void work(const Scene& scene, const Camera& cam, const RenderOptions& opt, const
     send(tile, st.rays, grid.floats(tile));
     ++pending;
   }
+  MPI_Waitall(2, sent, MPI_STATUSES_IGNORE);
 }
 
 }  // namespace
@@ -199,6 +212,14 @@ Image RenderRanks::render(const Scene& scene, const Camera& cam, const RenderOpt
     throw Error("render: image size must be positive, got " + std::to_string(width) + "x" +
                 std::to_string(height));
   const TileGrid grid(width, height, tile_size);
+  // MPI counts in int: the tiles and a tile's message must stay below 2^31.
+  if (uint64_t(grid.tiles_x) * uint64_t(grid.tiles_y) > uint64_t(INT_MAX))
+    throw Error("--mpi-tile " + std::to_string(tile_size) + ": " + std::to_string(width) + "x" +
+                std::to_string(height) +
+                " pixels make more than 2^31 tiles; expected a larger tile");
+  if (sizeof(ResultHeader) + grid.max_floats() * sizeof(float) > size_t(INT_MAX))
+    throw Error("--mpi-tile " + std::to_string(tile_size) +
+                ": a tile's pixels exceed MPI's 2 GiB message; expected a smaller tile");
   if (!is_root()) {
     work(scene, cam, opt, grid);
     return Image();
@@ -220,7 +241,7 @@ Image RenderRanks::render(const Scene& scene, const Camera& cam, const RenderOpt
   std::thread renderer([&] {
     if (!root_renders) return;
     try {
-      std::vector<float> px(size_t(tile_size) * size_t(tile_size) * 3);
+      std::vector<float> px(grid.max_floats());
       for (int t; !failed.load() && (t = next.fetch_add(1)) < count;) {
         int x0, y0, x1, y1;
         grid.rect(t, x0, y0, x1, y1);

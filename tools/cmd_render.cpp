@@ -192,7 +192,10 @@ int render_command(int argc, char** argv, const RenderRanks& ranks) {
                : shade == "kind"  ? Shade::Kind
                : shade == "sun"   ? Shade::Sun
                                   : Shade::Diffuse;
-  const bool show_progress = !quiet && ranks.is_root() && isatty(fileno(stderr)) != 0;
+  // Under mpirun stderr is a pipe to mpirun whatever the user's terminal: rank 0 shows progress
+  // there unless --quiet.
+  const bool show_progress =
+      !quiet && ranks.is_root() && (ranks.distributed() || isatty(fileno(stderr)) != 0);
   ropt.progress = show_progress;
   ViewOptions view;
   view.up = up.empty()  ? default_up(scene_name)

@@ -277,7 +277,8 @@ Image RenderRanks::render(const Scene& scene, const Camera& cam, const RenderOpt
     const int percent = int(int64_t(done.load()) * 100 / std::max(count, 1));
     if (s < 2.0 || (percent == shown && !last)) return;
     if (percent != shown)
-      std::fprintf(stderr, "\rrender %3d%% | %.1f s | %d processes ", percent, s, size_);
+      std::fprintf(stderr, "\rrender %3d%% | %.1f s | %.2f MRays/s | %d processes ", percent, s,
+                   double(rays.load()) / s * 1e-6, size_);
     if (last) std::fputc('\n', stderr);
     std::fflush(stderr);
     shown = percent;

@@ -2,9 +2,11 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -340,6 +342,54 @@ TEST(RenderScene, TerrainNormalsKindDiffuse) {
   EXPECT_EQ(small.width, 32);
   size_t small_hits = count_not(small, Vec3f(0.03f));
   EXPECT_NEAR(double(small_hits) * 4, double(hits), double(hits) * 0.1);
+}
+
+// render_region: every rectangle of an image, in every shading, holds render()'s pixels bit for
+// bit (what `slimrt render` under mpirun relies on), also when the camera is rescaled to the
+// options' resolution; a rectangle outside the image is an error.
+TEST(RenderScene, RegionsEqualTheWholeImage) {
+  slim::PolyMesh mesh = slim::make_terrain(40);
+  const slim::Scene scene = slim::Scene::build(mesh, slim::BuildOptions::from_config("bvh8-tri4v"));
+  const Camera cam = slim::frame_box(scene.bounds(), 60, 50);
+  for (slim::Shade shade :
+       {slim::Shade::Diffuse, slim::Shade::Sun, slim::Shade::Normals, slim::Shade::Kind}) {
+    slim::RenderOptions opt;
+    opt.width = 77;  // not the camera's 60x50, and no multiple of the 32-pixel tiles
+    opt.height = 45;
+    opt.shade = shade;
+    opt.spp = 3;
+    opt.max_bounces = 2;
+    slim::RenderStats whole_stats;
+    const Image whole = slim::render(scene, cam, opt, &whole_stats);
+    // A 40-pixel grid of rectangles covers the image; their rays add up to the whole image's.
+    uint64_t rays = 0;
+    size_t differing = 0;
+    for (int y0 = 0; y0 < opt.height; y0 += 40) {
+      for (int x0 = 0; x0 < opt.width; x0 += 40) {
+        const int x1 = std::min(x0 + 40, opt.width), y1 = std::min(y0 + 40, opt.height);
+        std::vector<float> px(size_t(x1 - x0) * size_t(y1 - y0) * 3, -1.0f);
+        slim::RenderStats st;
+        slim::render_region(scene, cam, opt, x0, y0, x1, y1, px.data(), &st);
+        rays += st.rays;
+        for (int y = y0; y < y1; ++y)
+          for (int x = x0; x < x1; ++x)
+            for (int c = 0; c < 3; ++c) {
+              float a = whole.rgb[(size_t(y) * size_t(opt.width) + size_t(x)) * 3 + size_t(c)];
+              float b = px[(size_t(y - y0) * size_t(x1 - x0) + size_t(x - x0)) * 3 + size_t(c)];
+              if (std::memcmp(&a, &b, sizeof a) != 0) ++differing;
+            }
+      }
+    }
+    EXPECT_EQ(differing, 0u) << "shade " << int(shade);
+    EXPECT_EQ(rays, whole_stats.rays) << "shade " << int(shade);
+  }
+  std::vector<float> px(64 * 3);
+  slim::RenderOptions opt;
+  opt.width = 8;
+  opt.height = 8;
+  EXPECT_THROW(slim::render_region(scene, cam, opt, 0, 0, 9, 1, px.data()), slim::Error);
+  EXPECT_THROW(slim::render_region(scene, cam, opt, -1, 0, 1, 1, px.data()), slim::Error);
+  EXPECT_THROW(slim::render_region(scene, cam, opt, 2, 0, 2, 1, px.data()), slim::Error);
 }
 
 // ---- the CLI ----

@@ -1,12 +1,14 @@
 // `slimrt render SCENE -o OUT.png|OUT.exr [--shade diffuse|sun|normals|kind] [--spp N] [--res WxH]
 //                [--config NAME] [--threads N] [--bounces N] [--up x|y|z] [--eye X,Y,Z]
-//                [--look-at X,Y,Z] [--fov DEG] [--quiet]`
+//                [--look-at X,Y,Z] [--fov DEG] [--mpi-tile N] [--mpi-root render|coordinate]
+//                [--quiet]`
 // Loads a mesh file or procedural scene, builds it in one configuration (BENCHMARK.md names),
 // renders it from the user's camera (slim::view_camera: by default the model's corners fill the
 // image, seen from the front-right and above; glTF is Y up by its specification, other inputs Z
 // up) and writes the image; prints build time, render time and MRays/s on stdout. Loading,
 // building and rendering that take over ~2 s show progress on stderr when it is a terminal,
-// unless --quiet.
+// unless --quiet. Under `mpirun -np K` the K processes render one image (mpi_render.h): rank 0
+// alone shows progress, writes the image and prints.
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -17,8 +19,10 @@
 #include <cstdio>
 #include <cstring>
 #include <string>
+#include <vector>
 
 #include "commands.h"
+#include "mpi_render.h"
 #include "progress.h"
 #include "slimrt/analysis.h"
 #include "slimrt/output.h"
@@ -81,15 +85,13 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-}  // namespace
-
-int cmd_render(int argc, char** argv) {
+int render_command(int argc, char** argv, const RenderRanks& ranks) {
   CLI::App app{"Render a scene and write a PNG or EXR image.", "slimrt render"};
   std::string scene_name, output, shade = "diffuse", res = "1024x1024", config = "bvh8-tri4v";
-  std::string up, eye, look_at;
+  std::string up, eye, look_at, mpi_root = "render";
   float fov = 40.0f;
   bool quiet = false;
-  int spp = 1, threads = 0, bounces = 8;
+  int spp = 1, threads = 0, bounces = 8, mpi_tile = 64;
   app.add_option("scene", scene_name,
                  "mesh file (.obj .ply .gltf .glb, optionally .xz) or terrain:N, torus:N, canyon:N")
       ->required();
@@ -149,17 +151,27 @@ int cmd_render(int argc, char** argv) {
   app.add_option("--fov", fov, "vertical field of view, degrees")
       ->check(CLI::Range(0.01f, 179.0f))
       ->capture_default_str();
+  app.add_option("--mpi-tile", mpi_tile,
+                 "under mpirun: edge in pixels of the square tiles rank 0 hands out")
+      ->check(CLI::Range(1, 65536))
+      ->capture_default_str();
+  app.add_option("--mpi-root", mpi_root,
+                 "under mpirun: rank 0 renders tiles too (render) or only hands them out and "
+                 "gathers them (coordinate)")
+      ->check(CLI::IsMember({"render", "coordinate"}))
+      ->capture_default_str();
   app.add_flag("-q,--quiet", quiet, "no progress on stderr");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // Every rank parses the same arguments: rank 0 alone says what is wrong.
+    return ranks.is_root() ? app.exit(e) : e.get_exit_code();
   }
 
   RenderOptions ropt;
   if (!parse_resolution(res, ropt.width, ropt.height)) return 2;  // already checked by CLI11
   // Before the load, build and render: a typo in -o or a huge --res must not cost that work.
-  check_output_path(output);
+  if (ranks.is_root()) check_output_path(output);
   {
     // The float image (12 bytes per pixel), its 8-bit copy and the encoded file: about 24 bytes
     // per pixel at the peak of write_image.
@@ -180,7 +192,10 @@ int cmd_render(int argc, char** argv) {
                : shade == "kind"  ? Shade::Kind
                : shade == "sun"   ? Shade::Sun
                                   : Shade::Diffuse;
-  const bool show_progress = !quiet && isatty(fileno(stderr)) != 0;
+  // Under mpirun stderr is a pipe to mpirun whatever the user's terminal: rank 0 shows progress
+  // there unless --quiet.
+  const bool show_progress =
+      !quiet && ranks.is_root() && (ranks.distributed() || isatty(fileno(stderr)) != 0);
   ropt.progress = show_progress;
   ViewOptions view;
   view.up = up.empty()  ? default_up(scene_name)
@@ -221,21 +236,42 @@ int cmd_render(int argc, char** argv) {
   mesh = PolyMesh();  // the scene owns all it needs
 
   Camera cam = view_camera(scene.bounds(), view, ropt.width, ropt.height);
+  ranks.check_same_scene(scene, scene_name);
   t0 = std::chrono::steady_clock::now();
   RenderStats rstats;
-  Image img = out_of_memory_context("rendering " + scene_name + " at " + res,
-                                    [&] { return render(scene, cam, ropt, &rstats); });
+  std::vector<int> rank_tiles;
+  Image img = out_of_memory_context("rendering " + scene_name + " at " + res, [&] {
+    return ranks.distributed() ? ranks.render(scene, cam, ropt, mpi_tile, mpi_root == "render",
+                                              show_progress, &rstats, &rank_tiles)
+                               : render(scene, cam, ropt, &rstats);
+  });
   double render_s = seconds_since(t0);
+  if (!ranks.is_root()) return 0;
   write_image(img, output);
 
   double mrays = render_s > 0 ? double(rstats.rays) / render_s * 1e-6 : 0.0;
+  std::string processes;  // " (K processes, tiles a + b + ...)": the tiles each rank rendered
+  if (ranks.distributed()) {
+    processes = " (" + std::to_string(ranks.size()) + " processes, tiles ";
+    for (size_t r = 0; r < rank_tiles.size(); ++r)
+      processes += (r ? " + " : "") + std::to_string(rank_tiles[r]);
+    processes += ")";
+  }
   std::printf(
       "%s: %llu faces, %llu triangles | load %.3f s | build %.3f s (%s) | render %.3f s "
       "(%dx%d, %d spp, %s) | %.2f MRays/s%s | %s\n",
       scene_name.c_str(), (unsigned long long)faces, (unsigned long long)triangles, load_s, build_s,
-      config.c_str(), render_s, ropt.width, ropt.height, ropt.spp, shade.c_str(), mrays, "",
-      output.c_str());
+      config.c_str(), render_s, ropt.width, ropt.height, ropt.spp, shade.c_str(), mrays,
+      processes.c_str(), output.c_str());
   return 0;
+}
+
+}  // namespace
+
+int cmd_render(int argc, char** argv) {
+  RenderRanks ranks;
+  if (ranks.idle()) return 0;
+  return ranks.guard([&] { return render_command(argc, argv, ranks); });
 }
 
 }  // namespace slim::cli

@@ -20,6 +20,8 @@ void usage() {
                "  render SCENE -o OUT.png|OUT.exr [--shade diffuse|sun|normals|kind] [--spp N] "
                "[--res WxH] [--config NAME]\n"
                "         [--up x|y|z] [--eye X,Y,Z] [--look-at X,Y,Z] [--fov DEG] [--quiet]\n"
+               "         under mpirun -np K: one image by K processes [--mpi-tile N] "
+               "[--mpi-root render|coordinate]\n"
                "  bench SCENE... [--config NAME...] [--threads N] [--repeat K] [--json FILE] "
                "[--plot FILE]\n"
                "SCENE is a mesh file (.obj .ply .gltf .glb, optionally .xz) or terrain:N, "

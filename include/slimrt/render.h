@@ -180,6 +180,13 @@ struct RenderStats {
 // Renders the scene with the camera, tiles spread over the threads.
 Image render(const Scene& scene, const Camera& cam, const RenderOptions& opt,
              RenderStats* stats = nullptr);
+// The pixels [x0, x1) x [y0, y1) of the image render(scene, cam, opt) makes, written row-major
+// into out, which must hold (x1 - x0) * (y1 - y0) * 3 floats: every pixel is traced with the same
+// rays, seeds and sample order as in render(), so its value is the same bits. For splitting one
+// image across processes (`slimrt render` under mpirun). Throws slim::Error unless the rectangle
+// is non-empty and inside the image; opt.progress reports on this rectangle alone.
+void render_region(const Scene& scene, const Camera& cam, const RenderOptions& opt, int x0, int y0,
+                   int x1, int y1, float* out, RenderStats* stats = nullptr);
 // Writes PNG (8-bit sRGB) or EXR (float) by the file extension; throws slim::Error otherwise.
 void write_image(const Image& img, const std::string& path);
 // PSNR in dB of b against a (both tone-mapped to 8-bit sRGB as in the PNG); +inf if identical.

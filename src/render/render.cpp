@@ -5,6 +5,8 @@
 // jitter and its bounces, so an image does not depend on the thread count or the tile order and two
 // configurations of one scene can be compared pixel by pixel (PSNR of lossy formats). With one
 // sample per pixel the ray goes through the pixel centre, as the benchmark's primary rays do.
+// render_region() shades any rectangle of that image through the same PixelShader, so the pieces
+// of an image rendered apart (slimrt render under mpirun) equal render()'s pixels bit for bit.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -92,60 +94,73 @@ Vec3f sun_up(Vec3f up) {
   return u.x == 0.0f && u.y == 0.0f && u.z == 0.0f ? Vec3f(0.0f, 0.0f, 1.0f) : u;
 }
 
-}  // namespace
-
-Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
-             RenderStats* stats) {
-  // The camera defines the view, the options the resolution: rescale the pixel steps when they
-  // differ so that the whole camera view lands in the image.
-  Camera cam = cam_in;
-  int width = opt.width > 0 ? opt.width : cam.width;
-  int height = opt.height > 0 ? opt.height : cam.height;
-  if (width <= 0 || height <= 0)
-    throw Error("render: image size must be positive, got " + std::to_string(width) + "x" +
-                std::to_string(height));
-  if (cam.width > 0 && cam.height > 0) {
-    cam.du = cam.du * (float(cam.width) / float(width));
-    cam.dv = cam.dv * (float(cam.height) / float(height));
+// What decides every pixel's value: the scene, the camera scaled to the image size, the options
+// and the sun of Shade::Sun. render() and render_region() shade through it, so a pixel computed by
+// either (any thread, any tile, any process) is the same bits.
+class PixelShader {
+ public:
+  PixelShader(const Scene& scene, const Camera& cam_in, const RenderOptions& opt)
+      : scene_(scene), opt_(opt) {
+    // The camera defines the view, the options the resolution: rescale the pixel steps when they
+    // differ so that the whole camera view lands in the image.
+    cam_ = cam_in;
+    int width = opt.width > 0 ? opt.width : cam_.width;
+    int height = opt.height > 0 ? opt.height : cam_.height;
+    if (width <= 0 || height <= 0)
+      throw Error("render: image size must be positive, got " + std::to_string(width) + "x" +
+                  std::to_string(height));
+    if (cam_.width > 0 && cam_.height > 0) {
+      cam_.du = cam_.du * (float(cam_.width) / float(width));
+      cam_.dv = cam_.dv * (float(cam_.height) / float(height));
+    }
+    cam_.width = width;
+    cam_.height = height;
+    spp_ = std::max(opt.spp, 1);
+    max_bounces_ = std::max(opt.max_bounces, 0);
+    offset_ = ray_offset_scale(scene.bounds());
+    inv_spp_ = 1.0f / float(spp_);
+    // Shade::Sun: the sun comes from the camera's left and a little from behind the scene, 25
+    // degrees above the horizon, so that slopes facing it are bright and ridges cast shadows.
+    up_ = sun_up(opt.up);
+    if (opt.shade == Shade::Sun) {
+      const Vec3f up = up_;
+      Vec3f right = safe_normalize(cam_.du - up * dot(cam_.du, up));
+      Vec3f fwd = safe_normalize(cross(up, right));  // horizontal, into the picture
+      Vec3f h = safe_normalize(right * -0.9f + fwd * 0.45f);
+      sun_ = safe_normalize(h * 0.906f + up * 0.423f);
+      if (h.x == 0.0f && h.y == 0.0f && h.z == 0.0f) sun_ = up;
+    }
   }
-  cam.width = width;
-  cam.height = height;
 
-  const int spp = std::max(opt.spp, 1);
-  const int max_bounces = std::max(opt.max_bounces, 0);
-  const float offset = ray_offset_scale(scene.bounds());
-  const float inv_spp = 1.0f / float(spp);
+  int width() const { return cam_.width; }
+  int height() const { return cam_.height; }
 
-  Image img;
-  img.width = width;
-  img.height = height;
-  img.rgb.assign(size_t(width) * size_t(height) * 3, 0.0f);
-
-  // Shade::Sun: the sun comes from the camera's left and a little from behind the scene, 25
-  // degrees above the horizon, so that slopes facing it are bright and ridges cast shadows.
-  Vec3f sun(0.0f, 0.0f, 1.0f);
-  const Vec3f up = sun_up(opt.up);
-  if (opt.shade == Shade::Sun) {
-    Vec3f right = safe_normalize(cam.du - up * dot(cam.du, up));
-    Vec3f fwd = safe_normalize(cross(up, right));  // horizontal, into the picture
-    Vec3f h = safe_normalize(right * -0.9f + fwd * 0.45f);
-    sun = safe_normalize(h * 0.906f + up * 0.423f);
-    if (h.x == 0.0f && h.y == 0.0f && h.z == 0.0f) sun = up;
+  // The mean of the spp samples of pixel (x, y), summed in sample order; adds the rays traced to
+  // `rays`.
+  Vec3f pixel(int x, int y, uint64_t& rays) const {
+    Vec3f sum(0.0f);
+    for (int s = 0; s < spp_; ++s) sum += sample(x, y, s, rays);
+    sum *= inv_spp_;
+    return sum;
   }
-  const Vec3f sun_colour(1.6f, 1.42f, 1.15f);
 
-  std::atomic<uint64_t> rays_traced{0};
-  auto shade_sample = [&](int x, int y, int s, uint64_t& rays) -> Vec3f {
+ private:
+  Vec3f sample(int x, int y, int s, uint64_t& rays) const {
+    const Scene& scene = scene_;
+    const RenderOptions& opt = opt_;
+    const float offset = offset_;
+    const Vec3f sun = sun_;
+    const Vec3f sun_colour(1.6f, 1.42f, 1.15f);
     Rng rng(pixel_seed(x, y, s));
     float jx = 0.5f, jy = 0.5f;
-    if (spp > 1) {
+    if (spp_ > 1) {
       jx = rng.uniform();
       jy = rng.uniform();
     }
-    Ray ray = camera_ray(cam, float(x) + jx, float(y) + jy);
+    Ray ray = camera_ray(cam_, float(x) + jx, float(y) + jy);
     switch (opt.shade) {
       case Shade::Diffuse: {
-        PathResult p = trace_path(scene, ray, rng, max_bounces, offset, up);
+        PathResult p = trace_path(scene, ray, rng, max_bounces_, offset, up_);
         rays += p.rays;
         return p.radiance;
       }
@@ -199,30 +214,42 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
       }
     }
     return Vec3f(0.0f);
-  };
+  }
 
-  const int tiles_x = (width + kTileSize - 1) / kTileSize;
-  const int tiles_y = (height + kTileSize - 1) / kTileSize;
+  const Scene& scene_;
+  const RenderOptions& opt_;
+  Camera cam_;
+  int spp_ = 1, max_bounces_ = 0;
+  float offset_ = 0.0f, inv_spp_ = 1.0f;
+  Vec3f sun_{0.0f, 0.0f, 1.0f};
+  Vec3f up_{0.0f, 0.0f, 1.0f};  // the sky's zenith and the sun's up (RenderOptions::up)
+};
+
+// Shades the pixels [x0, x1) x [y0, y1) into out (row-major, `stride` floats per row, pixel
+// (x0, y0) first) over kTileSize x kTileSize tiles spread across opt.threads threads; returns the
+// rays traced.
+uint64_t shade_rect(const PixelShader& shader, const RenderOptions& opt, int x0, int y0, int x1,
+                    int y1, float* out, size_t stride) {
+  const int tiles_x = (x1 - x0 + kTileSize - 1) / kTileSize;
+  const int tiles_y = (y1 - y0 + kTileSize - 1) / kTileSize;
   const int tile_count = tiles_x * tiles_y;
   Progress progress(opt.progress, tile_count);
-
+  std::atomic<uint64_t> rays_traced{0};
   auto render_tiles = [&] {
     tbb::parallel_for(
         tbb::blocked_range<int>(0, tile_count, 1), [&](const tbb::blocked_range<int>& r) {
           uint64_t rays = 0;
           for (int tile = r.begin(); tile != r.end(); ++tile) {
             const uint64_t rays_before = rays;
-            int x0 = (tile % tiles_x) * kTileSize, y0 = (tile / tiles_x) * kTileSize;
-            int x1 = std::min(x0 + kTileSize, width), y1 = std::min(y0 + kTileSize, height);
-            for (int y = y0; y < y1; ++y) {
-              for (int x = x0; x < x1; ++x) {
-                Vec3f sum(0.0f);
-                for (int s = 0; s < spp; ++s) sum += shade_sample(x, y, s, rays);
-                sum *= inv_spp;
-                float* px = &img.rgb[(size_t(y) * size_t(width) + size_t(x)) * 3];
-                px[0] = sum.x;
-                px[1] = sum.y;
-                px[2] = sum.z;
+            int tx0 = x0 + (tile % tiles_x) * kTileSize, ty0 = y0 + (tile / tiles_x) * kTileSize;
+            int tx1 = std::min(tx0 + kTileSize, x1), ty1 = std::min(ty0 + kTileSize, y1);
+            for (int y = ty0; y < ty1; ++y) {
+              for (int x = tx0; x < tx1; ++x) {
+                Vec3f v = shader.pixel(x, y, rays);
+                float* px = out + size_t(y - y0) * stride + size_t(x - x0) * 3;
+                px[0] = v.x;
+                px[1] = v.y;
+                px[2] = v.z;
               }
             }
             progress.tile_done(rays - rays_before);
@@ -237,8 +264,33 @@ Image render(const Scene& scene, const Camera& cam_in, const RenderOptions& opt,
     render_tiles();
   }
   progress.finish();
-  if (stats) stats->rays = rays_traced.load();
+  return rays_traced.load();
+}
+
+}  // namespace
+
+Image render(const Scene& scene, const Camera& cam, const RenderOptions& opt, RenderStats* stats) {
+  PixelShader shader(scene, cam, opt);
+  Image img;
+  img.width = shader.width();
+  img.height = shader.height();
+  img.rgb.assign(size_t(img.width) * size_t(img.height) * 3, 0.0f);
+  uint64_t rays =
+      shade_rect(shader, opt, 0, 0, img.width, img.height, img.rgb.data(), size_t(img.width) * 3);
+  if (stats) stats->rays = rays;
   return img;
+}
+
+void render_region(const Scene& scene, const Camera& cam, const RenderOptions& opt, int x0, int y0,
+                   int x1, int y1, float* out, RenderStats* stats) {
+  PixelShader shader(scene, cam, opt);
+  if (x0 < 0 || y0 < 0 || x1 <= x0 || y1 <= y0 || x1 > shader.width() || y1 > shader.height())
+    throw Error("render_region: [" + std::to_string(x0) + ", " + std::to_string(x1) + ") x [" +
+                std::to_string(y0) + ", " + std::to_string(y1) +
+                ") is not a non-empty rectangle inside the " + std::to_string(shader.width()) +
+                "x" + std::to_string(shader.height()) + " image");
+  uint64_t rays = shade_rect(shader, opt, x0, y0, x1, y1, out, size_t(x1 - x0) * 3);
+  if (stats) stats->rays = rays;
 }
 
 }  // namespace slim

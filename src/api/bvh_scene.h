@@ -120,6 +120,7 @@ class BvhScene : public Scene::Impl {
   // the BVH2 before the collapse.
   struct Bvh2Hooks {
     uint32_t max_leaf_size = 0, block_prims = 0;  // override the BVH2 config when nonzero
+    bool quantized_inner = false;  // CompressedLeaf with QNode8 inner nodes (QCompressedLeaf)
     std::function<void(Bvh2&)> reshape;
   };
   template <class Source>
@@ -169,7 +170,9 @@ class BvhScene : public Scene::Impl {
       if (enc.parts_per_block > 1)
         enc.part_bounds = [&](uint32_t prim, Box3f* boxes) { Leaf::part_bounds(src, prim, boxes); };
     }
-    bvh = collapse_bvh8(b2, node_kind(opt.nodes), enc, collapse_rule(opt));
+    NodeKind kind = node_kind(opt.nodes);
+    if (hooks.quantized_inner && kind == NodeKind::CompressedLeaf) kind = NodeKind::QCompressedLeaf;
+    bvh = collapse_bvh8(b2, kind, enc, collapse_rule(opt));
     double collapse_s = secs(t0);
     bounds = bvh.bounds;
     mem.bvh_bytes = bvh.node_bytes + bvh.multileaf_bytes;

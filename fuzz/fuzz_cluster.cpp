@@ -38,7 +38,10 @@ void decode_all(const uint8_t* block, uint32_t children) {
     for (int l = 0; l < d.n; ++l) {
       uint32_t g, p;
       cluster::decode_ids(block, uint32_t(d.first + l), g, p);
-      SLIM_FUZZ_CHECK(p - h.prim_base < (uint64_t(1) << h.pb), "prim offset width");
+      // primID = prim_base + a run start (pb bits) + an offset in the run (ob bits).
+      SLIM_FUZZ_CHECK(
+          uint64_t(p - h.prim_base) <= ((uint64_t(1) << h.pb) - 1) + ((uint64_t(1) << h.ob) - 1),
+          "prim offset width");
     }
   }
 }

@@ -147,6 +147,9 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ntris), 65));    // too many triangles
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, bits), 25));     // lossy axis wider than 24 bits
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ib), 9));        // index wider than 8 bits
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 33));       // run offset wider than 32 bits
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nruns), 0));     // no primID run
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nruns), 17));    // more runs than triangles
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, end), 0));       // empty first child
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, end) + 1, 20));  // second child of 12
 }

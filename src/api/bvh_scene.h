@@ -123,6 +123,7 @@ class BvhScene : public Scene::Impl {
   // ends_prepare is false, and its phases are named "bvh2" and "collapse" plus phase_suffix.
   struct Bvh2Hooks {
     uint32_t max_leaf_size = 0, block_prims = 0;  // override the BVH2 config when nonzero
+    bool quantized_inner = false;  // CompressedLeaf with QNode8 inner nodes (QCompressedLeaf)
     std::function<void(Bvh2&)> reshape;
     bool ends_prepare = true;
     std::string phase_suffix;
@@ -185,7 +186,9 @@ class BvhScene : public Scene::Impl {
     if (opt.progress)
       progress = std::make_unique<PhaseProgress>(opt.progress, "collapse" + hooks.phase_suffix,
                                                  2 * uint64_t(prim_count));
-    bvh = collapse_bvh8(b2, node_kind(opt.nodes), enc, collapse_rule(opt), progress.get());
+    NodeKind kind = node_kind(opt.nodes);
+    if (hooks.quantized_inner && kind == NodeKind::CompressedLeaf) kind = NodeKind::QCompressedLeaf;
+    bvh = collapse_bvh8(b2, kind, enc, collapse_rule(opt), progress.get());
     if (progress) progress->finish();
     double collapse_s = secs(t0);
     bounds = bvh.bounds;

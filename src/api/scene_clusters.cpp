@@ -7,7 +7,8 @@
 // one cluster (49-52 triangles on average on the benchmark scenes); its triangles are re-split by
 // SAH into at most 8 leaves of at most 8 triangles (left sizes multiples of 8, so that ceil(n / 8)
 // leaves suffice), and the collapse turns each such subtree into one multi-leaf whose data is
-// the cluster (LeafEncoder::encode_multileaf).
+// the cluster (LeafEncoder::encode_multileaf). The inner nodes above the clusters are QBVH8 nodes
+// (136 B instead of 256 B: 3.8 bits per triangle less on koala).
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -237,6 +238,7 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   // triangles, so leaves come out near that size; reshape then splits each into its children.
   typename BvhScene<Leaf>::Bvh2Hooks hooks;
   hooks.max_leaf_size = hooks.block_prims = kClusterMax;
+  hooks.quantized_inner = true;
   hooks.reshape = [&](Bvh2& b2) { b2 = ClusterReshaper(b2, src).run(); };
   s->build(src, uint32_t(tm.tri_count()), o, hooks);
   // The decoders' 64-bit loads may read up to kClusterReadSlack bytes past a cluster's data.

@@ -199,6 +199,12 @@ class Collapser {
 
  private:
   static uint64_t round16(uint64_t x) { return (x + 15) & ~uint64_t(15); }
+  // Multi-leaf sizes: 16-byte multiples, but 4-byte ones for QCompressedLeaf (the cluster formats,
+  // whose header, quantized boxes and bit stream are read with unaligned loads; the padding would
+  // cost about 1 bit per triangle).
+  uint64_t round_multileaf(uint64_t x) const {
+    return kind_ == NodeKind::QCompressedLeaf ? (x + 3) & ~uint64_t(3) : round16(x);
+  }
 
   // fn(c) for c = 0..k-1: as parallel tasks if the subtree of node i is large (and `parallel`).
   template <class F>
@@ -212,10 +218,13 @@ class Collapser {
       for (int c = 0; c < k; ++c) fn(c);
     }
   }
-  uint32_t node_bytes() const { return kind_ == NodeKind::QBvh8 ? sizeof(QNode8) : sizeof(Node8); }
+  bool quantized_nodes() const {
+    return kind_ == NodeKind::QBvh8 || kind_ == NodeKind::QCompressedLeaf;
+  }
+  uint32_t node_bytes() const { return quantized_nodes() ? sizeof(QNode8) : sizeof(Node8); }
 
   bool multileaf_candidate(uint32_t i) const {
-    if (kind_ != NodeKind::CompressedLeaf) return false;
+    if (kind_ != NodeKind::CompressedLeaf && kind_ != NodeKind::QCompressedLeaf) return false;
     if (b2_.nodes[i].is_leaf()) return false;
     // compressed-leaf-bvh.txt section 4.3: subtrees of fewer than N x M primitives; each of
     // their (at most 8) leaves must fit one block so that child blocks are addressed implicitly.
@@ -422,7 +431,7 @@ class Collapser {
         data = uint64_t(k) * enc_.block_bytes;
       }
       node_size_[i] = 0;
-      leaf_size_[i] = round16(sizeof(MultiLeaf8) + data);
+      leaf_size_[i] = round_multileaf(sizeof(MultiLeaf8) + data);
       s.leaf_data_bytes += data;
       s.multileaf_bytes += sizeof(MultiLeaf8);
       s.st.multileaf++;
@@ -439,7 +448,7 @@ class Collapser {
     uint32_t kids[8];
     int k = gather(i, kids);
     s.st.sah_cost += double(n.box.half_area()) / root_area_;
-    if (kind_ == NodeKind::QBvh8)
+    if (quantized_nodes())
       s.st.qnode8++;
     else
       s.st.node8++;
@@ -519,7 +528,7 @@ class Collapser {
     }
     for_children(i, k, [&](int c) { refs[c] = emit(kids[c], noff[c], loff[c]); });
     report_small_children(i, kids, k);
-    if (kind_ == NodeKind::QBvh8) {
+    if (quantized_nodes()) {
       auto* q = reinterpret_cast<QNode8*>(out_.nodes.data() + node_off);
       Box3f boxes[8];
       for (int c = 0; c < k; ++c) boxes[c] = b2_.nodes[kids[c]].box;

@@ -112,6 +112,9 @@ enum class NodeKind : uint8_t {
   Bvh8,            // Node8 everywhere
   QBvh8,           // QNode8 everywhere
   CompressedLeaf,  // Node8 inner nodes, MultiLeaf8 for small subtrees (compressed-leaf-bvh.txt)
+  // QNode8 inner nodes, MultiLeaf8 for small subtrees: the cluster formats, whose inner nodes
+  // are the largest part of the BVH (136 B per node instead of 256 B).
+  QCompressedLeaf,
 };
 
 // How the collapse writes leaves: blocks of up to block_prims primitives, block_bytes each.
@@ -167,7 +170,9 @@ enum class CollapseRule : uint8_t {
 
 // The rule each node kind is best served by (the figures above).
 inline CollapseRule default_collapse_rule(NodeKind kind) {
-  return kind == NodeKind::CompressedLeaf ? CollapseRule::Slots : CollapseRule::Optimal;
+  return kind == NodeKind::CompressedLeaf || kind == NodeKind::QCompressedLeaf
+             ? CollapseRule::Slots
+             : CollapseRule::Optimal;
 }
 
 // Collapses a BVH2 into 8-wide nodes of the given kind by the given rule (DESIGN.md), writing

@@ -71,7 +71,17 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   const uint32_t nv = uint32_t(codes.size() / 3);
   if (nv > 255) throw std::logic_error("cluster: more than 255 vertices");
   h.nverts = uint8_t(nv);
-  h.ib = uint8_t(bit_length(nv - 1));
+  // Per child: the smallest vertex index it uses is its base; ib covers the widest child range.
+  uint32_t vbase[8] = {};
+  for (int c = 0, first = 0; c < k; first = h.end[c], ++c) {
+    uint32_t lo = 255, hi = 0;
+    for (size_t i = 3 * size_t(first); i < 3 * size_t(h.end[c]); ++i) {
+      lo = std::min<uint32_t>(lo, local[i]);
+      hi = std::max<uint32_t>(hi, local[i]);
+    }
+    vbase[c] = lo;
+    h.ib = uint8_t(std::max(uint32_t(h.ib), bit_length(hi - lo)));
+  }
   for (int a = 0; a < 3; ++a) {
     uint32_t lo = codes[a], hi = codes[a];
     for (uint32_t i = 0; i < nv; ++i) {
@@ -81,27 +91,61 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     h.anchor[a] = lo;
     h.bits[a] = uint8_t(bit_length(hi - lo));
   }
-  uint32_t plo = ~0u, phi = 0, glo = ~0u, ghi = 0;
+  uint32_t glo = ~0u, ghi = 0;
+  std::vector<uint32_t> ids;
   for (uint32_t t : tris) {
-    plo = std::min(plo, s.prim_ids[t]);
-    phi = std::max(phi, s.prim_ids[t]);
+    ids.push_back(s.prim_ids[t]);
     glo = std::min(glo, s.geom_ids[t]);
     ghi = std::max(ghi, s.geom_ids[t]);
   }
-  h.prim_base = plo;
+  std::sort(ids.begin(), ids.end());
+  h.prim_base = ids[0];
   h.geom_base = glo;
-  h.pb = uint8_t(bit_length(phi - plo));
   h.gb = uint8_t(bit_length(ghi - glo));
+  // PrimID runs: a run starts at the first sorted id that is 2^ob or more past the current start;
+  // ob is the width with the fewest bits (run starts + per triangle run index and offset). The
+  // widest ob gives one run: the plain base + offset, for meshes whose ids are in random order.
+  auto runs_of = [&](uint32_t ob, std::vector<uint32_t>& starts) {
+    starts.clear();
+    for (uint32_t id : ids)
+      if (starts.empty() || uint64_t(id - starts.back()) >= (uint64_t(1) << ob))
+        starts.push_back(id);
+  };
+  std::vector<uint32_t> starts;
+  uint64_t best_bits = ~uint64_t(0);
+  uint32_t best_ob = 0;
+  for (uint32_t ob = 0; ob <= 32; ++ob) {
+    runs_of(ob, starts);
+    if (starts.size() > 255) continue;
+    const uint64_t bits = starts.size() * uint64_t(bit_length(starts.back() - h.prim_base)) +
+                          tris.size() * uint64_t(bit_length(uint32_t(starts.size()) - 1) + ob);
+    if (bits < best_bits) {
+      best_bits = bits;
+      best_ob = ob;
+    }
+  }
+  runs_of(best_ob, starts);
+  h.nruns = uint8_t(starts.size());
+  h.ob = uint8_t(best_ob);
+  h.pb = uint8_t(bit_length(starts.back() - h.prim_base));
 
   const Layout L = layout(h);
   std::vector<uint8_t> out(data_bytes(h) + 8, 0);  // 8: the writer's 64-bit stores
   std::memcpy(out.data(), &h, sizeof(h));
   BitWriter w{out, sizeof(ClusterHeader)};
-  for (uint8_t i : local) w.put(i, h.ib);
+  for (int c = 0; c < k; ++c) w.put(vbase[c], L.vbw);
+  for (int c = 0, first = 0; c < k; first = h.end[c], ++c)
+    for (size_t i = 3 * size_t(first); i < 3 * size_t(h.end[c]); ++i)
+      w.put(local[i] - vbase[c], h.ib);
   for (uint32_t i = 0; i < nv; ++i)
     for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - h.anchor[a], h.bits[a]);
+  for (uint32_t st : starts) w.put(st - h.prim_base, h.pb);
   for (uint32_t t : tris) {
-    w.put(s.prim_ids[t] - plo, h.pb);
+    const uint32_t id = s.prim_ids[t];
+    const uint32_t run =
+        uint32_t(std::upper_bound(starts.begin(), starts.end(), id) - starts.begin()) - 1;
+    w.put(run, L.rb);
+    w.put(id - starts[run], h.ob);
     w.put(s.geom_ids[t] - glo, h.gb);
   }
   if (w.pos != L.end) throw std::logic_error("cluster: stream size mismatch");
@@ -113,8 +157,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     st.triangles += h.ntris;
     st.vertices += nv;
     st.position_bits += uint64_t(nv) * L.vbits;
-    st.topology_bits += uint64_t(h.ntris) * 3 * h.ib + 8 * sizeof(h.end);
-    st.id_bits += uint64_t(h.ntris) * (h.pb + h.gb) + 64;
+    st.topology_bits += L.verts + 8 * sizeof(h.end);
+    st.id_bits += L.end - L.runs + 64;
     st.header_bytes += sizeof(ClusterHeader);
   }
   return out;
@@ -125,7 +169,8 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
     if (why) *why = "cluster: " + m;
     return false;
   };
-  if (size < sizeof(ClusterHeader)) return fail("shorter than its 36-byte header");
+  if (size < sizeof(ClusterHeader))
+    return fail("shorter than its " + std::to_string(sizeof(ClusterHeader)) + "-byte header");
   if (children < 1 || children > 8) return fail("children must be 1..8");
   ClusterHeader h;
   std::memcpy(&h, data, sizeof(h));
@@ -135,24 +180,36 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
   for (int a = 0; a < 3; ++a)
     if (h.bits[a] > max_bits)
       return fail("axis width beyond " + std::to_string(max_bits) + " bits");
-  if (h.ib > 8 || h.pb > 32 || h.gb > 32) return fail("index or id width beyond its limit");
-  if (h.nverts > 1 && bit_length(uint32_t(h.nverts) - 1) > h.ib)
-    return fail("index width too small for the vertex count");
+  if (h.ib > 8 || h.pb > 32 || h.gb > 32 || h.ob > 32)
+    return fail("index or id width beyond its limit");
+  if (h.nruns < 1 || h.nruns > h.ntris) return fail("run count must be 1..ntris");
   uint32_t prev = 0;
   for (uint32_t c = 0; c < children; ++c) {
     if (h.end[c] <= prev || h.end[c] - prev > 8) return fail("child of 0 or more than 8 triangles");
     prev = h.end[c];
   }
   if (prev != h.ntris) return fail("children do not cover the triangles");
+  if (child_count(h) != children) return fail("child ends disagree with the child count");
   if (data_bytes(h) > size) return fail("stream runs past the data");
   const uint8_t* bits = data + sizeof(ClusterHeader);
-  for (uint32_t t = 0; t < 3u * h.ntris; ++t) {
-    // Bytes beyond `size` are not read: the index stream lies inside data_bytes(h).
-    uint64_t pos = uint64_t(t) * h.ib;
+  const Layout L = layout(h);
+  // Bytes beyond `size` are not read: every field read here lies inside data_bytes(h).
+  auto get = [&](uint64_t pos, uint32_t w) {
     uint32_t v = 0;
-    for (uint32_t b = 0; b < h.ib; ++b)
+    for (uint32_t b = 0; b < w; ++b)
       v |= uint32_t((bits[(pos + b) >> 3] >> ((pos + b) & 7)) & 1) << b;
-    if (v >= h.nverts) return fail("local index " + std::to_string(v) + " >= vertex count");
+    return v;
+  };
+  for (uint32_t c = 0, first = 0; c < children; first = h.end[c], ++c) {
+    const uint32_t vbase = get(uint64_t(c) * L.vbw, L.vbw);
+    for (uint32_t i = 3 * first; i < 3u * h.end[c]; ++i) {
+      const uint64_t v = uint64_t(vbase) + get(L.topo + uint64_t(i) * h.ib, h.ib);
+      if (v >= h.nverts) return fail("vertex index " + std::to_string(v) + " >= vertex count");
+    }
+  }
+  for (uint32_t t = 0; t < h.ntris; ++t) {
+    const uint32_t run = get(L.ids + uint64_t(t) * L.idbits, L.rb);
+    if (run >= h.nruns) return fail("run index " + std::to_string(run) + " >= run count");
   }
   return true;
 }
@@ -178,7 +235,8 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
   z.decoded.assign(vertices, vertices + nv);
   if (!lossless) {
     if (!(rel_error > 0.0) || !std::isfinite(rel_error))
-      throw Error("cluster: the error bound (BuildOptions::cluster_error) must be positive and finite");
+      throw Error(
+          "cluster: the error bound (BuildOptions::cluster_error) must be positive and finite");
     // Rounding to the nearest lattice point moves a vertex by at most step * sqrt(3) / 2.
     const double bound = rel_error * z.diag;
     double step = bound > 0 ? std::exp2(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) : 1.0;

@@ -1,18 +1,31 @@
 // Compressed triangle clusters (configurations `cluster` and `cluster-lossless`), after AMD's Dense
 // Geometry Format (DGF, HPG 2024): positions on one scene-wide integer lattice with a power-of-two
 // step, each cluster an anchor plus per-axis bit widths and bit-packed offsets, local vertex
-// indices as topology, and ids stored as small offsets from a per-cluster base.
+// indices relative to a per-child base as topology, and primIDs as runs (a run start per run, a
+// run index and an offset per triangle).
 //
-// A cluster is one multi-leaf of the compressed-leaf BVH (bvh8.h): its 72-byte header holds the
-// quantized boxes of up to 8 children of up to 8 triangles each (one 8-wide watertight test per
-// child); the cluster data follows it:
-//   ClusterHeader (36 B)
+// A cluster is one multi-leaf of the compressed-leaf BVH (bvh8.h; QBVH8 inner nodes above the
+// multi-leaves, NodeKind::QCompressedLeaf): its 72-byte header holds the quantized boxes of up to
+// 8 children of up to 8 triangles each (one 8-wide watertight test per child); the cluster data
+// follows it:
+//   ClusterHeader (38 B, packed)
 //   bit stream, LSB first from the byte after the header:
-//     topology: 3 local vertex indices per triangle, `ib` bits each (triangles in child order)
+//     child vertex bases: k entries of vbw = bit_length(nverts - 1) bits (k children)
+//     topology: 3 vertex indices per triangle, `ib` bits each, minus its child's vertex base
+//               (triangles in child order; vertices numbered in order of first use, so that the
+//               vertices of one child lie in a short range)
 //     vertices: per vertex bx + by + bz bits (offsets from the anchor)
-//     ids:      per triangle pb bits (primID - prim_base) then gb bits (geomID - geom_base)
-// A child's triangles are [end[i-1], end[i]) (end[-1] = 0). Children with fewer than 8 triangles
-// repeat their last triangle in the padding lanes (the duplicate gives the same hit).
+//     id runs:  nruns run starts of pb bits (start - prim_base)
+//     ids:      per triangle rb = bit_length(nruns - 1) bits run index, ob bits offset in the
+//               run (primID = prim_base + start + offset), gb bits geomID - geom_base
+// A child's triangles are [end[i-1], end[i]) (end[-1] = 0); k is one more than the first i with
+// end[i] = ntris. Children with fewer than 8 triangles repeat their last triangle in the padding
+// lanes (the duplicate gives the same hit).
+//
+// The primID runs: input faces are not stored in a cluster's order (they are the user's), but
+// neighbouring faces often have nearby numbers (scan rows, quads split in two, terrain rows), so a
+// cluster's sorted ids fall into few runs of width 2^ob; on meshes in random order the encoder
+// picks ob = 0 and one run per triangle, close to the plain base + offset.
 //
 // Lossy (`cluster`): a vertex's code is its lattice integer q = round((x - origin) / step) per
 // axis, decoded as origin + float(q) * step. Every cluster decodes a vertex with the same float
@@ -40,8 +53,8 @@
 #include "core/simd.h"
 #include "core/watertight.h"
 #include "prim/triangles.h"
-#include "slimrt/math.h"
 #include "slimrt/error.h"
+#include "slimrt/math.h"
 #include "slimrt/ray.h"
 
 namespace slim {
@@ -52,17 +65,21 @@ struct ClusterLattice {
   float step = 1.0f;  // a power of two
 };
 
+#pragma pack(push, 1)
 struct ClusterHeader {
   uint8_t nverts;   // distinct vertices (codes) in the cluster, <= 255
   uint8_t ntris;    // triangles, <= 64
   uint8_t bits[3];  // per-axis offset widths (lossy <= 24, lossless <= 32)
-  uint8_t ib;       // bits per local vertex index (<= 8)
-  uint8_t pb, gb;   // bits per primID / geomID offset (<= 32)
+  uint8_t ib;       // bits per vertex index relative to the child's base (<= 8)
+  uint8_t pb, gb;   // bits per primID run start / geomID offset (<= 32)
+  uint8_t nruns;    // primID runs, 1..ntris
+  uint8_t ob;       // bits per primID offset in its run (<= 32)
   uint8_t end[8];   // end[i]: one past the last triangle of child i
   uint32_t anchor[3];
   uint32_t prim_base, geom_base;
 };
-static_assert(sizeof(ClusterHeader) == 36, "cluster header is 36 bytes");
+#pragma pack(pop)
+static_assert(sizeof(ClusterHeader) == 38, "cluster header is 38 bytes");
 
 // Bytes a decoder may read past the end of a cluster's data (64-bit bit-stream loads).
 constexpr uint32_t kClusterReadSlack = 8;
@@ -101,18 +118,33 @@ SLIM_INLINE float decode_coord(const ClusterLattice& lat, int axis, uint32_t cod
     return lattice_coord(lat, axis, code);
 }
 
+SLIM_INLINE uint32_t bit_width(uint32_t x) { return x ? 32u - uint32_t(__builtin_clz(x)) : 0u; }
+
+// Children of a cluster: one more than the first i with end[i] = ntris.
+SLIM_INLINE uint32_t child_count(const ClusterHeader& h) {
+  uint32_t k = 1;
+  while (k < 8 && h.end[k - 1] != h.ntris) ++k;
+  return k;
+}
+
 // Bit positions of the streams of a cluster.
 struct Layout {
-  uint64_t topo = 0, verts = 0, ids = 0, end = 0;  // bit offsets from the stream start
-  uint32_t vbits = 0;                              // bits per vertex
+  uint64_t topo = 0, verts = 0, runs = 0, ids = 0, end = 0;  // bit offsets from the stream start
+  uint32_t vbits = 0;                                        // bits per vertex
+  uint32_t vbw = 0;                                          // bits per child vertex base
+  uint32_t rb = 0, idbits = 0;  // bits per run index; per triangle's ids (rb + ob + gb)
 };
 SLIM_INLINE Layout layout(const ClusterHeader& h) {
   Layout l;
   l.vbits = uint32_t(h.bits[0]) + h.bits[1] + h.bits[2];
-  l.topo = 0;
-  l.verts = uint64_t(h.ntris) * 3 * h.ib;
-  l.ids = l.verts + uint64_t(h.nverts) * l.vbits;
-  l.end = l.ids + uint64_t(h.ntris) * (uint32_t(h.pb) + h.gb);
+  l.vbw = h.nverts ? bit_width(uint32_t(h.nverts) - 1) : 0;
+  l.rb = h.nruns ? bit_width(uint32_t(h.nruns) - 1) : 0;
+  l.idbits = l.rb + h.ob + h.gb;
+  l.topo = uint64_t(child_count(h)) * l.vbw;
+  l.verts = l.topo + uint64_t(h.ntris) * 3 * h.ib;
+  l.runs = l.verts + uint64_t(h.nverts) * l.vbits;
+  l.ids = l.runs + uint64_t(h.nruns) * h.pb;
+  l.end = l.ids + uint64_t(h.ntris) * l.idbits;
   return l;
 }
 // Total bytes of a cluster's data (header + stream), without the read slack.
@@ -144,7 +176,8 @@ SLIM_INLINE void decode_vertex(const ClusterLattice& lat, const ClusterHeader& h
 // bits.
 template <bool kLossless>
 SLIM_INLINE void decode_child_avx2(const ClusterLattice& lat, const ClusterHeader& h,
-                                   const uint8_t* bits, const Layout& L, Decoded8& d) {
+                                   const uint8_t* bits, const Layout& L, uint32_t vbase,
+                                   Decoded8& d) {
   const auto* base = reinterpret_cast<const int*>(bits);
   auto field = [&](__m256i pos, uint32_t w) {
     const __m256i word = _mm256_i32gather_epi32(base, _mm256_srli_epi32(pos, 3), 1);
@@ -170,29 +203,63 @@ SLIM_INLINE void decode_child_avx2(const ClusterLattice& lat, const ClusterHeade
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   const __m256i t = _mm256_add_epi32(_mm256_set1_epi32(d.first),
                                      _mm256_min_epi32(lane, _mm256_set1_epi32(d.n - 1)));
-  const __m256i t3 = _mm256_mullo_epi32(t, _mm256_set1_epi32(3));
+  // A triangle's three indices (3 x ib <= 24 bits) with one 32-bit gather.
+  const __m256i tri = [&] {
+    const __m256i tpos = _mm256_add_epi32(_mm256_set1_epi32(int(L.topo)),
+                                          _mm256_mullo_epi32(t, _mm256_set1_epi32(3 * int(h.ib))));
+    const __m256i word = _mm256_i32gather_epi32(base, _mm256_srli_epi32(tpos, 3), 1);
+    return _mm256_srlv_epi32(word, _mm256_and_si256(tpos, _mm256_set1_epi32(7)));
+  }();
+  const __m256i imask = _mm256_set1_epi32(int((1u << h.ib) - 1));
+  auto store = [&](int k, int a, __m256i off) {
+    const __m256i code = _mm256_add_epi32(off, _mm256_set1_epi32(int(h.anchor[a])));
+    __m256 x;
+    if constexpr (kLossless) {
+      const __m256i neg = _mm256_srai_epi32(code, 31);  // key's top bit: a positive float
+      const __m256i pos_bits = _mm256_and_si256(code, _mm256_set1_epi32(0x7fffffff));
+      const __m256i neg_bits = _mm256_xor_si256(code, _mm256_set1_epi32(-1));
+      x = _mm256_castsi256_ps(_mm256_blendv_epi8(neg_bits, pos_bits, neg));
+    } else {
+      // q < 2^24: the signed conversion is the scalar float(q).
+      x = _mm256_add_ps(_mm256_set1_ps(lat.origin[a]),
+                        _mm256_mul_ps(_mm256_cvtepi32_ps(code), _mm256_set1_ps(lat.step)));
+    }
+    _mm256_store_ps(d.v[k][a], x);
+  };
   for (int k = 0; k < 3; ++k) {
-    const __m256i ipos =
-        _mm256_mullo_epi32(_mm256_add_epi32(t3, _mm256_set1_epi32(k)), _mm256_set1_epi32(h.ib));
-    const __m256i idx = field(ipos, h.ib);
+    const __m256i idx = _mm256_add_epi32(
+        _mm256_and_si256(_mm256_srlv_epi32(tri, _mm256_set1_epi32(k * int(h.ib))), imask),
+        _mm256_set1_epi32(int(vbase)));
     __m256i vpos = _mm256_add_epi32(_mm256_set1_epi32(int(L.verts)),
                                     _mm256_mullo_epi32(idx, _mm256_set1_epi32(int(L.vbits))));
-    for (int a = 0; a < 3; ++a) {
-      const __m256i off = h.bits[a] <= 25 ? field(vpos, h.bits[a]) : wide_field(vpos, h.bits[a]);
-      const __m256i code = _mm256_add_epi32(off, _mm256_set1_epi32(int(h.anchor[a])));
-      vpos = _mm256_add_epi32(vpos, _mm256_set1_epi32(h.bits[a]));
-      __m256 x;
-      if constexpr (kLossless) {
-        const __m256i neg = _mm256_srai_epi32(code, 31);  // key's top bit: a positive float
-        const __m256i pos_bits = _mm256_and_si256(code, _mm256_set1_epi32(0x7fffffff));
-        const __m256i neg_bits = _mm256_xor_si256(code, _mm256_set1_epi32(-1));
-        x = _mm256_castsi256_ps(_mm256_blendv_epi8(neg_bits, pos_bits, neg));
-      } else {
-        // q < 2^24: the signed conversion is the scalar float(q).
-        x = _mm256_add_ps(_mm256_set1_ps(lat.origin[a]),
-                          _mm256_mul_ps(_mm256_cvtepi32_ps(code), _mm256_set1_ps(lat.step)));
+    if (L.vbits <= 57) {
+      // The whole vertex (bx + by + bz bits) with one 64-bit load per lane.
+      const __m256i byte = _mm256_srli_epi32(vpos, 3);
+      const __m256i sh = _mm256_and_si256(vpos, _mm256_set1_epi32(7));
+      const __m256i lo =
+          _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_castsi256_si128(byte), 1),
+                            _mm256_cvtepu32_epi64(_mm256_castsi256_si128(sh)));
+      const __m256i hi =
+          _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_extracti128_si256(byte, 1), 1),
+                            _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sh, 1)));
+      uint32_t shift = 0;
+      for (int a = 0; a < 3; ++a) {
+        const __m128i s64 = _mm_cvtsi32_si128(int(shift));
+        // The low 32 bits of each 64-bit lane, lanes 0-3 from lo and 4-7 from hi.
+        const __m256 pair = _mm256_shuffle_ps(_mm256_castsi256_ps(_mm256_srl_epi64(lo, s64)),
+                                              _mm256_castsi256_ps(_mm256_srl_epi64(hi, s64)),
+                                              _MM_SHUFFLE(2, 0, 2, 0));
+        const __m256i v = _mm256_permute4x64_epi64(_mm256_castps_si256(pair), 0xD8);
+        store(
+            k, a,
+            _mm256_and_si256(v, _mm256_set1_epi32(int(uint32_t((uint64_t(1) << h.bits[a]) - 1)))));
+        shift += h.bits[a];
       }
-      _mm256_store_ps(d.v[k][a], x);
+      continue;
+    }
+    for (int a = 0; a < 3; ++a) {
+      store(k, a, h.bits[a] <= 25 ? field(vpos, h.bits[a]) : wide_field(vpos, h.bits[a]));
+      vpos = _mm256_add_epi32(vpos, _mm256_set1_epi32(h.bits[a]));
     }
   }
 }
@@ -207,13 +274,14 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, in
   const Layout L = layout(h);
   d.first = child ? h.end[child - 1] : 0;
   d.n = int(h.end[child]) - d.first;
+  const uint32_t vbase = read_bits(bits, uint64_t(child) * L.vbw, L.vbw);
 #if defined(SLIM_SIMD_AVX2)
-  decode_child_avx2<kLossless>(lat, h, bits, L, d);
+  decode_child_avx2<kLossless>(lat, h, bits, L, vbase, d);
 #else
   for (int l = 0; l < 8; ++l) {
     const uint32_t t = uint32_t(d.first + (l < d.n ? l : d.n - 1));
     for (int k = 0; k < 3; ++k) {
-      const uint32_t vi = read_bits(bits, (uint64_t(t) * 3 + k) * h.ib, h.ib);
+      const uint32_t vi = vbase + read_bits(bits, L.topo + (uint64_t(t) * 3 + k) * h.ib, h.ib);
       float p[3];
       decode_vertex<kLossless>(lat, h, bits, L, vi, p);
       d.v[k][0][l] = p[0];
@@ -229,14 +297,18 @@ SLIM_INLINE void decode_ids(const uint8_t* data, uint32_t t, uint32_t& geom, uin
   ClusterHeader h;
   std::memcpy(&h, data, sizeof(h));
   const uint8_t* bits = data + sizeof(ClusterHeader);
-  const uint64_t pos = layout(h).ids + uint64_t(t) * (uint32_t(h.pb) + h.gb);
-  prim = h.prim_base + read_bits(bits, pos, h.pb);
-  geom = h.geom_base + read_bits(bits, pos + h.pb, h.gb);
+  const Layout L = layout(h);
+  const uint64_t pos = L.ids + uint64_t(t) * L.idbits;
+  const uint32_t run = read_bits(bits, pos, L.rb);
+  prim = h.prim_base + read_bits(bits, L.runs + uint64_t(run) * h.pb, h.pb) +
+         read_bits(bits, pos + L.rb, h.ob);
+  geom = h.geom_base + read_bits(bits, pos + L.rb + h.ob, h.gb);
 }
 
 // Checks that `size` bytes at `data` hold a well-formed cluster of `children` children (header
-// fields in range, child ranges of 1..8 triangles, every local index below nverts, the stream
-// inside `size`). The decoders read only what this accepts (plus kClusterReadSlack bytes).
+// fields in range, child ranges of 1..8 triangles, every vertex index (child base + local) below
+// nverts, every run index below nruns, the stream inside `size`). The decoders read only what this
+// accepts (plus kClusterReadSlack bytes).
 bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless, std::string* why);
 
 // Per-scene encoding figures (info --clusters).
@@ -244,8 +316,8 @@ struct EncodeStats {
   std::mutex m;
   uint64_t clusters = 0, triangles = 0, vertices = 0;
   uint64_t position_bits = 0;  // sum over clusters of nverts * (bx + by + bz)
-  uint64_t topology_bits = 0;  // index bits + the 8 child end bytes
-  uint64_t id_bits = 0;        // id offset bits + the bases
+  uint64_t topology_bits = 0;  // index bits, child vertex bases, the 8 child end bytes
+  uint64_t id_bits = 0;        // run starts, run indices, offsets, geomIDs, the two bases
   uint64_t header_bytes = 0;
 };
 

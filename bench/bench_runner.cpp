@@ -266,7 +266,9 @@ struct SceneRun {
     agreement(reference, frac, same_frac);
     row.agreement_embree_tri = frac;
     std::string against = "embree-tri";
-    if (std::optional<OwnGeometry> own = own_geometry(meshes, row.config)) {
+    std::optional<OwnGeometry> own;  // Embree reads the input itself
+    if constexpr (std::is_same_v<Tracer, Scene>) own = own_geometry(tracer, meshes);
+    if (own) {
       // Embree on the format's own decoded triangles, hits mapped back to the input faces.
       EmbreeScene es({&own->mesh}, "embree-tri");
       std::vector<Hit> ref = primary_hits(es, arena, w);

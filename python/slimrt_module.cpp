@@ -557,7 +557,10 @@ PYBIND11_MODULE(slimrt, m) {
   m.doc() =
       "slimrt: compact CPU ray tracing of triangle and quad meshes. RaycastingScene follows "
       "Open3D's open3d.t.geometry.RaycastingScene.";
-  py::register_exception<slim::Error>(m, "Error", PyExc_RuntimeError);
+  // slimrt.NotApplicable (a configuration that does not apply to the mesh) is a slimrt.Error:
+  // registered after it, so that its translator is tried first.
+  auto& error = py::register_exception<slim::Error>(m, "Error", PyExc_RuntimeError);
+  py::register_exception<slim::NotApplicable>(m, "NotApplicable", error.ptr());
   m.attr("INVALID_ID") = kInvalid;
   m.attr("__version__") = SLIMRT_VERSION;
   m.def("configs", &slim::all_config_names,

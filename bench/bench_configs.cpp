@@ -44,11 +44,9 @@ OwnGeometry own_geometry_from(const Tris& t) {
 
 }  // namespace
 
-std::optional<OwnGeometry> own_geometry(const std::vector<const PolyMesh*>& meshes,
-                                        const std::string& config) {
-  if (EmbreeScene::is_config(config)) return std::nullopt;  // Embree reads the input itself
-  if (std::optional<DecodedTriangles> t =
-          decoded_triangles(meshes, BuildOptions::from_config(config)))
+std::optional<OwnGeometry> own_geometry(const Scene& scene,
+                                        const std::vector<const PolyMesh*>& meshes) {
+  if (std::optional<DecodedTriangles> t = decoded_triangles(scene, meshes))
     return own_geometry_from(*t);
   return std::nullopt;
 }

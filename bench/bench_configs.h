@@ -1,7 +1,7 @@
 // What `slimrt bench` needs to know about a configuration name: the default list, whether the
 // name exists, whether the format is lossy, and the geometry it intersects when it has its own
 // (validated against Embree run on that geometry). Each property is one small function here,
-// answered by the library's registry (find_config, decoded_triangles).
+// answered by the library's registry (find_config) and the built scene (decoded_triangles).
 #pragma once
 
 #include <cstdint>
@@ -28,8 +28,9 @@ struct OwnGeometry {
   PolyMesh mesh;                     // one triangle per face
   std::vector<uint32_t> geom, face;  // per triangle: the input mesh and face it decodes
 };
-// The decoded triangles of such a format; nullopt for every other configuration.
-std::optional<OwnGeometry> own_geometry(const std::vector<const PolyMesh*>& meshes,
-                                        const std::string& config);
+// The decoded triangles of a built scene of such a format (decoded_triangles(scene, meshes):
+// from the built scene where it decodes its leaves); nullopt for every other configuration.
+std::optional<OwnGeometry> own_geometry(const Scene& scene,
+                                        const std::vector<const PolyMesh*>& meshes);
 
 }  // namespace slim::bench

@@ -50,7 +50,7 @@ nlohmann::json report_json(const BenchReport& report) {
     j["scene"] = r.scene;
     j["config"] = r.config;
     j["triangles"] = r.triangles;
-    j["build_s"] = opt_json(r.build_s);
+    spread_json(j, "build_s", r.build_s);
     j["bytes_geometry"] = opt_json(r.bytes_geometry);
     j["bytes_bvh"] = opt_json(r.bytes_bvh);
     j["bytes_other"] = opt_json(r.bytes_other);
@@ -76,6 +76,7 @@ nlohmann::json report_json(const BenchReport& report) {
                   {"psnr_db", opt_json(r.error.psnr_db)}};
     // The raw rounds and the run's identity: rays traced and the checksum of their hit distances
     // (the same in every round, and for every build of the same code).
+    j["seconds_build_rounds"] = r.seconds_build;
     j["seconds_primary_rounds"] = r.seconds_primary;
     j["seconds_diffuse_rounds"] = r.seconds_diffuse;
     j["cpu_seconds_primary_rounds"] = r.cpu_seconds_primary;

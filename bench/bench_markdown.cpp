@@ -36,9 +36,9 @@ std::string markdown_escape(std::string s) {
 
 }  // namespace
 
-std::string ratio_cell(const std::optional<Spread>& s) {
+std::string ratio_cell(const std::optional<Spread>& s, const char* f) {
   if (!s) return "—";
-  return fmt("%.2f", s->median) + " (" + fmt("%.2f", s->lo) + "-" + fmt("%.2f", s->hi) + ")" +
+  return fmt(f, s->median) + " (" + fmt(f, s->lo) + "-" + fmt(f, s->hi) + ")" +
          (s->noisy() ? " !" : "");
 }
 
@@ -57,7 +57,9 @@ std::string report_markdown(const BenchReport& report) {
        "every 16th pixel. agree = workload-1 hits agreeing with Embree on the same geometry "
        "(BENCHMARK.md): embree-tri, or for grid, lossy-grid* and costa-* embree-tri run on the "
        "format's own decoded triangles; vs tri = agreement with embree-tri on the input's fan "
-       "triangles. MB = geometry + BVH + side tables.\n\n";
+       "triangles. build s = median over the rounds (each round builds every configuration once, "
+       "in the round's order, before timing rays), (min-max) over the rounds. MB = geometry + "
+       "BVH + side tables.\n\n";
   o << "| scene | config | build s | Mtri/s | MB | B/tri | W1 MRays/s | W2 MRays/s | W1 ratio | "
        "W2 ratio | box/ray W1 | prim/ray W1 | box/ray W2s | prim/ray W2s | agree % | vs tri % | "
        "PSNR dB | note |\n";
@@ -81,14 +83,15 @@ std::string report_markdown(const BenchReport& report) {
     if (r.hit_agreement && *r.hit_agreement < kLosslessAgreement) note = "ERROR: agreement < 99.9%";
     if (!r.kept) note += std::string(note.empty() ? "" : "; ") + "rebuilt in each round";
     std::string psnr_cell = r.error.psnr_identical ? "inf" : cell(r.error.psnr_db, "%.2f");
-    o << cell(r.build_s, "%.3f") << " | " << cell(r.build_mprims_s, "%.2f") << " | "
+    o << ratio_cell(r.build_s, "%.3f") << " | " << cell(r.build_mprims_s, "%.2f") << " | "
       << cell(mb, "%.2f") << " | " << cell(r.bytes_per_triangle, "%.1f") << " | "
       << cell(median_of(r.mrays_primary), "%.2f") << " | "
-      << cell(median_of(r.mrays_diffuse), "%.2f") << " | " << ratio_cell(r.ratio_primary) << " | "
-      << ratio_cell(r.ratio_diffuse) << " | " << cell(r.box_tests_per_ray, "%.1f") << " | "
-      << cell(r.prim_tests_per_ray, "%.1f") << " | " << cell(r.box_tests_per_ray_w2, "%.1f")
-      << " | " << cell(r.prim_tests_per_ray_w2, "%.1f") << " | " << cell(agree, "%.3f") << " | "
-      << cell(vs_tri, "%.3f") << " | " << psnr_cell << " | " << note << " |\n";
+      << cell(median_of(r.mrays_diffuse), "%.2f") << " | " << ratio_cell(r.ratio_primary, "%.2f")
+      << " | " << ratio_cell(r.ratio_diffuse, "%.2f") << " | " << cell(r.box_tests_per_ray, "%.1f")
+      << " | " << cell(r.prim_tests_per_ray, "%.1f") << " | "
+      << cell(r.box_tests_per_ray_w2, "%.1f") << " | " << cell(r.prim_tests_per_ray_w2, "%.1f")
+      << " | " << cell(agree, "%.3f") << " | " << cell(vs_tri, "%.3f") << " | " << psnr_cell
+      << " | " << note << " |\n";
   }
   return o.str();
 }

@@ -29,7 +29,11 @@ struct BenchRow {
   bool lossy = false;
   bool embree = false;
   bool kept = true;  // the built scene stayed in memory between rounds (else rebuilt per round)
-  std::optional<double> build_s, build_mprims_s;
+  // Build time: median over the rounds with its range (each round builds every configuration once,
+  // in the round's order, before its rays are timed); build_mprims_s from the median.
+  std::optional<Spread> build_s;
+  std::optional<double> build_mprims_s;
+  std::vector<double> seconds_build;  // per round, in round order
   std::optional<uint64_t> bytes_geometry, bytes_bvh, bytes_other, bytes_total;
   std::optional<double> bytes_per_triangle;
   // Medians over the rounds with their ranges; a ratio is the median of the per-round ratios to

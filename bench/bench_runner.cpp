@@ -266,7 +266,9 @@ struct SceneRun {
     agreement(reference, frac, same_frac);
     row.agreement_embree_tri = frac;
     std::string against = "embree-tri";
-    if (std::optional<OwnGeometry> own = own_geometry(meshes, row.config)) {
+    std::optional<OwnGeometry> own;  // Embree reads the input itself
+    if constexpr (std::is_same_v<Tracer, Scene>) own = own_geometry(tracer, meshes);
+    if (own) {
       // Embree on the format's own decoded triangles, hits mapped back to the input faces.
       EmbreeScene es({&own->mesh}, "embree-tri");
       std::vector<Hit> ref = primary_hits(es, arena, w);
@@ -294,42 +296,31 @@ struct SceneRun {
     if (triangles) row.bytes_per_triangle = double(m.total()) / double(triangles);
   }
 
-  void set_build_time(std::vector<double> seconds, BenchRow& row) {
-    row.build_s = median(std::move(seconds));
-    if (*row.build_s > 0) row.build_mprims_s = double(triangles) / *row.build_s * 1e-6;
-  }
-
-  void build_embree(const BenchRow& row, Slot& slot) {
+  // Builds the row's scene into the slot (the previous one freed first); returns the build time:
+  // EmbreeScene::build_seconds() (buffer set-up + commit), Scene::build's wall time.
+  double build(const BenchRow& row, Slot& slot) {
     slot.release();
-    arena.execute([&] { slot.embree = std::make_unique<EmbreeScene>(meshes, row.config); });
-  }
-
-  void build_slim(const BenchRow& row, Slot& slot) {
-    slot.release();
+    if (row.embree) {
+      arena.execute([&] { slot.embree = std::make_unique<EmbreeScene>(meshes, row.config); });
+      return slot.embree->build_seconds();
+    }
     BuildOptions bo = BuildOptions::from_config(row.config);
     bo.threads = report.machine.threads;
+    const auto t0 = Clock::now();
     arena.execute([&] { slot.slim = std::make_unique<Scene>(Scene::build(meshes, bo)); });
+    return seconds_since(t0);
   }
 
+  // The first build of each configuration (untimed: the rounds time the builds) and what is
+  // checked before the rounds.
   void prepare_embree(BenchRow& row, Slot& slot) {
-    std::vector<double> build;
-    for (int r = 0; r < report.repeat; ++r) {
-      build_embree(row, slot);
-      build.push_back(slot.embree->build_seconds());
-    }
-    set_build_time(build, row);
+    build(row, slot);
     fill_memory(slot.embree->memory(), row);
     validate_hits(*slot.embree, row);
   }
 
   void prepare_slim(BenchRow& row, Slot& slot) {
-    std::vector<double> build;
-    for (int r = 0; r < report.repeat; ++r) {
-      const auto t0 = Clock::now();
-      build_slim(row, slot);
-      build.push_back(seconds_since(t0));
-    }
-    set_build_time(build, row);
+    build(row, slot);
     const Scene& scene = *slot.slim;
     fill_memory(scene.memory(), row);
 
@@ -399,12 +390,11 @@ struct SceneRun {
       slot_bytes.push_back(row.bytes_total.value_or(0));
       row.kept = keep_between_rounds(slot_bytes, report.memory_budget).back();
       if (!row.kept) slot.release();
-      progress(opt, "build " + fmt("%.3f s", *row.build_s) + ", " +
+      progress(opt, "first build and checks " + fmt("%.1f s", seconds_since(t0)) + ", " +
                         fmt("%.1f B/tri", row.bytes_per_triangle.value_or(0)) + ", agreement " +
                         fmt("%.4f%%", 100.0 * row.hit_agreement.value_or(0)) + " (same face " +
                         fmt("%.4f%%", 100.0 * row.same_face.value_or(0)) + "), " +
-                        (row.kept ? "kept" : "rebuilt in each round") +
-                        fmt(" (%.1f s)\n", seconds_since(t0)));
+                        (row.kept ? "kept" : "rebuilt for its rays in each round") + "\n");
       slot.row = report.rows.size();
       slots.push_back(std::move(slot));
     } else {
@@ -413,15 +403,18 @@ struct SceneRun {
     report.rows.push_back(std::move(row));
   }
 
+  // One configuration's build in round `round`, timed; the scene stays for the rays if it fits
+  // the memory budget.
+  void time_build(Slot& slot) {
+    BenchRow& row = report.rows[slot.row];
+    row.seconds_build.push_back(build(row, slot));
+    if (!row.kept) slot.release();
+  }
+
   // One configuration's turn in round `round`: both workloads, timed.
   void time_slot(Slot& slot, int round) {
     BenchRow& row = report.rows[slot.row];
-    if (!slot.built()) {  // did not fit the memory budget: rebuilt for this round, untimed
-      if (row.embree)
-        build_embree(row, slot);
-      else
-        build_slim(row, slot);
-    }
+    if (!slot.built()) build(row, slot);  // did not fit the memory budget: rebuilt, untimed
     RunResult p, d;
     if (slot.embree) {
       p = run_primary(*slot.embree, arena, w);
@@ -454,11 +447,12 @@ struct SceneRun {
     for (int round = 0; round < report.repeat; ++round) {
       const auto t0 = Clock::now();
       std::vector<Slot*> failed;
-      for (size_t i : round_order(active.size(), round)) {
-        Slot& slot = *active[i];
+      // A slot whose build or rays throw (out of memory) leaves the rounds.
+      auto guarded = [&](Slot& slot, auto&& fn) {
+        if (std::find(failed.begin(), failed.end(), &slot) != failed.end()) return;
         try {
-          time_slot(slot, round);
-        } catch (const std::exception& e) {  // a rebuild that fails (out of memory)
+          fn();
+        } catch (const std::exception& e) {
           slot.release();
           BenchRow& row = report.rows[slot.row];
           row = unmeasured(row, "failed in round " + std::to_string(round + 1) + ": " + e.what());
@@ -466,7 +460,12 @@ struct SceneRun {
           error(row, row.reason);
           failed.push_back(&slot);
         }
-      }
+      };
+      // Every configuration's build in the round's order, then every configuration's rays in the
+      // same order: drift of the shared machine spreads over all configurations alike.
+      const std::vector<size_t> order = round_order(active.size(), round);
+      for (size_t i : order) guarded(*active[i], [&] { time_build(*active[i]); });
+      for (size_t i : order) guarded(*active[i], [&] { time_slot(*active[i], round); });
       for (Slot* f : failed) active.erase(std::find(active.begin(), active.end(), f));
       progress(opt, name + ": round " + std::to_string(round + 1) + "/" +
                         std::to_string(report.repeat) + fmt(" (%.1f s)\n", seconds_since(t0)));
@@ -485,14 +484,18 @@ struct SceneRun {
         r2.push_back(m2.back() / (double(ref->rays_diffuse) / ref->seconds_diffuse[k] * 1e-6));
       }
       if (m1.empty()) continue;
+      row.build_s = spread_of(row.seconds_build);
+      if (row.build_s->median > 0)
+        row.build_mprims_s = double(triangles) / row.build_s->median * 1e-6;
       row.mrays_primary = spread_of(m1);
       row.mrays_diffuse = spread_of(m2);
       if (ref) {
         row.ratio_primary = spread_of(r1);
         row.ratio_diffuse = spread_of(r2);
       }
-      progress(opt, name + " " + row.config + ": " + spread_text(row.mrays_primary, "%.2f") +
-                        " / " + spread_text(row.mrays_diffuse, "%.2f") + " MRays/s, ratios " +
+      progress(opt, name + " " + row.config + ": build " + spread_text(row.build_s, "%.3f") +
+                        " s, " + spread_text(row.mrays_primary, "%.2f") + " / " +
+                        spread_text(row.mrays_diffuse, "%.2f") + " MRays/s, ratios " +
                         spread_text(row.ratio_primary, "%.2f") + " / " +
                         spread_text(row.ratio_diffuse, "%.2f") + ", checksums " +
                         fmt("%.17g", row.checksum_primary) + " " +

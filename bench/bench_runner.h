@@ -3,7 +3,7 @@
 //
 // Per scene: load it, frame it with the benchmark camera (frame_box, 1024 x 1024), then
 // A. prepare every configuration (embree-tri first, the reference), one after the other:
-//   1. build it `repeat` times back to back (median build time; the last build is kept);
+//   1. build it once (untimed: the rounds time the builds);
 //   2. validate before any ray is timed: the workload-1 hits are compared with embree-tri's
 //      (hit_agreement); a lossless configuration under 99.9% is an ERROR;
 //   3. count (slimrt only, untimed): box and primitive tests per ray over all workload-1 rays, and
@@ -11,12 +11,13 @@
 //   4. lossy configurations: PSNR of a 256 x 256 normals render against bvh8-tri4v's;
 //   5. keep the built scene for the rounds while the scenes kept so far fit in the memory budget
 //      (Scene::memory() / EmbreeScene::memory() totals, greedily in configuration order); a scene
-//      that does not fit is freed and rebuilt (untimed) at its turn in every round;
-// B. time `repeat` interleaved rounds (bench_stats.h): each round runs workload 1 (one primary ray
-//    per pixel centre) then workload 2 (slim::trace_path, up to 8 bounces, every ray counted) for
-//    every configuration once, in an order rotating by one configuration per round. MRays/s is
-//    the median over the rounds; a ratio is the median of the per-round ratios to embree-tri's
-//    MRays/s in the same round; both come with their min..max range.
+//      that does not fit is freed and rebuilt (untimed) for its rays in every round;
+// B. time `repeat` interleaved rounds (bench_stats.h), each in an order rotating by one
+//    configuration per round: first every configuration is built once (timed; the new scene
+//    replaces the kept one), then every configuration runs workload 1 (one primary ray per pixel
+//    centre) then workload 2 (slim::trace_path, up to 8 bounces, every ray counted). Build time
+//    and MRays/s are medians over the rounds; a ratio is the median of the per-round ratios to
+//    embree-tri's MRays/s in the same round; all come with their min..max range.
 // Every timed run traces all of its rays and folds each hit distance into a checksum that is kept,
 // so that nothing is optimised away; the ray counts and checksums of the rounds must agree.
 #pragma once
@@ -35,7 +36,7 @@ struct BenchOptions {
   std::vector<std::string> scenes;   // mesh files or terrain:N, torus:N, canyon:N
   std::vector<std::string> configs;  // empty: default_configs(); embree-tri is always measured
   int threads = 0;                   // 0 = all cores
-  int repeat = 3;                    // timed rounds, and builds per configuration; medians
+  int repeat = 3;                    // timed rounds (each builds and traces every config)
   int width = 1024, height = 1024;   // BENCHMARK.md camera
   int max_bounces = 8;               // workload 2
   int psnr_size = 256;               // lossy configurations: normals render, size x size

@@ -41,8 +41,10 @@ if(SLIM_FUZZ)
   set(SLIM_FUZZ_SOURCES_quantized_mesh src/prim/quantized_mesh.cpp src/mesh/tessellate.cpp)
   set(SLIM_FUZZ_LIBS_quantized_mesh ${SLIM_GLU_LIB})
   # pairing: the pairing and the fan triangulation Scene::build runs first, against the test
-  # reference (tests/pairing_reference.h).
-  set(SLIM_FUZZ_SOURCES_pairing src/mesh/pairing.cpp src/mesh/triangulate.cpp)
+  # reference (tests/pairing_reference.h) and the edge orders only the tests run
+  # (tests/pairing_orders.cpp).
+  set(SLIM_FUZZ_SOURCES_pairing src/mesh/pairing.cpp src/mesh/triangulate.cpp
+                             tests/pairing_orders.cpp)
   set(SLIM_FUZZ_LIBS_pairing TBB::tbb)
   # scene: every configuration through the public API, so the whole library (built here with
   # coverage instrumentation, unlike in the other build trees).

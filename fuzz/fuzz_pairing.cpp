@@ -11,7 +11,8 @@
 //            (3 + byte % 4 corners; with groups, byte / 4 % 3 is the group), one index byte per
 //            corner (modulo the vertex count)
 // The faces are fan-triangulated as Scene::build does (mesh/triangulate.h). Checks:
-//   - index keys: the three EdgeOrders give the pairs of the std::stable_sort reference
+//   - index keys: the three EdgeOrders (tests/pairing_orders.h) give the pairs of the
+//   std::stable_sort reference
 //     (tests/pairing_reference.h);
 //   - coordinate keys, weld, augment, pre-scan on and off, the window-2 baseline: every result
 //     satisfies the invariants (each pair shares the edge it records, every triangle in exactly one
@@ -26,6 +27,7 @@
 #include "fuzz_common.h"
 #include "mesh/pairing.h"
 #include "mesh/triangulate.h"
+#include "pairing_orders.h"
 #include "pairing_reference.h"
 #include "slimrt/scene.h"
 
@@ -94,10 +96,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                         groups.data()};
 
   const test::PairSet ref = test::reference_pairs(in);
-  const EdgeOrder orders[3] = {EdgeOrder::FullTable, EdgeOrder::TwinSort, EdgeOrder::Local};
-  for (EdgeOrder o : orders) {
+  const test::EdgeOrder orders[3] = {test::EdgeOrder::FullTable, test::EdgeOrder::TwinSort,
+                                     test::EdgeOrder::Local};
+  for (test::EdgeOrder o : orders) {
     const std::string what = "index keys, order " + std::to_string(int(o));
-    const test::PairSet got = check(in, pair_by_edge_heuristic(in, false, o), false, what);
+    const test::PairSet got = check(in, test::pair_in_order(in, o), false, what);
     SLIM_FUZZ_CHECK(got == ref, what + ": not the reference's pairs (" +
                                     std::to_string(got.size()) + " vs " +
                                     std::to_string(ref.size()) + ")");

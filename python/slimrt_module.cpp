@@ -585,9 +585,12 @@ PYBIND11_MODULE(slimrt, m) {
   m.doc() =
       "slimrt: compact CPU ray tracing of triangle and quad meshes. RaycastingScene follows "
       "Open3D's open3d.t.geometry.RaycastingScene.";
+  // slimrt.Cancelled (a build its progress callback stopped) and slimrt.NotApplicable (a
+  // configuration that does not apply to the mesh) are slimrt.Errors: registered after it, since
+  // pybind11 tries the most recently registered translator first.
   auto& error = py::register_exception<slim::Error>(m, "Error", PyExc_RuntimeError);
-  // After Error: pybind11 tries the most recently registered translator first.
   py::register_exception<slim::Cancelled>(m, "Cancelled", error.ptr());
+  py::register_exception<slim::NotApplicable>(m, "NotApplicable", error.ptr());
   m.attr("INVALID_ID") = kInvalid;
   m.attr("__version__") = SLIMRT_VERSION;
   m.def("configs", &slim::all_config_names,

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -112,24 +113,21 @@ TEST(BenchEmbree, MixedPolygonsSeveralMeshesAndNonFiniteFaces) {
   EXPECT_GT(c.both_hit, 3000u);
   EXPECT_EQ(c.agree, c.rays);
   EXPECT_EQ(c.same_geom, c.both_hit);
-  EXPECT_GE(c.same_face, c.both_hit - c.both_hit / 200);
+  // Random faces far apart from each other's planes: no two faces meet a ray at the same t, so
+  // every hit names the same face (a fan triangle of a face is a hit on that face).
+  EXPECT_EQ(c.same_face, c.both_hit);
   // The face table is Embree's side data.
   EXPECT_GT(e.memory().other_bytes, 0u);
   EXPECT_EQ(e.memory().triangles, a.fan_triangle_count() + b.fan_triangle_count());
 
+  // Configurations that do not apply say so by type (a message for people besides).
   try {
     EmbreeScene q(meshes, "embree-quad");
     ADD_FAILURE() << "embree-quad built on non-quad faces";
-  } catch (const Error& err) {
-    EXPECT_NE(std::string(err.what()).find("does not apply"), std::string::npos) << err.what();
+  } catch (const NotApplicable& err) {
     EXPECT_NE(std::string(err.what()).find("non-quad faces"), std::string::npos) << err.what();
   }
-  try {
-    EmbreeScene g(meshes, "embree-grid");
-    ADD_FAILURE() << "embree-grid built on a soup";
-  } catch (const Error& err) {
-    EXPECT_NE(std::string(err.what()).find("does not apply"), std::string::npos) << err.what();
-  }
+  EXPECT_THROW(EmbreeScene(meshes, "embree-grid"), NotApplicable) << "embree-grid on a soup";
 }
 
 TEST(BenchEmbree, LatticeDetection) {
@@ -488,16 +486,8 @@ TEST(BenchCli, JsonSchemaOnTerrain64) {
       ASSERT_TRUE(r["error"].contains(f)) << config << " " << f;
       EXPECT_TRUE(r["error"][f].is_null() || r["error"][f].is_number()) << config << " " << f;
     }
-    if (r.contains("reason")) {  // not measured: every figure is null
-      EXPECT_TRUE(r["reason"].is_string());
-      for (const char* f : number_fields) EXPECT_TRUE(r[f].is_null()) << config << " " << f;
-      for (const char* f : integer_fields) EXPECT_TRUE(r[f].is_null()) << config << " " << f;
-      const std::string reason = r["reason"];
-      EXPECT_TRUE(reason.find("does not apply") != std::string::npos ||
-                  reason.find("not implemented") != std::string::npos)
-          << config << ": " << reason;
-      continue;
-    }
+    // Every configuration of the list applies to a terrain: none may come back unmeasured.
+    ASSERT_FALSE(r.contains("reason")) << config << ": " << r["reason"];
     for (const char* f : integer_fields) EXPECT_FALSE(r[f].is_null()) << config << " " << f;
     EXPECT_EQ(r["bytes_total"].get<uint64_t>(), r["bytes_geometry"].get<uint64_t>() +
                                                     r["bytes_bvh"].get<uint64_t>() +
@@ -511,8 +501,9 @@ TEST(BenchCli, JsonSchemaOnTerrain64) {
       ASSERT_TRUE(r[f].is_number()) << config << " " << f;
       EXPECT_GT(r[f].get<double>(), 0.0) << config << " " << f;
     }
-    // The rounds (one here): each MRays/s figure and ratio with its range and flag.
-    for (const char* f : {"mrays_primary", "mrays_diffuse", "ratio_primary", "ratio_diffuse"}) {
+    // The rounds (one here): the build time, each MRays/s figure and ratio with its range and flag.
+    for (const char* f :
+         {"build_s", "mrays_primary", "mrays_diffuse", "ratio_primary", "ratio_diffuse"}) {
       const std::string n = f;
       ASSERT_TRUE(r.contains(n + "_range") && r[n + "_range"].is_array()) << config << " " << n;
       ASSERT_EQ(r[n + "_range"].size(), 2u) << config << " " << n;
@@ -521,6 +512,8 @@ TEST(BenchCli, JsonSchemaOnTerrain64) {
       ASSERT_TRUE(r.contains(n + "_noisy") && r[n + "_noisy"].is_boolean()) << config << " " << n;
       EXPECT_FALSE(r[n + "_noisy"].get<bool>()) << config << " " << n;
     }
+    EXPECT_EQ(r["seconds_build_rounds"].size(), 1u) << config;
+    EXPECT_EQ(r["seconds_build_rounds"][0].get<double>(), r["build_s"].get<double>()) << config;
     EXPECT_EQ(r["seconds_primary_rounds"].size(), 1u) << config;
     EXPECT_EQ(r["seconds_diffuse_rounds"].size(), 1u) << config;
     EXPECT_EQ(r["rays_primary"].get<uint64_t>(), 1024u * 1024u) << config;
@@ -541,17 +534,33 @@ TEST(BenchCli, JsonSchemaOnTerrain64) {
       for (const char* f : error_fields) EXPECT_TRUE(r["error"][f].is_null()) << config << " " << f;
     }
   }
-  // The Embree anchors that apply to a terrain, and the uncompressed slimrt formats, must build.
-  for (const char* c : {"embree-tri", "embree-tri-compact", "embree-quad", "embree-grid",
-                        "bvh8-tri4v", "bvh8-tri4i"}) {
-    ASSERT_TRUE(by_config.count(c)) << c;
-    EXPECT_FALSE(by_config[c].contains("reason")) << c;
-  }
+  for (const std::string c :
+       {"embree-tri", "embree-tri-compact", "embree-quad", "embree-grid", "bvh8-tri4v",
+        "bvh8-tri4i", "qbvh8-tri4v", "clbvh-tri4v", "grid", "lossy-grid", "costa-PFV"})
+    EXPECT_TRUE(by_config.count(c)) << c;
   const double ref_primary = by_config["embree-tri"]["mrays_primary"];
   const double ref_diffuse = by_config["embree-tri"]["mrays_diffuse"];
-  EXPECT_EQ(by_config["embree-tri"]["hit_agreement"].get<double>(), 1.0);
+  // embree-tri is the reference of hit_agreement (1 by definition); what it traced is checked
+  // against slimrt's watertight bvh8-tri4v instead: the same camera rays on the same triangles.
+  // Rays that agree add t equal within 1e-5 relative to both checksums; each ray that does not
+  // (one that slips through Embree's non-watertight test) moves the sum by at most the largest t,
+  // the distance from the camera to the farthest corner of the box.
+  const Box3f box = make_terrain(64).bounds();
+  const Camera cam = frame_box(box, 1024, 1024);
+  double t_max = 0;
+  for (int c = 0; c < 8; ++c) {
+    const Vec3f corner(c & 1 ? box.hi.x : box.lo.x, c & 2 ? box.hi.y : box.lo.y,
+                       c & 4 ? box.hi.z : box.lo.z);
+    t_max = std::max(t_max, double(length(corner - cam.eye)));
+  }
+  const nlohmann::json& tri4v = by_config["bvh8-tri4v"];
+  const double disagree = std::round((1.0 - tri4v["hit_agreement"].get<double>()) *
+                                     double(tri4v["rays_primary"].get<uint64_t>()));
+  const double ck_embree = by_config["embree-tri"]["checksum_primary"];
+  const double ck_slim = tri4v["checksum_primary"];
+  EXPECT_NEAR(ck_embree, ck_slim, 1e-5 * ck_slim + disagree * t_max)
+      << disagree << " rays disagree, t_max " << t_max;
   for (const auto& [config, r] : by_config) {
-    if (r.contains("reason")) continue;
     const double rp = r["ratio_primary"], rd = r["ratio_diffuse"];
     const double mp = r["mrays_primary"], md = r["mrays_diffuse"];
     EXPECT_NEAR(rp, mp / ref_primary, 1e-6 * rp) << config;
@@ -594,6 +603,13 @@ TEST(BenchCli, RoundsKeptOrRebuiltTraceTheSameRays) {
       EXPECT_EQ((*x)["seconds_diffuse_rounds"].size(), 3u) << config;
       EXPECT_EQ((*x)["cpu_seconds_primary_rounds"].size(), 3u) << config;
       EXPECT_EQ((*x)["cpu_seconds_diffuse_rounds"].size(), 3u) << config;
+      // Each round builds every configuration once: three build times, the median among them.
+      const nlohmann::json& builds = (*x)["seconds_build_rounds"];
+      ASSERT_EQ(builds.size(), 3u) << config;
+      std::vector<double> b = {builds[0], builds[1], builds[2]};
+      std::sort(b.begin(), b.end());
+      EXPECT_EQ((*x)["build_s"].get<double>(), b[1]) << config;
+      EXPECT_EQ((*x)["build_s_range"], nlohmann::json::array({b[0], b[2]})) << config;
       const nlohmann::json& range = (*x)["ratio_diffuse_range"];
       EXPECT_LE(range[0].get<double>(), (*x)["ratio_diffuse"].get<double>()) << config;
       EXPECT_GE(range[1].get<double>(), (*x)["ratio_diffuse"].get<double>()) << config;
@@ -627,8 +643,8 @@ TEST(InfoCli, PairsJsonNames) {
   EXPECT_EQ(j["triangles"].get<uint64_t>(), 2u * 16 * 8);
   EXPECT_DOUBLE_EQ(j["paired_fraction"].get<double>(), 1.0);  // quads, kept by the pre-scan
   EXPECT_DOUBLE_EQ(j["window2_paired_fraction"].get<double>(), 1.0);
-  EXPECT_GE(j["pairing_s"].get<double>(), 0.0);
-  EXPECT_GE(j["pairing_later_s"].get<double>(), 0.0);
+  EXPECT_TRUE(j["pairing_s"].is_number_float());  // a time: only its presence is checked
+  EXPECT_TRUE(j["pairing_later_s"].is_number_float());
   EXPECT_EQ(j["pairing_later_runs"].get<int>(), 2);
   EXPECT_EQ(j["pairing"]["pairs"].get<uint64_t>(), 16u * 8);
   const std::string bad =

@@ -17,6 +17,7 @@
 #include "core/simd_ext.h"
 #include "mesh/pairing.h"
 #include "mesh/triangulate.h"
+#include "pairing_orders.h"
 #include "pairing_reference.h"
 #include "prim/pairs.h"
 #include "slimrt/pairing.h"
@@ -168,7 +169,7 @@ TEST(Pairing, MatchesSortReferenceAndInvariants) {
     auto got = check_pairing(t.in(), r, false);
     EXPECT_EQ(got, reference_pairs(t.in())) << "seed " << seed;
     for (EdgeOrder o : {EdgeOrder::FullTable, EdgeOrder::Local})
-      EXPECT_EQ(check_pairing(t.in(), pair_by_edge_heuristic(t.in(), false, o), false), got)
+      EXPECT_EQ(check_pairing(t.in(), pair_in_order(t.in(), o), false), got)
           << "seed " << seed << " order " << int(o);
     EXPECT_GT(r.stats.paired_fraction, 0.9);
     EXPECT_EQ(r.stats.nonmanifold_edges, 0u);
@@ -184,7 +185,7 @@ TEST(Pairing, LargeIndicesUseTheWideKey) {
   auto ref = reference_pairs(t.in());
   EXPECT_EQ(check_pairing(t.in(), r, false), ref);
   for (EdgeOrder o : {EdgeOrder::FullTable, EdgeOrder::Local})
-    EXPECT_EQ(check_pairing(t.in(), pair_by_edge_heuristic(t.in(), false, o), false), ref);
+    EXPECT_EQ(check_pairing(t.in(), pair_in_order(t.in(), o), false), ref);
 }
 
 TEST(Pairing, NonManifoldRunsAllOrdersAgree) {
@@ -205,7 +206,7 @@ TEST(Pairing, NonManifoldRunsAllOrdersAgree) {
     Tri t = triangulate(m);
     auto ref = reference_pairs(t.in());
     for (EdgeOrder o : {EdgeOrder::FullTable, EdgeOrder::TwinSort, EdgeOrder::Local}) {
-      PairingResult r = pair_by_edge_heuristic(t.in(), false, o);
+      PairingResult r = pair_in_order(t.in(), o);
       EXPECT_EQ(check_pairing(t.in(), r, false), ref) << "seed " << seed << " order " << int(o);
       EXPECT_GT(r.stats.nonmanifold_edges, 100u);
     }
@@ -264,8 +265,7 @@ TEST(Pairing, HighValenceFansAllOrdersAgree) {
   auto ref = reference_pairs(t.in());
   EXPECT_GT(ref.size(), 150u);
   for (EdgeOrder o : {EdgeOrder::FullTable, EdgeOrder::TwinSort, EdgeOrder::Local})
-    EXPECT_EQ(check_pairing(t.in(), pair_by_edge_heuristic(t.in(), false, o), false), ref)
-        << "order " << int(o);
+    EXPECT_EQ(check_pairing(t.in(), pair_in_order(t.in(), o), false), ref) << "order " << int(o);
 }
 
 TEST(Pairing, Deterministic) {
@@ -340,7 +340,7 @@ TEST(Pairing, NonManifoldAndDegenerateEdges) {
   EXPECT_EQ(r.stats.nonmanifold_edges, 2u);
   EXPECT_EQ(r.pairs.size(), 3u);
   for (EdgeOrder o : {EdgeOrder::FullTable, EdgeOrder::Local})
-    EXPECT_EQ(check_pairing(t.in(), pair_by_edge_heuristic(t.in(), false, o), false),
+    EXPECT_EQ(check_pairing(t.in(), pair_in_order(t.in(), o), false),
               check_pairing(t.in(), r, false));
   PairingResult rc = pair_by_edge_heuristic(t.in(), true);
   check_pairing(t.in(), rc, true);

@@ -3,6 +3,9 @@
 // format does; and BuildOptions' orthogonal fields and their checks.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
+#include <cstring>
 #include <optional>
 #include <set>
 #include <string>
@@ -77,7 +80,7 @@ TEST(Registry, EveryRowMatchesItsScene) {
     EXPECT_TRUE(std::isfinite(s.error_bound()));
     // The bound is small against the scene: every vertex within 1% of the box diagonal.
     EXPECT_LT(s.error_bound(), 0.01 * double(length(s.bounds().size())));
-    const std::optional<DecodedTriangles> t = decoded_triangles(ptrs, c.options);
+    const std::optional<DecodedTriangles> t = decoded_triangles(s, ptrs);
     EXPECT_EQ(t.has_value(), c.own_geometry);
     if (t) {
       EXPECT_GT(t->size(), 0u);
@@ -91,6 +94,63 @@ TEST(Registry, EveryRowMatchesItsScene) {
   // costa rows without V.
   EXPECT_EQ(lossy, 13);
   EXPECT_EQ(own, 21);
+}
+
+// The triangles a built scene decodes from its leaves (Scene::decoded_triangles) are those of the
+// rebuild from the input (decoded_triangles(meshes, options)), bit for bit, each with the same
+// input mesh and face, in another order (the scene's leaf order); under every node layout.
+TEST(Registry, SceneDecodesTheTrianglesOfTheRebuild) {
+  const std::vector<PolyMesh> meshes = registry_meshes();
+  std::vector<const PolyMesh*> ptrs;
+  for (const PolyMesh& m : meshes) ptrs.push_back(&m);
+  // A triangle as 9 coordinate bit patterns (corners rotated to start at the smallest, winding
+  // kept), then its mesh and face; a decoding as the sorted keys.
+  using Key = std::array<uint32_t, 11>;
+  auto keys = [](const DecodedTriangles& t) {
+    std::vector<Key> k(t.size());
+    for (size_t i = 0; i < t.size(); ++i) {
+      std::array<std::array<uint32_t, 3>, 3> c;
+      std::memcpy(c.data(), &t.vertices[3 * i], 36);
+      const size_t r = size_t(std::min_element(c.begin(), c.end()) - c.begin());
+      for (size_t v = 0; v < 3; ++v)
+        for (size_t a = 0; a < 3; ++a) k[i][3 * v + a] = c[(r + v) % 3][a];
+      k[i][9] = t.geom[i];
+      k[i][10] = t.face[i];
+    }
+    std::sort(k.begin(), k.end());
+    return k;
+  };
+  int decoded = 0;
+  for (const ConfigInfo& c : configs()) {
+    if (!c.own_geometry) continue;
+    for (Nodes nodes : {Nodes::Bvh8, Nodes::QBvh8, Nodes::CompressedLeaf}) {
+      BuildOptions o = c.options;
+      o.nodes = nodes;
+      try {
+        o.check();
+      } catch (const Error&) {
+        continue;  // a leaf that lives in multi-leaf nodes only
+      }
+      SCOPED_TRACE(c.name + " nodes " + std::to_string(int(nodes)));
+      const Scene s = Scene::build(ptrs, o);
+      std::optional<DecodedTriangles> mine;
+      try {
+        mine = s.decoded_triangles();
+      } catch (const Error& e) {
+        // The one format whose scene does not decode its leaves yet (its builder is elsewhere).
+        EXPECT_EQ(c.options.leaf, Leaf::Clusters) << e.what();
+        continue;
+      }
+      ASSERT_TRUE(mine.has_value());
+      const std::optional<DecodedTriangles> rebuilt = decoded_triangles(ptrs, o);
+      ASSERT_TRUE(rebuilt.has_value());
+      EXPECT_EQ(keys(*mine), keys(*rebuilt));
+      decoded++;
+    }
+  }
+  EXPECT_GT(decoded, 20);
+  // Formats without their own geometry have none to give.
+  EXPECT_FALSE(Scene::build(ptrs, BuildOptions::from_config("bvh8-tri4v")).decoded_triangles());
 }
 
 // A lossy format whose decoded vertices lie within error_bound() of the input: the decoded

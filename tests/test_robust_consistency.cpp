@@ -61,11 +61,11 @@ struct RefGeometry {
   std::vector<RefTri> tris;    // brute-force triangles, built on the first disagreement
 };
 
-RefGeometry decoded(const PolyMesh& input, const BuildOptions& opt) {
-  const std::vector<const PolyMesh*> meshes{&input};
+RefGeometry decoded(const PolyMesh& input, const Scene& s) {
+  const BuildOptions& opt = s.options();
   std::vector<Vec3f> v;
   RefGeometry g;
-  DecodedTriangles t = *decoded_triangles(meshes, opt);
+  DecodedTriangles t = *decoded_triangles(s, {&input});
   v = std::move(t.vertices);
   g.face = std::move(t.face);
   g.mesh.name = input.name + " (" + opt.config_name() + " decoded)";
@@ -144,7 +144,7 @@ void check_mesh_file(const std::string& file, int mesh_index) {
     OracleHits own_hits;
     const OracleHits* oracle = &input_hits;
     if (describe(opt).own_geometry) {
-      own = std::make_unique<RefGeometry>(decoded(mesh, opt));
+      own = std::make_unique<RefGeometry>(decoded(mesh, s));
       own_hits = embree_hits(*own, rays);
       g = own.get();
       oracle = &own_hits;

@@ -387,7 +387,7 @@ TEST(RobustLimits, RaysStartingOnASurface) {
     if (!build_or_skip(ball, c, s)) continue;
     const BuildOptions opt = BuildOptions::from_config(c);
     std::vector<Vec3f> origins = ball.positions;
-    if (std::optional<DecodedTriangles> t = decoded_triangles({&ball}, opt)) origins = t->vertices;
+    if (std::optional<DecodedTriangles> t = decoded_triangles(s, {&ball})) origins = t->vertices;
     for (size_t i = 0; i < origins.size(); i += 7) {
       const Vec3f o = origins[i];
       const Hit h = s.intersect(make_ray(o, o * -1.0f));

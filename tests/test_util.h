@@ -233,6 +233,25 @@ inline bool is_geometric_tie(const std::vector<RefTri>& tris, const Ray& r, cons
   return geometric_tie(tris, r, ref, geom_b, prim_b, delta) == TieKind::Edge;
 }
 
+// The same over decoded triangles that stand for input faces (formats with their own geometry):
+// `input_of(tri)` is the input (geom, face) of a reference triangle; face A is the input face of
+// the reference hit's triangle, face B = (geom_b, prim_b) the one slimrt reported.
+template <class InputOf>
+TieKind input_face_tie(const std::vector<RefTri>& tris, const Ray& r, const RefHit& ref,
+                       InputOf&& input_of, uint32_t geom_b, uint32_t prim_b, double delta) {
+  double p[3];
+  point_on_ray(r, ref.t, p);
+  const std::pair<uint32_t, uint32_t> a = input_of(tris[ref.tri]), b = {geom_b, prim_b};
+  double da = INFINITY, db = INFINITY;
+  for (const RefTri& t : tris) {
+    const std::pair<uint32_t, uint32_t> f = input_of(t);
+    if (f == a) da = std::min(da, boundary_distance(t, p));
+    if (f == b) db = std::min(db, triangle_distance(t, p));
+  }
+  if (db > delta) return TieKind::None;
+  return da <= delta ? TieKind::Edge : TieKind::Coincident;
+}
+
 // The tie distance for a hit at p seen from org: a few float roundings of the coordinates the
 // watertight test works with (relative to the origin and to the scene's origin).
 inline double tie_delta(const Ray& r, double t) {

@@ -38,8 +38,8 @@ int cmd_bench(int argc, char** argv) {
       ->check(CLI::Range(0, 4096))
       ->capture_default_str();
   app.add_option("--repeat", opt.repeat,
-                 "interleaved timed rounds (each runs every configuration once; medians and "
-                 "ranges over the rounds), and builds per configuration")
+                 "interleaved timed rounds (each builds, then traces every configuration once; "
+                 "medians and ranges over the rounds)")
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
   double budget_mb = 0;

@@ -545,9 +545,9 @@ int cmd_verify(int argc, char** argv) {
     // Origins that are inside the input but not inside the decoded surface (closer to the
     // surface than the format's error) cannot expect a hit: their rays are skipped.
     std::vector<char> origin_ok(inside.size(), 1);
-    if (describe(opt).own_geometry) {
+    if (const std::optional<DecodedTriangles> decoded = decoded_triangles(s, {&mesh})) {
       try {
-        const PolyMesh own = to_mesh(*decoded_triangles({&mesh}, opt));
+        const PolyMesh own = to_mesh(*decoded);
         Scene own_ref;
         arena.execute([&] {
           own_ref = Scene::build(own, ref_opt);

@@ -19,11 +19,17 @@
 namespace slim {
 
 // The triangles the format of `opt` intersects when it has its own geometry
-// (describe(opt).own_geometry: lossy grids, costa), decoded exactly as its leaves decode them and
-// built by the same deterministic conversion as Scene::build; std::nullopt for the formats that
-// intersect the input's fan triangles. Throws slim::Error on malformed meshes.
+// (describe(opt).own_geometry: lossy grids, costa), decoded exactly as its leaves decode them:
+// a rebuild by the same deterministic conversion as Scene::build (in the conversion's order, not
+// the scene's leaf order); std::nullopt for the formats that intersect the input's fan triangles.
+// Throws slim::Error on malformed meshes. With a built scene at hand, the next one is cheaper.
 std::optional<DecodedTriangles> decoded_triangles(const std::vector<const PolyMesh*>& meshes,
                                                   const BuildOptions& opt);
+
+// A built scene's decoded triangles (Scene::decoded_triangles), or where its scene does not decode
+// its leaves (cluster), the rebuild above from `meshes`, which must be the scene's input.
+std::optional<DecodedTriangles> decoded_triangles(const Scene& scene,
+                                                  const std::vector<const PolyMesh*>& meshes);
 
 // The decoded triangles as a triangle mesh (face i = decoded triangle i; t.face maps it back to
 // the input face), for a reference that reads meshes (Embree, a brute force).

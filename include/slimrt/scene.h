@@ -13,10 +13,12 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "slimrt/decoded.h"
 #include "slimrt/error.h"
 #include "slimrt/math.h"
 #include "slimrt/mesh.h"
@@ -231,6 +233,13 @@ class Scene {
   // build; 0 for the formats that store positions exactly (and for a lossy format whose every
   // vertex happened to be encoded exactly).
   double error_bound() const;
+  // The triangles the scene intersects when its format has its own geometry
+  // (describe(options()).own_geometry: lossy grids, grid, costa), decoded from the built scene
+  // exactly as its leaves decode them, each with the input mesh and face it stands for, in the
+  // scene's leaf order; std::nullopt for the formats that intersect the input's fan triangles.
+  // Throws slim::Error for a format whose built scene does not decode its leaves (cluster):
+  // decoded_triangles(meshes, options) in slimrt/analysis.h rebuilds those from the input.
+  std::optional<DecodedTriangles> decoded_triangles() const;
 
   // Walks the whole structure and checks every invariant (every primitive referenced exactly
   // once, child boxes inside parents, quantized boxes conservative). Returns false and fills
@@ -240,6 +249,8 @@ class Scene {
   struct Impl;
 
  private:
+  friend std::optional<DecodedTriangles> decoded_triangles(const Scene& scene,
+                                                           const std::vector<const PolyMesh*>&);
   std::unique_ptr<Impl> impl_;
 };
 

@@ -12,6 +12,7 @@
 #include "core/large_array.h"
 #include "core/progress.h"
 #include "mesh/triangulate.h"
+#include "slimrt/analysis.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -190,6 +191,23 @@ const BuildOptions& Scene::options() const {
 bool Scene::is_lossy() const { return impl_ && describe(impl_->opt).lossy; }
 
 double Scene::error_bound() const { return impl_ ? impl_->error_bound : 0.0; }
+
+std::optional<DecodedTriangles> Scene::decoded_triangles() const {
+  if (!impl_ || !describe(impl_->opt).own_geometry) return std::nullopt;
+  std::optional<DecodedTriangles> t = impl_->decoded_triangles();
+  if (!t)
+    throw Error(impl_->opt.config_name() +
+                ": the built scene does not decode its triangles; decoded_triangles(meshes, "
+                "options) rebuilds them from the input");
+  return t;
+}
+
+std::optional<DecodedTriangles> decoded_triangles(const Scene& scene,
+                                                  const std::vector<const PolyMesh*>& meshes) {
+  if (!scene.impl_ || !describe(scene.impl_->opt).own_geometry) return std::nullopt;
+  if (std::optional<DecodedTriangles> t = scene.impl_->decoded_triangles()) return t;
+  return decoded_triangles(meshes, scene.impl_->opt);
+}
 
 bool Scene::validate(std::string* why) const {
   if (!impl_) {

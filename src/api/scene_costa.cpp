@@ -27,6 +27,39 @@ struct CostaData {
   std::vector<uint32_t> face_base;  // first global face id per mesh, + total
 };
 
+// Mesh of a global face id (for the validation keys of the source primitives).
+uint32_t mesh_of(const std::vector<uint32_t>& face_base, uint32_t g) {
+  return uint32_t(std::upper_bound(face_base.begin(), face_base.end(), g) - face_base.begin()) - 1;
+}
+
+// The triangles of the store's primitives, split by the leaves' rules (primitive_triangles), in
+// store order, each with its input mesh and face; face_of(i) is the global input face of
+// primitive i (face_base: first global face of each mesh).
+template <class FaceOf>
+DecodedTriangles store_triangles(const QuantizedMesh& q, const std::vector<uint32_t>& face_base,
+                                 FaceOf&& face_of) {
+  NgonMesh d;  // the store's primitives (indices only: primitive_triangles reads no position)
+  d.prim_offsets.reserve(q.prim_count() + 1);
+  d.faces.reserve(q.face_count());
+  for (uint32_t i = 0; i <= q.prim_count(); ++i) d.prim_offsets.push_back(q.offset(i));
+  for (uint64_t j = 0; j < q.face_count(); ++j) d.faces.push_back(q.face(j));
+  DecodedTriangles out;
+  std::vector<uint32_t> tris;
+  for (size_t i = 0; i < d.prim_count(); ++i) {
+    tris.clear();
+    primitive_triangles(d, i, tris);
+    const uint32_t g = face_of(i), mesh = mesh_of(face_base, g);
+    for (size_t k = 0; k < tris.size(); ++k) {
+      out.vertices.push_back(q.vertex(tris[k]));
+      if (k % 3 == 2) {
+        out.geom.push_back(mesh);
+        out.face.push_back(g - face_base[mesh]);
+      }
+    }
+  }
+  return out;
+}
+
 template <bool P, bool F, bool V>
 class CostaScene : public BvhScene<CostaLeaf<P, F, V>> {
  public:
@@ -45,6 +78,11 @@ class CostaScene : public BvhScene<CostaLeaf<P, F, V>> {
         return false;
       }
     return BvhScene<CostaLeaf<P, F, V>>::validate(why);
+  }
+  // Decoded from the store (in the BVH's leaf order), as the leaves decode it.
+  std::optional<DecodedTriangles> decoded_triangles() const override {
+    return store_triangles(data->store, data->face_base,
+                           [&](size_t i) { return uint32_t(data->face_map.get(i)); });
   }
 };
 
@@ -119,11 +157,6 @@ void order_leaves_for_prediction(Bvh2& b2, const NgonMesh& m) {
     }
   }
   std::copy(ids.begin(), ids.end(), b2.prim_ids.begin());
-}
-
-// Mesh of a global face id (for the validation keys of the source primitives).
-uint32_t mesh_of(const std::vector<uint32_t>& face_base, uint32_t g) {
-  return uint32_t(std::upper_bound(face_base.begin(), face_base.end(), g) - face_base.begin()) - 1;
 }
 
 template <bool P, bool F, bool V>
@@ -429,27 +462,7 @@ CostaTriangles costa_triangles(const std::vector<const PolyMesh*>& meshes,
   NgonMesh m = load_ngon_mesh(meshes);
   if (f.T) m = triangulate_ngon_mesh(m);
   const QuantizedMesh q(m, f.P, f.F, f.V);
-  // Decode the store back into an NgonMesh, then triangulate with the leaves' rules.
-  NgonMesh d;
-  d.prim_offsets.reserve(q.prim_count() + 1);
-  d.faces.reserve(q.face_count());
-  for (uint32_t i = 0; i <= q.prim_count(); ++i) d.prim_offsets.push_back(q.offset(i));
-  for (uint64_t j = 0; j < q.face_count(); ++j) d.faces.push_back(q.face(j));
-  CostaTriangles out;
-  std::vector<uint32_t> tris;
-  for (size_t i = 0; i < d.prim_count(); ++i) {
-    tris.clear();
-    primitive_triangles(d, i, tris);
-    const uint32_t g = m.prim_face[i], mesh = mesh_of(m.face_base, g);
-    for (size_t k = 0; k < tris.size(); ++k) {
-      out.vertices.push_back(q.vertex(tris[k]));
-      if (k % 3 == 2) {
-        out.geom.push_back(mesh);
-        out.face.push_back(g - m.face_base[mesh]);
-      }
-    }
-  }
-  return out;
+  return store_triangles(q, m.face_base, [&](size_t i) { return m.prim_face[i]; });
 }
 
 CostaSizes costa_sizes(const PolyMesh& mesh) {

@@ -190,6 +190,92 @@ void grid_tables(const Prepared& p, std::vector<GridInfo>& info, std::vector<Gri
   }
 }
 
+// The two triangles of each cell of a decoded sub-grid (w: rx x ry vertices), split as the leaves
+// split them (flipped(i, j): cell (i, j) takes the other diagonal, subgrid.h), each with its input
+// mesh and face (face(i, j, tri)).
+template <class Flipped, class Face>
+void append_subgrid_triangles(const SubGridVerts& w, uint32_t rx, uint32_t ry, uint32_t geom,
+                              Flipped&& flipped, Face&& face, DecodedTriangles& out) {
+  auto vert = [&](uint32_t i, uint32_t j) { return detail::subgrid_vertex(w, int(5 * j + i)); };
+  for (uint32_t j = 0; j + 1 < ry; ++j)
+    for (uint32_t i = 0; i + 1 < rx; ++i) {
+      if (flipped(i, j)) {
+        out.vertices.insert(out.vertices.end(), {vert(i, j), vert(i + 1, j), vert(i, j + 1)});
+        out.vertices.insert(out.vertices.end(),
+                            {vert(i + 1, j + 1), vert(i, j + 1), vert(i + 1, j)});
+      } else {
+        out.vertices.insert(out.vertices.end(), {vert(i, j), vert(i + 1, j), vert(i + 1, j + 1)});
+        out.vertices.insert(out.vertices.end(), {vert(i, j), vert(i + 1, j + 1), vert(i, j + 1)});
+      }
+      for (uint32_t tri = 0; tri < 2; ++tri) {
+        out.geom.push_back(geom);
+        out.face.push_back(face(i, j, tri));
+      }
+    }
+}
+
+// A stored sub-grid block: its grid, the position of its vertex (0, 0) in the grid, its vertices
+// and flip mask (bit 4 j + i: cell (i, j) flipped), read with the leaf's own accessors.
+struct BlockPlace {
+  uint32_t grid = 0, gx = 0, gy = 0, rx = 0, ry = 0, flips = 0;
+};
+BlockPlace place_of(const SubGridLeaf::Context& ctx, const SubGridRef& b) {
+  return {b.grid,
+          b.grid_x,
+          b.grid_y,
+          b.res_x,
+          b.res_y,
+          subgrid_flips(ctx.hot[b.grid], ctx.flips, b.grid_x / kSubGridCells,
+                        b.grid_y / kSubGridCells, (b.stride + kSubGridCells - 2) / kSubGridCells)};
+}
+template <int kEnc>
+BlockPlace place_of(const LossyContext& ctx, const LossySubGrid& b) {
+  const uint32_t g = LossyGridLeaf<kEnc>::grid(ctx, b);
+  return {g,
+          b.grid_x,
+          b.grid_y,
+          uint32_t(b.res & 15),
+          uint32_t(b.res >> 4),
+          LossyGridLeaf<kEnc>::flips(ctx, b, g)};
+}
+template <int kEnc>
+BlockPlace place_of(const LossyContext& ctx, const LossySubGridShared& b) {
+  const uint32_t g = LossySharedLeaf<kEnc>::grid(ctx, b);
+  uint32_t sx = 0, sy = 0;
+  LossySharedLeaf<kEnc>::position(ctx.hot[g], b, sx, sy);
+  return {g,
+          kSubGridCells * sx,
+          kSubGridCells * sy,
+          uint32_t(b.res & 15),
+          uint32_t(b.res >> 4),
+          LossySharedLeaf<kEnc>::flips(ctx, b, g)};
+}
+
+// Block type and place of each grid leaf.
+template <class Leaf>
+struct GridBlock;
+template <>
+struct GridBlock<SubGridLeaf> {
+  using Type = SubGridRef;
+  static BlockPlace place(const SubGridLeaf::Context& ctx, const SubGridRef& b) {
+    return place_of(ctx, b);
+  }
+};
+template <int kEnc>
+struct GridBlock<LossyGridLeaf<kEnc>> {
+  using Type = LossySubGrid;
+  static BlockPlace place(const LossyContext& ctx, const LossySubGrid& b) {
+    return place_of<kEnc>(ctx, b);
+  }
+};
+template <int kEnc>
+struct GridBlock<LossySharedLeaf<kEnc>> {
+  using Type = LossySubGridShared;
+  static BlockPlace place(const LossyContext& ctx, const LossySubGridShared& b) {
+    return place_of<kEnc>(ctx, b);
+  }
+};
+
 // The grid formats' scene: a BVH over sub-grid blocks, the side tables the blocks refer to, and
 // optionally a second BVH of leftover triangles.
 template <class Leaf>
@@ -226,6 +312,61 @@ class GridScene final : public BvhScene<Leaf> {
       return false;
     }
     return true;
+  }
+
+  // Every block the BVH's leaves hold (each once), decoded as the leaves decode it, in leaf order;
+  // then the leftover triangles.
+  std::optional<DecodedTriangles> decoded_triangles() const override {
+    using Block = typename GridBlock<Leaf>::Type;
+    const typename Leaf::Context& c = this->ctx;
+    DecodedTriangles out;
+    auto append = [&](const uint8_t* p) {
+      const Block& b = *reinterpret_cast<const Block*>(p);
+      const BlockPlace at = GridBlock<Leaf>::place(c, b);
+      SubGridVerts w;
+      Leaf::decode(c, b, w);
+      append_subgrid_triangles(
+          w, at.rx, at.ry, c.grids[at.grid].geom,
+          [&](uint32_t i, uint32_t j) { return (at.flips >> (4 * j + i)) & 1; },
+          [&](uint32_t i, uint32_t j, uint32_t tri) {
+            return grid_face(c.grids[at.grid], c.faces, at.gx + i, at.gy + j, tri);
+          },
+          out);
+    };
+    // The walk of validate(): the boxes are filled in as it expects them.
+    auto leaf = [&](const uint8_t* p, Box3f& bounds, std::string*) {
+      Leaf::visit(c, p, [&](const Box3f& box, uint64_t) { bounds.extend(box); });
+      append(p);
+      return true;
+    };
+    MultiLeafValidator multi;
+    if constexpr (HasMultiLeafLayout<Leaf>)
+      multi = [&](const uint8_t* data, uint32_t k, uint32_t i, Box3f& bounds, std::string*) {
+        Leaf::visit_in_multileaf(c, data, k, int(i),
+                                 [&](const Box3f& box, uint64_t) { bounds.extend(box); });
+        // A block split into several children (sub-grid parts) is decoded once.
+        if (Leaf::primary_part(c, i)) append(data + uint64_t(i / c.parts) * Leaf::kBlockBytes);
+        return true;
+      };
+    std::string why;
+    if (!validate_bvh8(this->bvh, leaf, &why, multi))
+      throw Error("grid scene: its leaves do not decode: " + why);
+    if (tris) {
+      auto tri_leaf = [&](const uint8_t* p, Box3f& bounds, std::string*) {
+        Tri4v::visit(tris->ctx, p, [&](const Box3f& box, uint64_t) { bounds.extend(box); });
+        const auto* b = reinterpret_cast<const Tri4vBlock*>(p);
+        for (int l = 0; l < detail::distinct_lanes(b->prim); ++l) {
+          for (int k = 0; k < 3; ++k)
+            out.vertices.push_back(Vec3f(b->v[k][0][l], b->v[k][1][l], b->v[k][2][l]));
+          out.geom.push_back(b->geom[l]);
+          out.face.push_back(b->prim[l]);
+        }
+        return true;
+      };
+      if (!validate_bvh8(tris->bvh, tri_leaf, &why))
+        throw Error("grid scene: its leftover triangles do not decode: " + why);
+    }
+    return out;
   }
 };
 
@@ -289,24 +430,13 @@ void extract_triangles(const Prepared& p, const std::vector<const PolyMesh*>& me
                      ry = std::min(kSubGridRes, g.res_y - gy);
       SubGridVerts w;
       decode(si, w);
-      auto vert = [&](uint32_t i, uint32_t j) { return detail::subgrid_vertex(w, int(5 * j + i)); };
-      for (uint32_t j = 0; j + 1 < ry; ++j)
-        for (uint32_t i = 0; i + 1 < rx; ++i) {
-          if (p.gs.flipped(g, gx + i, gy + j)) {
-            out.vertices.insert(out.vertices.end(), {vert(i, j), vert(i + 1, j), vert(i, j + 1)});
-            out.vertices.insert(out.vertices.end(),
-                                {vert(i + 1, j + 1), vert(i, j + 1), vert(i + 1, j)});
-          } else {
-            out.vertices.insert(out.vertices.end(),
-                                {vert(i, j), vert(i + 1, j), vert(i + 1, j + 1)});
-            out.vertices.insert(out.vertices.end(),
-                                {vert(i, j), vert(i + 1, j + 1), vert(i, j + 1)});
-          }
-          for (int tri = 0; tri < 2; ++tri) {
-            out.geom.push_back(g.geom);
-            out.face.push_back(grid_face(table[gi], faces, gx + i, gy + j, tri));
-          }
-        }
+      append_subgrid_triangles(
+          w, rx, ry, g.geom,
+          [&](uint32_t i, uint32_t j) { return p.gs.flipped(g, gx + i, gy + j); },
+          [&](uint32_t i, uint32_t j, uint32_t tri) {
+            return grid_face(table[gi], faces, gx + i, gy + j, tri);
+          },
+          out);
     }
   }
   for (const LeftoverTriangle& t : p.gs.triangles) {

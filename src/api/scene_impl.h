@@ -4,10 +4,12 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "core/ray.h"
+#include "slimrt/decoded.h"
 #include "slimrt/scene.h"
 
 namespace slim {
@@ -35,6 +37,10 @@ struct Scene::Impl {
   virtual bool occluded(TravRay& ray) const = 0;
   virtual void intersect_counted(TravRay& ray, HitRecord& hit, TraversalCounters& c) const = 0;
   virtual bool validate(std::string* why) const = 0;
+  // The triangles the scene intersects, decoded from what it stores (Scene::decoded_triangles):
+  // overridden by the formats with their own geometry; std::nullopt where the scene intersects the
+  // input's fan triangles, or cannot decode its leaves.
+  virtual std::optional<DecodedTriangles> decoded_triangles() const { return std::nullopt; }
 };
 
 // Format builders (one per file under api/). Each fills stats/mem/bounds except build time.

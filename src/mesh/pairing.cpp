@@ -8,30 +8,23 @@
 //   3. sort descending by (BBSA, smaller vertex, larger vertex) with an LSD radix sort;
 //   4. greedy scan: runs of equal keys are twins; pair two of them when both triangles are free.
 //
-// Three implementations of stages 1-4 give the same pairs (EdgeOrder; tests/test_pairing.cpp
-// checks them against a std::stable_sort of the explicit table):
-//   - FullTable (coordinate keys always; index keys on request): 16 B records with the packed key
-//     (BBSA float bits : smaller vertex : larger vertex, or BBSA24 : midpoint 3 x 24), LSD radix
-//     sort over all key bits (7 passes of 11 bits for 1M vertices), linear scan;
-//   - TwinSort (default for index keys): a counting sort of the half-edges by their smaller
-//     vertex brings twins together (buckets hold ~3 edges); each run of >= 2 twins becomes one
-//     8 B edge record, emitted in ascending (smaller, larger) vertex order, so a stable radix
-//     sort by the 31 BBSA bits alone (sort_edges: one MSD pass, two LSD passes in cache) read
-//     backwards gives exactly the paper's descending (BBSA, smaller, larger) order; boundary
-//     edges never enter the sort. The records and the sort's second buffer live in the counting
-//     sort's buckets: 83 MB of scratch on fg_terrain_hawaii instead of 119 with 12 B records in
-//     an array of their own;
-//   - Local: the twins as in TwinSort, then the greedy scan's result is computed from each
-//     triangle's neighbours without any global sort (see local_scan): fewer cache misses, more
-//     instructions.
-// One thread, thread CPU time on the shared 2-core build VM (best of 3), pairing alone:
-//   fg_terrain_hawaii (2M triangles, TIN):      TwinSort 7.3 M triangles/s (~8.5-9 whole
-//   pair_triangles, cold or warm, after the memory diet of find_twins/sorted_scan), Local 6.5,
-//   FullTable 2.4 jittered grid, 2M / 8M triangles (coherent): TwinSort 5.7 / 6.2, Local 6.8 / 8.6
-// so TwinSort (the paper's sort) is the default and Local is kept for very large meshes. The
-// whole pair_triangles on hawaii runs at 10.2 M triangles/s (best of 4 warm calls in one process;
-// a process's first call pays the first touch of fresh pages, 2x slower).
+// Two implementations of stages 1-4, with the same order:
+//   - coordinate keys: the full table, 16 B records with the packed key (BBSA24 : midpoint
+//     3 x 24), LSD radix sort over all key bits, linear scan (coordinate_table);
+//   - index keys, TwinSort: a counting sort of the half-edges by their smaller vertex brings
+//     twins together (buckets hold ~3 edges); each run of >= 2 twins becomes one 8 B edge record,
+//     emitted in ascending (smaller, larger) vertex order, so a stable radix sort by the 31 BBSA
+//     bits alone (sort_edges: one MSD pass, two LSD passes in cache) read backwards gives exactly
+//     the paper's descending (BBSA, smaller, larger) order; boundary edges never enter the sort.
+//     The records and the sort's second buffer live in the counting sort's buckets (83 MB of
+//     scratch on fg_terrain_hawaii instead of 119 with 12 B records in an array of their own).
+// tests/pairing_orders.cpp applies the index-key order two more ways through the internals of
+// mesh/pairing_internal.h (the full table with index keys, and a local order without any global
+// sort), and tests/test_pairing.cpp checks all of them against a std::stable_sort of the explicit
+// table. On fg_terrain_hawaii (2M triangles, one thread) TwinSort pairs 7.3 M triangles/s, the
+// local order 6.5 and the index-key full table 2.4, so the library keeps TwinSort.
 #include "mesh/pairing.h"
+#include "mesh/pairing_internal.h"
 
 #include <algorithm>
 #include <chrono>
@@ -51,41 +44,14 @@
 
 namespace slim {
 
+using namespace pairing_detail;
+
 namespace {
 
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
-
-constexpr uint32_t kNone = 0xffffffffu;
-
-// kNone in every entry: a memset (0xff bytes), a sequential stream instead of the random writes
-// of the entries that stay kNone.
-void fill_none(uint32_t* p, size_t n) {
-  if (n) std::memset(p, 0xff, n * sizeof(uint32_t));  // p is null for an empty array
-}
-
-SLIM_INLINE uint32_t float_bits(float f) {
-  uint32_t u;
-  std::memcpy(&u, &f, 4);
-  return u;
-}
-
-SLIM_INLINE bool same_bits(const Vec3f& a, const Vec3f& b) {
-  return std::memcmp(&a, &b, sizeof(Vec3f)) == 0;
-}
-
-// Surface area of the edge's bounding box, halved (the factor 2 changes no order). Symmetric in
-// (p, q) bit for bit, so twin half-edges get the same value. Axis-aligned edges give 0 and sort
-// last (paper, "Halfedge table sorting"). An overflow to NaN counts as +inf.
-SLIM_INLINE float edge_box_area(const Vec3f& p, const Vec3f& q) {
-  Vec3f d = abs(q - p);
-  float a = d.x * d.y + d.y * d.z + d.z * d.x;
-  return a >= 0.0f ? a : kInf;
-}
-
-int bit_width(uint64_t x) { return x ? 64 - __builtin_clzll(x) : 0; }
 
 // Digits of <= 11 bits (2048 buckets: the histograms of all passes stay in L1/L2) covering key
 // bits [from, to) evenly.
@@ -154,90 +120,6 @@ struct MidpointQuantizer {
   }
 };
 
-SLIM_INLINE const Vec3f& corner(const PairingInput& in, uint32_t tri, int k) {
-  return in.vertices[in.tris[3 * size_t(tri) + k]];
-}
-SLIM_INLINE int next3(int k) { return k == 2 ? 0 : k + 1; }
-
-// Greedy scan state (paper, "Greedy pairing"). The scan reads one bit per triangle ("paired"; a
-// bit set of T/8 bytes stays in cache where a 4 B-per-triangle array would not) and writes the
-// accepted twins into mate[t] = the half-edge of t's partner on the shared edge (3 * partner +
-// corner), kNone for unpaired triangles. twin[h] (only if asked for, for the augmenting pass of
-// the full table) is the other half-edge of a manifold edge, kNone otherwise.
-struct Greedy {
-  const PairingInput& in;
-  bool verify_positions;
-  std::vector<uint64_t> used;
-  LargeArray<uint32_t> mate;
-  uint64_t pairs = 0;  // accepted so far
-  LargeArray<uint32_t> twin;
-  uint64_t nonmanifold = 0;
-
-  Greedy(const PairingInput& i, bool verify, bool want_twins)
-      : in(i), verify_positions(verify), used((i.tri_count + 63) / 64, 0) {
-    mate = LargeArray<uint32_t>(i.tri_count);
-    fill_none(mate.data(), mate.size());
-    if (want_twins) {
-      twin = LargeArray<uint32_t>(3 * i.tri_count);
-      fill_none(twin.data(), twin.size());
-    }
-  }
-
-  SLIM_INLINE bool is_used(uint32_t t) const { return (used[t >> 6] >> (t & 63)) & 1; }
-  SLIM_INLINE void set_used(uint32_t t) { used[t >> 6] |= uint64_t(1) << (t & 63); }
-
-  bool compatible(uint32_t ha, uint32_t hb) const {
-    uint32_t ta = ha / 3, tb = hb / 3;
-    if (ta == tb) return false;
-    if (in.groups && in.groups[ta] != in.groups[tb]) return false;
-    if (!verify_positions) return true;
-    // Different edges may share a compressed key: accept real shared edges only.
-    TrianglePair p{std::min(ta, tb), std::max(ta, tb), uint8_t((ta < tb ? ha : hb) % 3),
-                   uint8_t((ta < tb ? hb : ha) % 3)};
-    return pair_shares_edge(in, p, true);
-  }
-
-  SLIM_INLINE void set_twins(uint32_t ha, uint32_t hb) {
-    if (!twin.empty()) {
-      twin[ha] = hb;
-      twin[hb] = ha;
-    }
-  }
-
-  SLIM_INLINE void accept(uint32_t ha, uint32_t hb) {
-    set_used(ha / 3);
-    set_used(hb / 3);
-    mate[ha / 3] = hb;
-    mate[hb / 3] = ha;
-    pairs++;
-  }
-
-  // Twins already known to be compatible.
-  SLIM_INLINE void accept_if_free(uint32_t ha, uint32_t hb) {
-    if (!is_used(ha / 3) && !is_used(hb / 3)) accept(ha, hb);
-  }
-
-  void two(uint32_t ha, uint32_t hb) {
-    if (!compatible(ha, hb)) return;
-    set_twins(ha, hb);
-    accept_if_free(ha, hb);
-  }
-
-  // A run of k >= 3 equal keys (an edge of 3+ triangles, or a key collision): pair the first two
-  // eligible, then the next two, ...
-  void run(const uint32_t* he, size_t k) {
-    nonmanifold++;
-    for (size_t x = 0; x + 1 < k; ++x) {
-      if (is_used(he[x] / 3)) continue;
-      for (size_t y = x + 1; y < k; ++y) {
-        if (is_used(he[y] / 3) || !compatible(he[x], he[y])) continue;
-        accept_if_free(he[x], he[y]);
-        break;
-      }
-    }
-  }
-};
-
 // Pairs of `mate` (npairs of them), ascending by a; the unpaired triangles; the figures. Without
 // branches (whether t starts a pair is a coin toss): every entry is written at the next free
 // position (one spare entry at the end), and the position moves on only if the entry is kept; the
@@ -272,94 +154,6 @@ void collect(const PairingInput& in, const uint32_t* mate, uint64_t npairs, Pair
   s.paired_fraction = in.tri_count ? double(2 * s.pairs) / double(in.tri_count) : 0.0;
 }
 
-// Full-table form: 16 B records with the packed key, sorted over all key bits.
-struct HalfEdgeRec {
-  uint64_t lo;  // key bits 0..63
-  uint32_t hi;  // key bits 64..95
-  uint32_t he;  // 3 * triangle + corner (the edge from that corner to the next)
-};
-static_assert(sizeof(HalfEdgeRec) == 16, "half-edge record is 16 bytes (paper: 16 B per entry)");
-
-void full_table(const PairingInput& in, bool coordinate_keys, Greedy& g, PairingStats& st) {
-  const uint64_t T = in.tri_count;
-  auto t0 = Clock::now();
-  LargeArray<HalfEdgeRec> table(3 * T);
-  size_t n = 0;
-  int key_bits;
-  if (!coordinate_keys) {
-    // Key = BBSA float bits (31 bits: areas >= 0, so the bits order like the values) : smaller
-    // vertex : larger vertex, each vertex in just enough bits for the vertex count; complemented
-    // so that an ascending sort gives the paper's descending order.
-    const int vb = std::max(1, bit_width(in.vertex_count ? in.vertex_count - 1 : 0));
-    key_bits = 31 + 2 * vb;
-    using u128 = unsigned __int128;
-    const u128 all = (u128(1) << key_bits) - 1;
-    for (uint64_t t = 0; t < T; ++t) {
-      const uint32_t* v = &in.tris[3 * t];
-      for (int k = 0; k < 3; ++k) {
-        uint32_t i0 = v[k], i1 = v[next3(k)];
-        if (i0 == i1) continue;  // degenerate edge: never paired on
-        uint32_t v0 = std::min(i0, i1), v1 = std::max(i0, i1);
-        float area = edge_box_area(in.vertices[v0], in.vertices[v1]);
-        u128 key = all - ((u128(float_bits(area)) << (2 * vb)) | (u128(v0) << vb) | v1);
-        table[n++] = {uint64_t(key), uint32_t(key >> 64), uint32_t(3 * t + k)};
-      }
-    }
-  } else {
-    // Paper, "Edge key representation & compression": BBSA (its float bits 30..7, order kept)
-    // and the edge midpoint quantized to 24 bits per axis: 96 key bits + the half-edge id = 16 B.
-    Box3f box;
-    for (uint64_t t = 0; t < T; ++t)
-      for (int k = 0; k < 3; ++k) box.extend(corner(in, uint32_t(t), k));
-    MidpointQuantizer mq(box);
-    key_bits = 96;
-    for (uint64_t t = 0; t < T; ++t) {
-      for (int k = 0; k < 3; ++k) {
-        const Vec3f& p = corner(in, uint32_t(t), k);
-        const Vec3f& q = corner(in, uint32_t(t), next3(k));
-        if (same_bits(p, q)) continue;
-        uint64_t area24 = float_bits(edge_box_area(p, q)) >> 7;
-        Vec3f m = (p + q) * 0.5f;  // + is commutative bit for bit: twins agree
-        uint64_t mx = mq.q(m.x, 0), my = mq.q(m.y, 1), mz = mq.q(m.z, 2);
-        // 96-bit key area24 : mx : my : mz, complemented.
-        uint32_t hi = ~uint32_t((area24 << 8) | (mx >> 16));
-        uint64_t lo = ~(((mx & 0xffff) << 48) | (my << 24) | mz);
-        table[n++] = {lo, hi, uint32_t(3 * t + k)};
-      }
-    }
-  }
-  st.half_edges = n;
-  st.table_s = seconds_since(t0);
-
-  t0 = Clock::now();
-  LargeArray<HalfEdgeRec> tmp(n);
-  Digit digits[12];
-  int nd = cut_digits(0, std::min(key_bits, 64), digits);
-  nd += cut_digits(64, key_bits, digits + nd);
-  const HalfEdgeRec* s =
-      radix_sort(table.data(), tmp.data(), n, digits, nd, [](const HalfEdgeRec& r, Digit d) {
-        uint64_t v = d.shift >= 64 ? uint64_t(r.hi) >> (d.shift - 64) : r.lo >> d.shift;
-        return uint32_t(v) & ((1u << d.bits) - 1);
-      });
-  st.sort_s = seconds_since(t0);
-
-  t0 = Clock::now();
-  std::vector<uint32_t> run;
-  for (size_t i = 0; i < n;) {
-    size_t j = i + 1;
-    while (j < n && s[j].lo == s[i].lo && s[j].hi == s[i].hi) ++j;
-    if (j - i == 2) {
-      g.two(s[i].he, s[i + 1].he);
-    } else if (j - i > 2) {
-      run.clear();
-      for (size_t x = i; x < j; ++x) run.push_back(s[x].he);
-      g.run(run.data(), run.size());
-    }
-    i = j;
-  }
-  st.scan_s = seconds_since(t0);
-}
-
 // Index keys without the full table: twins found by a counting sort on the smaller vertex.
 // Edge record (8 B): BBSA bits (31 bits) << 32 | first half-edge of the edge (smallest id). Its
 // twin is link[first]; a record whose first half-edge has no link is a run of 3+ twins (found
@@ -369,27 +163,9 @@ void full_table(const PairingInput& in, bool coordinate_keys, Greedy& g, Pairing
 SLIM_INLINE uint32_t rec_key(uint64_t r) { return uint32_t(r >> 32); }
 SLIM_INLINE uint32_t rec_half_edge(uint64_t r) { return uint32_t(r); }
 
-// Twins of the mesh: link[h] = the twin of h for manifold edges (two compatible half-edges),
-// kNone otherwise; runs of 3+ equal keys (edges of 3+ triangles) as [count, half-edges
-// ascending...] in `runs`, and for each half-edge of a run its run offset (run_of, sorted by
-// half-edge). 4 B per half-edge: the edge box area is recomputed from the two corners where it is
-// needed again (augment, local_scan), which is bit-identical (edge_box_area is symmetric and
-// -ffp-contract=off).
-struct Twins {
-  LargeArray<uint32_t> link;
-  // The counting sort's buckets (8 B per half-edge). With edge records asked for, the records
-  // overwrite the buckets as they are read (slots[0, ne)), and slots[ne, 2 ne) is the radix
-  // sort's second buffer.
-  LargeArray<uint64_t> slots;
-  std::vector<uint32_t> runs;
-  std::vector<std::pair<uint32_t, uint32_t>> run_of;
-  std::vector<uint64_t> in_run;  // bit per triangle: has a half-edge in a run
+}  // namespace
 
-  uint32_t run_offset(uint32_t h) const {
-    auto it = std::lower_bound(run_of.begin(), run_of.end(), std::make_pair(h, 0u));
-    return it != run_of.end() && it->first == h ? it->second : kNone;
-  }
-};
+namespace pairing_detail {
 
 // Builds the twins (and, if `emit`, one record per run of >= 2 twins into tw.slots[0, ne), in
 // ascending (smaller, larger) vertex order: the input of the area-only radix sort, with the
@@ -495,6 +271,10 @@ void find_twins(const PairingInput& in, Greedy& g, Twins& tw, bool emit, size_t*
   if (edge_count) *edge_count = ne;
 }
 
+}  // namespace pairing_detail
+
+namespace {
+
 // The paper's order by a stable radix sort of the edge records on the BBSA bits alone: one MSD
 // pass on the top 11 bits (its histogram counted while the records were emitted), then 2 LSD
 // passes of 10 bits inside each bucket, which mostly fits in L2; buckets of a few records take
@@ -589,97 +369,6 @@ void sorted_scan(Greedy& g, Twins& tw, size_t ne, const uint32_t* top_hist, Pair
     mate[b / 3] = a;
   }
   g.pairs += ne - w;
-  st.scan_s = seconds_since(t0);
-}
-
-// The same pairs without a global sort (EdgeOrder::Local). The greedy scan over a
-// strict total order of candidate pairs accepts exactly the pairs that are "locally dominant"
-// when they are accepted: heavier than every other candidate of both triangles among free
-// triangles (R. Preis, "Linear time 1/2-approximation algorithm for maximum weighted matching in
-// general graphs", STACS 1999). So: from a free triangle, follow best-candidate pointers (the
-// priority rises along the path) until two triangles choose each other, pair them, go on. The
-// order is the paper's: (BBSA, smaller vertex, larger vertex) descending, and inside a run of 3+
-// twins the run's pair order (first two eligible first). Only the neighbours of a triangle are
-// touched, in mesh order: no table of all edges is sorted or scanned.
-struct Priority {
-  uint64_t hi = 0, lo = 0;  // BBSA bits : smaller vertex | larger vertex : run positions
-  bool operator>(const Priority& o) const { return hi > o.hi || (hi == o.hi && lo > o.lo); }
-};
-struct Candidate {
-  uint32_t partner = kNone;
-  uint32_t h = kNone, o = kNone;  // own half-edge, partner's half-edge
-  Priority prio;
-};
-
-SLIM_INLINE Priority edge_priority(uint32_t area_bits, uint32_t i0, uint32_t i1, uint32_t i,
-                                   uint32_t j) {
-  uint32_t v0 = std::min(i0, i1), v1 = std::max(i0, i1);
-  return {uint64_t(area_bits) << 32 | v0, uint64_t(v1) << 32 | (0xffffu - i) << 16 | (0xffffu - j)};
-}
-
-void local_scan(const PairingInput& in, Greedy& g, const Twins& tw, PairingStats& st) {
-  auto t0 = Clock::now();
-  const uint32_t* tris = in.tris;
-  auto best = [&](uint32_t x) {
-    Candidate c;
-    const uint32_t* v = &tris[3 * size_t(x)];
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t h = 3 * x + k;
-      const uint32_t o = tw.link[h];
-      if (o != kNone) {
-        if (g.is_used(o / 3)) continue;
-        const float area = edge_box_area(in.vertices[v[k]], in.vertices[v[next3(k)]]);
-        Priority p = edge_priority(float_bits(area), v[k], v[next3(k)], 0, 1);
-        if (p > c.prio || c.partner == kNone) c = {o / 3, h, o, p};
-      }
-    }
-    if ((tw.in_run[x / 64] >> (x % 64)) & 1) {
-      for (int k = 0; k < 3; ++k) {
-        const uint32_t h = 3 * x + k;
-        const uint32_t off = tw.run_offset(h);
-        if (off == kNone) continue;
-        const uint32_t* run = &tw.runs[off + 1];
-        const uint32_t cnt = std::min<uint32_t>(tw.runs[off], 0xffff);
-        uint32_t i = 0;
-        while (i < cnt && run[i] != h) ++i;
-        if (i == cnt) continue;
-        for (uint32_t j = 0; j < cnt; ++j) {
-          const uint32_t o = run[j], n = o / 3;
-          if (j == i || n == x || g.is_used(n) || !g.compatible(h, o)) continue;
-          const float area = edge_box_area(in.vertices[v[k]], in.vertices[v[next3(k)]]);
-          Priority p =
-              edge_priority(float_bits(area), v[k], v[next3(k)], std::min(i, j), std::max(i, j));
-          if (p > c.prio || c.partner == kNone) c = {n, h, o, p};
-        }
-      }
-    }
-    return c;
-  };
-  std::vector<uint32_t> stack;
-  for (uint64_t s = 0; s < in.tri_count; ++s) {
-    if (g.is_used(uint32_t(s))) continue;
-    stack.push_back(uint32_t(s));
-    while (!stack.empty()) {
-      const uint32_t x = stack.back();
-      if (g.is_used(x)) {
-        stack.pop_back();
-        continue;
-      }
-      const Candidate c = best(x);
-      if (c.partner == kNone) {  // no free neighbour left: x stays unpaired
-        stack.pop_back();
-        continue;
-      }
-      const Candidate d = best(c.partner);  // >= c.prio, since x is one of its candidates
-      if (d.h == c.o && d.o == c.h) {  // the same candidate: x and its partner choose each other
-        g.accept(c.h, c.o);
-        stack.pop_back();
-      } else {
-        stack.push_back(c.partner);
-      }
-    }
-  }
-  for (size_t r = 0; r < tw.runs.size(); r += tw.runs[r] + 1) g.nonmanifold++;
   st.scan_s = seconds_since(t0);
 }
 
@@ -781,45 +470,56 @@ bool find_shared_edge_by_position(const PairingInput& in, uint32_t a, uint32_t b
   return false;
 }
 
-using enum EdgeOrder;
+// Paper, "Edge key representation & compression": the full table with coordinate keys, BBSA (its
+// float bits 30..7, order kept) and the edge midpoint quantized to 24 bits per axis: 96 key bits +
+// the half-edge id = 16 B per record, sorted over all key bits.
+void coordinate_table(const PairingInput& in, Greedy& g, PairingStats& st) {
+  const uint64_t T = in.tri_count;
+  auto t0 = Clock::now();
+  LargeArray<HalfEdgeRec> table(3 * T);
+  size_t n = 0;
+  Box3f box;
+  for (uint64_t t = 0; t < T; ++t)
+    for (int k = 0; k < 3; ++k) box.extend(corner(in, uint32_t(t), k));
+  MidpointQuantizer mq(box);
+  for (uint64_t t = 0; t < T; ++t) {
+    for (int k = 0; k < 3; ++k) {
+      const Vec3f& p = corner(in, uint32_t(t), k);
+      const Vec3f& q = corner(in, uint32_t(t), next3(k));
+      if (same_bits(p, q)) continue;
+      uint64_t area24 = float_bits(edge_box_area(p, q)) >> 7;
+      Vec3f m = (p + q) * 0.5f;  // + is commutative bit for bit: twins agree
+      uint64_t mx = mq.q(m.x, 0), my = mq.q(m.y, 1), mz = mq.q(m.z, 2);
+      // 96-bit key area24 : mx : my : mz, complemented.
+      uint32_t hi = ~uint32_t((area24 << 8) | (mx >> 16));
+      uint64_t lo = ~(((mx & 0xffff) << 48) | (my << 24) | mz);
+      table[n++] = {lo, hi, uint32_t(3 * t + k)};
+    }
+  }
+  st.half_edges = n;
+  st.table_s = seconds_since(t0);
+  sort_and_scan_table(table.data(), n, 96, g, st);
+}
 
-PairingResult heuristic(const PairingInput& in_arg, bool coordinate_keys, EdgeOrder full,
-                        bool aug) {
-  const uint64_t T = in_arg.tri_count;
-  if (3 * T >= 0xffffffffull)
-    throw Error("triangle pairing: " + std::to_string(T) +
-                " triangles, at most (2^32 - 1) / 3 can be paired");
-  PairingInput in = in_arg;
-  // One group for all triangles (a single mesh): no group test per candidate pair.
-  if (in.groups &&
-      std::all_of(in.groups, in.groups + T, [&](uint32_t x) { return x == in.groups[0]; }))
-    in.groups = nullptr;
+// The paper's pairing: index keys by TwinSort (find_twins + sorted_scan), coordinate keys by the
+// full table; then (aug) the augmenting pass.
+PairingResult heuristic(const PairingInput& in_arg, bool coordinate_keys, bool aug) {
+  const PairingInput in = prepare(in_arg);
   PairingResult r;
-  Greedy g(in, coordinate_keys, aug && (coordinate_keys || full == FullTable));
+  Greedy g(in, coordinate_keys, aug && coordinate_keys);
   Twins tw;
-  if (coordinate_keys || full == FullTable) {
-    full_table(in, coordinate_keys, g, r.stats);
+  if (coordinate_keys) {
+    coordinate_table(in, g, r.stats);
   } else {
     auto t0 = Clock::now();
     size_t ne = 0;
     std::vector<uint32_t> top_hist(2048, 0);
-    find_twins(in, g, tw, full == TwinSort, &ne, top_hist.data(), r.stats);
+    find_twins(in, g, tw, true, &ne, top_hist.data(), r.stats);
     r.stats.table_s = seconds_since(t0);
-    if (full == TwinSort)
-      sorted_scan(g, tw, ne, top_hist.data(), r.stats);
-    else
-      local_scan(in, g, tw, r.stats);
+    sorted_scan(g, tw, ne, top_hist.data(), r.stats);
   }
   tw.slots = {};
-  r.stats.heuristic_paired_fraction = T ? double(2 * g.pairs) / double(T) : 0.0;
-  if (aug) {
-    auto t0 = Clock::now();
-    const uint32_t* twin = tw.link.empty() ? g.twin.data() : tw.link.data();
-    r.stats.augmented_pairs = augment(in, twin, g.mate.data());
-    r.stats.augment_s = seconds_since(t0);
-  }
-  r.stats.nonmanifold_edges = g.nonmanifold;
-  collect(in, g.mate.data(), g.pairs + r.stats.augmented_pairs, r);
+  finish(in, g, !aug ? nullptr : coordinate_keys ? g.twin.data() : tw.link.data(), r);
   return r;
 }
 
@@ -938,6 +638,64 @@ PairingResult window_result(const PairingInput& in, std::vector<TrianglePair>&& 
 
 }  // namespace
 
+namespace pairing_detail {
+
+PairingInput prepare(const PairingInput& in_arg) {
+  const uint64_t T = in_arg.tri_count;
+  if (3 * T >= 0xffffffffull)
+    throw Error("triangle pairing: " + std::to_string(T) +
+                " triangles, at most (2^32 - 1) / 3 can be paired");
+  PairingInput in = in_arg;
+  if (in.groups &&
+      std::all_of(in.groups, in.groups + T, [&](uint32_t x) { return x == in.groups[0]; }))
+    in.groups = nullptr;
+  return in;
+}
+
+void sort_and_scan_table(HalfEdgeRec* table, size_t n, int key_bits, Greedy& g, PairingStats& st) {
+  auto t0 = Clock::now();
+  LargeArray<HalfEdgeRec> tmp(n);
+  Digit digits[12];
+  int nd = cut_digits(0, std::min(key_bits, 64), digits);
+  nd += cut_digits(64, key_bits, digits + nd);
+  const HalfEdgeRec* s =
+      radix_sort(table, tmp.data(), n, digits, nd, [](const HalfEdgeRec& r, Digit d) {
+        uint64_t v = d.shift >= 64 ? uint64_t(r.hi) >> (d.shift - 64) : r.lo >> d.shift;
+        return uint32_t(v) & ((1u << d.bits) - 1);
+      });
+  st.sort_s = seconds_since(t0);
+
+  t0 = Clock::now();
+  std::vector<uint32_t> run;
+  for (size_t i = 0; i < n;) {
+    size_t j = i + 1;
+    while (j < n && s[j].lo == s[i].lo && s[j].hi == s[i].hi) ++j;
+    if (j - i == 2) {
+      g.two(s[i].he, s[i + 1].he);
+    } else if (j - i > 2) {
+      run.clear();
+      for (size_t x = i; x < j; ++x) run.push_back(s[x].he);
+      g.run(run.data(), run.size());
+    }
+    i = j;
+  }
+  st.scan_s = seconds_since(t0);
+}
+
+void finish(const PairingInput& in, Greedy& g, const uint32_t* twin, PairingResult& r) {
+  const uint64_t T = in.tri_count;
+  r.stats.heuristic_paired_fraction = T ? double(2 * g.pairs) / double(T) : 0.0;
+  if (twin) {
+    auto t0 = Clock::now();
+    r.stats.augmented_pairs = augment(in, twin, g.mate.data());
+    r.stats.augment_s = seconds_since(t0);
+  }
+  r.stats.nonmanifold_edges = g.nonmanifold;
+  collect(in, g.mate.data(), g.pairs + r.stats.augmented_pairs, r);
+}
+
+}  // namespace pairing_detail
+
 bool pair_shares_edge(const PairingInput& in, const TrianglePair& p, bool by_position) {
   if (p.a == p.b || p.ea > 2 || p.eb > 2) return false;
   if (in.groups && in.groups[p.a] != in.groups[p.b]) return false;
@@ -997,9 +755,8 @@ uint64_t weld_positions(const Vec3f* vertices, uint64_t vertex_count,
   return merged;
 }
 
-PairingResult pair_by_edge_heuristic(const PairingInput& in, bool coordinate_keys,
-                                     EdgeOrder order) {
-  return heuristic(in, coordinate_keys, order, false);
+PairingResult pair_by_edge_heuristic(const PairingInput& in, bool coordinate_keys) {
+  return heuristic(in, coordinate_keys, false);
 }
 
 PairingResult pair_triangles(const PairingInput& in_arg, const PairingOptions& opt) {
@@ -1037,7 +794,7 @@ PairingResult pair_triangles(const PairingInput& in_arg, const PairingOptions& o
   double prescan_s = seconds_since(t0);
   if (!r.stats.prescan_skipped) {
     w = {};
-    r = heuristic(in, opt.coordinate_keys, EdgeOrder::TwinSort, opt.augment);
+    r = heuristic(in, opt.coordinate_keys, opt.augment);
     r.stats.window2_paired_fraction = window2;
   }
   r.stats.weld_s = weld_s;
@@ -1064,8 +821,8 @@ PairingStats pairing_stats(const PolyMesh& mesh, const PairingOptions& opt) {
     hin.tris = welded_tris.data();
   }
   if (s.prescan_skipped)
-    s.heuristic_paired_fraction = heuristic(hin, opt.coordinate_keys, EdgeOrder::TwinSort, false)
-                                      .stats.heuristic_paired_fraction;
+    s.heuristic_paired_fraction =
+        heuristic(hin, opt.coordinate_keys, false).stats.heuristic_paired_fraction;
   if (std::isnan(s.window2_paired_fraction)) {
     std::vector<TrianglePair> unused;
     const uint64_t nw = window_scan(hin, opt.coordinate_keys, 2.0, unused);

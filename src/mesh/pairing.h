@@ -51,18 +51,11 @@ struct PairingInput {
 // tri_count >= 2^32.
 PairingResult pair_triangles(const PairingInput& in, const PairingOptions& opt = {});
 
-// How the paper's descending (BBSA, smaller vertex, larger vertex) order is applied with index
-// keys; all three give the same pairs (see pairing.cpp). Coordinate keys always sort the table.
-enum class EdgeOrder {
-  FullTable,  // LSD radix sort of the whole packed-key half-edge table, then the linear scan
-  TwinSort,   // twins by a counting sort on the smaller vertex, radix sort of the edges by BBSA
-              // (default)
-  Local,      // twins as above, then the greedy order applied locally without a sort
-};
-
-// The paper's pairing alone (no weld, pre-scan or augmenting pass), index or coordinate keys.
-PairingResult pair_by_edge_heuristic(const PairingInput& in, bool coordinate_keys,
-                                     EdgeOrder order = EdgeOrder::TwinSort);
+// The paper's pairing alone (no weld, pre-scan or augmenting pass), index or coordinate keys: the
+// descending (BBSA, smaller vertex, larger vertex) order by TwinSort for index keys, the full
+// table for coordinate keys (see pairing.cpp). tests/pairing_orders.h applies the same order two
+// other ways, which give the same pairs.
+PairingResult pair_by_edge_heuristic(const PairingInput& in, bool coordinate_keys);
 
 // The paper's baseline: triangle i pairs with i+1 when both are unpaired and share an edge (two
 // corners with equal vertex indices, or with coordinate keys, bit-identical positions).

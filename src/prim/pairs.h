@@ -122,6 +122,10 @@ struct PairLeaf {
   static constexpr uint32_t kBlockPrims = W;
   static constexpr uint32_t kBlockBytes = sizeof(Block);
 
+  // Scene files' structure check: a block refers to nothing outside itself (corner() stays
+  // inside the block for any order bits).
+  static const char* check_block(const Context&, const uint8_t*) { return nullptr; }
+
   // Input corner k of the triangle in lane i (0..2W-1) of a block.
   static SLIM_INLINE Vec3f corner(const Block* b, int i, int k) {
     int g = (i >= W) + ((b->order[i] >> (2 * k)) & 3);  // vertex group: A starts at q0, B at q1

@@ -1,7 +1,7 @@
 // Scene file timings (issue 27, item 1): open time, time to the first hit, and MRays/s of the
 // mapped scene against the same scene built in memory, interleaved in one process.
 //
-//   g++ -O2 -std=c++20 -Iinclude scripts/scene_file_bench.cpp build/libslimrt.a \
+//   g++ -O2 -std=c++20 -mavx2 -mfma -Iinclude scripts/scene_file_bench.cpp build/libslimrt.a \
 //       -ltbb -lxxhash -lz -llzma -lGLU -lstb -o build/scene_file_bench
 //   build/scene_file_bench FILE.slim [SCENE CONFIG ROUNDS]
 //
@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "slimrt/render.h"
 #include "slimrt/slimrt.h"
 
 using namespace slim;

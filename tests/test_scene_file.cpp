@@ -306,6 +306,18 @@ TEST(SceneFile, StructureCheckNamesSectionAndOffset) {
   const std::string msg2 = try_open(bad, b, {}, s.rays);
   EXPECT_NE(msg2.find("section 'bvh.leaves'"), std::string::npos) << msg2;
   EXPECT_NE(msg2.find("checksum"), std::string::npos) << msg2;
+  // Pairs: an order field beyond the 3 corners of a triangle (corner() would index past the
+  // block's vertices; found by fuzz_scene_file).
+  Small pr = small_file("bvh8-pairs", "struct_pairs");
+  std::string pb = pr.bytes;
+  uint64_t pleaves = 0;
+  for (uint32_t k = 0; k < section_count(pb); ++k)
+    if (std::string(pb.data() + entry(k)) == "bvh.leaves") pleaves = get64(pb, entry(k) + 48);
+  ASSERT_GT(pleaves, 0u);
+  pb[pleaves + 240] = char(0xff);  // PairBlock<4>::order[0] (192 + 32 + 16 bytes in)
+  const std::string msg4 = try_open(bad, pb, oo, pr.rays);
+  EXPECT_NE(msg4.find("pair corner order"), std::string::npos) << msg4;
+  std::filesystem::remove(pr.path);
   // A format the check does not cover says so.
   Small g = small_file("lossy-grid", "struct_grid");
   const std::string msg3 = try_open(bad, g.bytes, oo, g.rays);

@@ -3,7 +3,8 @@
 #   CC=clang-14 CXX=clang++-14 cmake -S . -B build-fuzz -DSLIM_FUZZ=ON -DSLIM_SANITIZE=ON
 #   cmake --build build-fuzz --target slimrt_fuzz
 #
-# SLIM_FUZZ needs clang (Debian's clang-14 ships libFuzzer). The targets but `scene` do not link
+# SLIM_FUZZ needs clang (Debian's clang-14 ships libFuzzer). The targets but `scene` and
+# `scene_file` do not link
 # the whole library: each compiles just the sources it exercises (readers, decoders, the pairing)
 # with -fsanitize=fuzzer-no-link, so that coverage reaches the header-only tinyobjloader and
 # tinygltf they include, and the fuzz build stays short; `scene` links the library, which this
@@ -35,7 +36,8 @@ if(SLIM_FUZZ)
   add_dependencies(slimrt_fuzz slimrt_make_seeds)
   # One target per reader and per byte decoder; the name after fuzz_ is its corpus directory.
   # SLIM_FUZZ_SOURCES_<t>: library sources a decoder target compiles besides its own file.
-  set(SLIM_FUZZ_TARGETS obj ply gltf glb xz lossy_subgrid quantized_mesh pairing scene cluster)
+  set(SLIM_FUZZ_TARGETS obj ply gltf glb xz lossy_subgrid quantized_mesh pairing scene cluster
+                        scene_file)
   set(SLIM_FUZZ_SOURCES_lossy_subgrid src/prim/lossy_subgrid.cpp)
   set(SLIM_FUZZ_SOURCES_cluster src/prim/cluster.cpp)  # the cluster block decoder
   set(SLIM_FUZZ_SOURCES_quantized_mesh src/prim/quantized_mesh.cpp src/mesh/tessellate.cpp)
@@ -49,6 +51,10 @@ if(SLIM_FUZZ)
   # scene: every configuration through the public API, so the whole library (built here with
   # coverage instrumentation, unlike in the other build trees).
   set(SLIM_FUZZ_LIBS_scene slimrt)
+  # scene_file: Scene::open of arbitrary bytes (the library too); make_seeds writes its seeds,
+  # small scene files, with the library.
+  set(SLIM_FUZZ_LIBS_scene_file slimrt ${SLIM_XXHASH_LIB})
+  target_link_libraries(slimrt_make_seeds PRIVATE slimrt)
   target_compile_options(slimrt PRIVATE -fsanitize=fuzzer-no-link)
   foreach(t IN LISTS SLIM_FUZZ_TARGETS)
     add_executable(slimrt_fuzz_${t} fuzz/fuzz_${t}.cpp ${SLIM_FUZZ_SOURCES_${t}})

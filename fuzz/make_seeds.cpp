@@ -1,7 +1,7 @@
 // Writes the seed corpus of the fuzz targets: make_seeds OUT_DIR creates OUT_DIR/<target>/ for
 // obj, ply, gltf, glb and xz, each holding the seed files of its format (fuzz/seed_files.h), and
 // for scene, pairing, quantized_mesh and lossy_subgrid, each holding inputs in the target's own
-// byte layout (fuzz/binary_seeds.h).
+// byte layout (fuzz/binary_seeds.h), and for scene_file small scene files (Scene::save).
 // Run by ./fuzz.sh before fuzzing; nothing it writes is kept in git.
 #include <cstdio>
 #include <filesystem>
@@ -10,6 +10,7 @@
 
 #include "binary_seeds.h"
 #include "seed_files.h"
+#include "slimrt/scene.h"
 
 int main(int argc, char** argv) {
   if (argc != 2) {
@@ -62,6 +63,16 @@ int main(int argc, char** argv) {
       "0 0 0\n1e300 0 0\n0 1 0\n3 0 1 4294967295\n");
   for (const slim::seeds::BinarySeed& b : slim::seeds::binary_seeds())
     put(b.target, b.name, b.bytes);
+  // scene_file: small scene files (Scene::save) of the configurations the structure check walks,
+  // and of two it does not (their sections are still parsed and their header checked).
+  for (const char* config : {"bvh8-tri4v", "bvh8-tri4i", "qbvh8-tri4v", "clbvh-compact",
+                             "bvh8-pairs", "lossy-grid-shared", "costa-PFV"}) {
+    const fs::path p = out / "scene_file" / (std::string(config) + ".slim");
+    fs::create_directories(p.parent_path());
+    slim::Scene::build(slim::make_terrain(3, 1), slim::BuildOptions::from_config(config))
+        .save(p.string());
+    ++n;
+  }
   std::printf("make_seeds: %d files in %s\n", n, out.c_str());
   return 0;
 }

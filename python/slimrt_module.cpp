@@ -340,7 +340,7 @@ class RaycastingScene {
 
   py::dict memory() {
     py::dict d;
-    if (meshes_.empty()) {
+    if (meshes_.empty() && !opened_) {
       for (const char* k : {"geometry", "bvh", "other", "total", "triangles"}) d[k] = 0;
       d["bytes_per_triangle"] = 0.0;
     } else {
@@ -384,8 +384,31 @@ class RaycastingScene {
   std::string config() const { return options_.config_name(); }
   size_t geometry_count() const { return meshes_.size(); }
 
+  // Scene files (slim::Scene::save / open): the built scene, written atomically; a scene opened
+  // from a file traces straight from its mapping and takes no more geometry.
+  void save(const std::string& path) {
+    py::gil_scoped_release release;
+    built().save(path);
+  }
+  static std::unique_ptr<RaycastingScene> open(const std::string& path, bool verify_checksums) {
+    slim::OpenOptions o;
+    o.verify_checksums = verify_checksums;
+    slim::Scene s = [&] {
+      py::gil_scoped_release release;
+      return slim::Scene::open(path, o);
+    }();
+    auto r = std::make_unique<RaycastingScene>(s.options().config_name(), 0);
+    r->options_ = s.options();
+    r->options_.threads = 0;
+    r->scene_.emplace(std::move(s));
+    r->opened_ = true;
+    return r;
+  }
+
  private:
   uint32_t add(slim::PolyMesh&& mesh) {
+    if (opened_)
+      throw py::value_error("this scene was opened from a scene file: it takes no more geometry");
     if (meshes_.size() >= size_t(kInvalid))
       throw py::value_error("at most 2^32 - 1 geometries in a scene");
     std::lock_guard<std::mutex> lock(mutex_);
@@ -455,6 +478,7 @@ class RaycastingScene {
   py::object progress_;  // None or progress(phase, done, total)
   std::vector<slim::PolyMesh> meshes_;
   std::optional<slim::Scene> scene_;
+  bool opened_ = false;  // from a scene file (open())
   std::mutex mutex_;
 };
 
@@ -655,6 +679,13 @@ PYBIND11_MODULE(slimrt, m) {
            "Bytes the scene keeps, by part (geometry, bvh, other, total) and per triangle; "
            "input_meshes is the copy of the input kept to rebuild when geometry is added.")
       .def("stats", &RaycastingScene::stats, "Build statistics (builds the scene if needed).")
+      .def("save", &RaycastingScene::save, py::arg("path"),
+           "Writes the scene (built now if needed) as a slimrt scene file (.slim), atomically.")
+      .def_static("open", &RaycastingScene::open, py::arg("path"),
+                  py::arg("verify_checksums") = true,
+                  "A scene mapped from a scene file written by save() or `slimrt build` (no "
+                  "copy, ready to cast rays); it takes no more geometry. verify_checksums=False "
+                  "skips the per-section checksums (the header is always checked).")
       .def_property_readonly("config", &RaycastingScene::config)
       .def_property_readonly("geometry_count", &RaycastingScene::geometry_count)
       .def_static(

@@ -3,9 +3,10 @@
 set -euo pipefail
 PKGS=(cmake g++ make pkg-config libembree-dev libtbb-dev libtinyobjloader-dev libtinygltf-dev
       libstb-dev libtinyexr-dev zlib1g-dev liblzma-dev libglu1-mesa-dev libcli11-dev
-      nlohmann-json3-dev libgtest-dev libbenchmark-dev gnuplot-nox xz-utils
+      nlohmann-json3-dev libgtest-dev libbenchmark-dev gnuplot-nox xz-utils libxxhash-dev
       pybind11-dev python3-dev python3-numpy python3-pytest openmpi-bin libopenmpi-dev
       python3-open3d)
+# libxxhash-dev: the scene files' section checksums (XXH3-64, src/api/scene_file.cpp).
 # pybind11-dev, python3-dev, python3-numpy: the Python module (python/), built for Debian's
 # /usr/bin/python3; python3-pytest: its tests (./test.sh). python3-open3d (36 MB download with its
 # dependencies, about 1.5 min to install): python/examples/compare_open3d.py and the test that

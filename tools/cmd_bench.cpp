@@ -57,6 +57,13 @@ int cmd_bench(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
+  for (const std::string& sc : opt.scenes)
+    if (is_scene_file(sc))
+      throw Error(sc +
+                  ": bench builds every configuration and Embree from the input mesh, which "
+                  "a scene file does not hold; give the mesh, or time the file with `slimrt "
+                  "render " +
+                  sc + "` (MRays/s)");
   for (const std::string& c : opt.configs) bench::check_config_name(c);  // before any work
   opt.memory_budget = uint64_t(budget_mb * 1e6);
   if (!json_path.empty()) check_output_path(json_path);

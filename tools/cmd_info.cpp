@@ -112,7 +112,8 @@ int cmd_info(int argc, char** argv) {
   std::string scene_name, accel;
   bool json = false, pairs = false, costa = false, grids = false, clusters = false;
   double cluster_error = BuildOptions().cluster_error;
-  app.add_option("scene", scene_name, "mesh file or procedural scene")->required();
+  app.add_option("scene", scene_name, "mesh file, procedural scene or scene file (.slim)")
+      ->required();
   app.add_flag("--json", json, "print one JSON object");
   app.add_option("--accel", accel, "build this configuration and print its statistics");
   app.add_flag("--pairs", pairs, "triangle pairing statistics (fast-triangle-pairing)");
@@ -149,6 +150,61 @@ int cmd_info(int argc, char** argv) {
     return app.exit(e);
   }
   if (chunks > 0) return info_chunks(scene_name, chunks, spill_dir, budget_mib, chunk_accel, json);
+
+  if (is_scene_file(scene_name)) {
+    // A scene file: its figures (the input mesh is not in it, so no mesh statistics).
+    if (pairs || costa || grids || clusters)
+      throw Error(scene_name +
+                  ": --pairs, --costa, --grids and --clusters need the input mesh, "
+                  "which a scene file does not hold");
+    double open_s = 0;
+    const Scene scene = open_scene_file(scene_name, &open_s);
+    if (!accel.empty() &&
+        BuildOptions::from_config(accel).config_name() != scene.options().config_name())
+      throw Error(scene_name + " holds a " + scene.options().config_name() + " scene, not " +
+                  accel);
+    const MemoryStats m = scene.memory();
+    const SceneStats& st = scene.stats();
+    std::string why;
+    const bool valid = scene.validate(&why);
+    nlohmann::json out;
+    out["scene"] = scene_name;
+    out["open_s"] = open_s;
+    out["triangles"] = st.triangles;
+    out["faces"] = st.input_faces;
+    out["bounds"] = box_json(scene.bounds());
+    nlohmann::json a;
+    a["config"] = scene.options().config_name();
+    a["build_s"] = st.build_seconds;
+    a["primitives"] = st.primitives;
+    a["skipped_faces"] = st.skipped_faces;
+    a["bytes_geometry"] = m.geometry_bytes;
+    a["bytes_bvh"] = m.bvh_bytes;
+    a["bytes_other"] = m.other_bytes;
+    a["bytes_total"] = m.total();
+    a["bytes_per_triangle"] = m.bytes_per_triangle();
+    for (const auto& [k, v] : st.details) a["details"][k] = v;
+    a["valid"] = valid;
+    if (!why.empty()) a["validate_error"] = why;
+    out["accel"] = a;
+    if (json) {
+      std::printf("%s\n", out.dump(2).c_str());
+    } else {
+      std::printf("scene file       %s (opened in %.3f s)\n", scene_name.c_str(), open_s);
+      std::printf("faces            %llu (%llu fan triangles)\n",
+                  (unsigned long long)st.input_faces, (unsigned long long)st.triangles);
+      std::printf("\n%s: built in %.3f s over %llu primitives\n",
+                  scene.options().config_name().c_str(), st.build_seconds,
+                  (unsigned long long)st.primitives);
+      std::printf(
+          "  memory: geometry %llu B, bvh %llu B, other %llu B, total %llu B = %.2f B/triangle\n",
+          (unsigned long long)m.geometry_bytes, (unsigned long long)m.bvh_bytes,
+          (unsigned long long)m.other_bytes, (unsigned long long)m.total(), m.bytes_per_triangle());
+      for (const auto& [k, v] : st.details) std::printf("  %-24s %.6g\n", k.c_str(), v);
+      std::printf("  validate: %s%s\n", why.empty() ? "ok" : "FAILED: ", why.c_str());
+    }
+    return valid ? 0 : 1;
+  }
 
   PolyMesh mesh = load(scene_name);
   MeshSummary s = summarize(mesh);

@@ -214,26 +214,36 @@ int render_command(int argc, char** argv, const RenderRanks& ranks) {
 
   auto t0 = std::chrono::steady_clock::now();
   PolyMesh mesh;
-  {
-    StepProgress p(show_progress, "load " + scene_name);
-    mesh = load(scene_name);
-  }
-  double load_s = seconds_since(t0);
-
-  t0 = std::chrono::steady_clock::now();
   Scene scene;
-  {
-    BuildMeter meter(
-        show_progress,
-        "build " + config + " (" + std::to_string(mesh.fan_triangle_count()) + " triangles)",
-        mesh.fan_triangle_count());
-    bopt.progress = meter.callback();
-    scene = out_of_memory_context("building " + scene_name + " as " + config,
-                                  [&] { return Scene::build(mesh, bopt); });
+  double load_s = 0, build_s = 0;
+  uint64_t faces = 0, triangles = 0;
+  if (is_scene_file(scene_name)) {
+    // A scene file: opened (mapped), not built; load_s is the open time.
+    scene = open_scene_file(scene_name, &load_s);
+    config = scene.options().config_name();
+    faces = scene.stats().input_faces;
+    triangles = scene.stats().triangles;
+  } else {
+    {
+      StepProgress p(show_progress, "load " + scene_name);
+      mesh = load(scene_name);
+    }
+    load_s = seconds_since(t0);
+
+    t0 = std::chrono::steady_clock::now();
+    {
+      BuildMeter meter(
+          show_progress,
+          "build " + config + " (" + std::to_string(mesh.fan_triangle_count()) + " triangles)",
+          mesh.fan_triangle_count());
+      bopt.progress = meter.callback();
+      scene = out_of_memory_context("building " + scene_name + " as " + config,
+                                    [&] { return Scene::build(mesh, bopt); });
+    }
+    build_s = seconds_since(t0);
+    faces = mesh.face_count(), triangles = mesh.fan_triangle_count();
+    mesh = PolyMesh();  // the scene owns all it needs
   }
-  double build_s = seconds_since(t0);
-  uint64_t faces = mesh.face_count(), triangles = mesh.fan_triangle_count();
-  mesh = PolyMesh();  // the scene owns all it needs
 
   Camera cam = view_camera(scene.bounds(), view, ropt.width, ropt.height);
   ranks.check_same_scene(scene, scene_name);

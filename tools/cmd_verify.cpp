@@ -423,6 +423,12 @@ int cmd_verify(int argc, char** argv) {
                   std::to_string(budget / kBytesPerRay) + " rays, the memory limit being " +
                   format_bytes(budget) + " (half of this machine's memory)");
   }
+  if (is_scene_file(scene_name))
+    throw Error(scene_name +
+                ": verify compares each configuration with a brute force over the "
+                "input mesh, which a scene file does not hold; give the mesh, or check the file "
+                "with `slimrt info " +
+                scene_name + "` (validate: every invariant of the scene)");
   if (configs.empty()) configs = all_config_names();
   for (const std::string& c : configs) BuildOptions::from_config(c);  // unknown names: error now
 

@@ -9,6 +9,7 @@
 #include "slimrt/error.h"
 
 #include "slimrt/mesh.h"
+#include "slimrt/scene.h"
 
 namespace slim::cli {
 
@@ -16,6 +17,12 @@ int cmd_info(int argc, char** argv);
 int cmd_render(int argc, char** argv);
 int cmd_bench(int argc, char** argv);
 int cmd_verify(int argc, char** argv);  // cmd_verify.cpp
+int cmd_build(int argc, char** argv);   // cmd_build.cpp
+
+// Scene files (cmd_build.cpp): a SCENE argument ending in .slim is a scene file (Scene::open),
+// opened in `seconds`.
+bool is_scene_file(const std::string& name);
+Scene open_scene_file(const std::string& name, double* seconds = nullptr);
 
 // Runs fn(); a std::bad_alloc becomes slim::Error "out of memory while <what>", so the user
 // learns which step of which scene ran out (main() only knows the command).

@@ -1,4 +1,4 @@
-// slimrt command-line tool: info, render, bench.
+// slimrt command-line tool: info, render, bench, verify, build.
 #include <cerrno>
 #include <csignal>
 #include <cstdio>
@@ -24,8 +24,9 @@ void usage() {
                "[--mpi-root render|coordinate]\n"
                "  bench SCENE... [--config NAME...] [--threads N] [--repeat K] [--json FILE] "
                "[--plot FILE]\n"
+               "  build SCENE --config NAME -o FILE.slim [--threads N]\n"
                "SCENE is a mesh file (.obj .ply .gltf .glb, optionally .xz) or terrain:N, "
-               "torus:N, canyon:N\n");
+               "torus:N, canyon:N, or (info, render, bench, verify) a scene file FILE.slim\n");
 }
 
 }  // namespace
@@ -46,6 +47,7 @@ int main(int argc, char** argv) {
     if (cmd == "render") rc = slim::cli::cmd_render(argc - 1, argv + 1);
     if (cmd == "bench") rc = slim::cli::cmd_bench(argc - 1, argv + 1);
     if (cmd == "verify") rc = slim::cli::cmd_verify(argc - 1, argv + 1);
+    if (cmd == "build") rc = slim::cli::cmd_build(argc - 1, argv + 1);
   } catch (const slim::Error& e) {
     std::fprintf(stderr, "slimrt: error: %s\n", e.what());
     return 1;

@@ -201,6 +201,20 @@ struct SceneStats {
   std::vector<std::pair<std::string, double>> details;
 };
 
+// How Scene::open() checks a scene file (docs: the "Scene files" section of README.md).
+struct OpenOptions {
+  // Checks every section's xxHash (XXH3-64) against the section table before the scene is used:
+  // reads the whole file once (cold page cache: at disk speed). Off, only the header and the
+  // section table are checked (their own checksum, always verified) and the sections are trusted:
+  // for big files written by slimrt itself.
+  bool verify_checksums = true;
+  // Walks every node and leaf block and checks every offset and index the traversal follows
+  // (bounds-safe, reads the whole file): for files of unknown origin opened without checksums.
+  // Throws slim::Error naming the section and the byte offset of the first bad reference, or for
+  // a configuration whose leaves it cannot check yet (README.md lists them).
+  bool check_structure = false;
+};
+
 class Scene {
  public:
   Scene();
@@ -245,6 +259,20 @@ class Scene {
   // once, child boxes inside parents, quantized boxes conservative). Returns false and fills
   // `why` with the first violation.
   bool validate(std::string* why = nullptr) const;
+
+  // Writes the scene to `path` (a scene file, conventionally *.slim) atomically (slimrt/output.h):
+  // a header with the options, figures and a section table, then the buffers the scene keeps, as
+  // 64-byte aligned sections with an xxHash each. Throws slim::Error naming the path.
+  void save(const std::string& path) const;
+  // Maps a scene file read-only (mmap MAP_SHARED: processes that open the same file share its
+  // pages) and returns a scene ready to trace that reads its buffers straight from the mapping
+  // (no copy; the mapping lives as long as the scene). memory(), stats(), bounds(), options() and
+  // error_bound() are the saved scene's. A damaged, truncated, foreign or incompatible file (other
+  // version, byte order, or an instruction set this CPU lacks) throws slim::Error naming the file,
+  // the section and the byte offset.
+  static Scene open(const std::string& path, const OpenOptions& options = {});
+  // The scene file this scene maps, or "" for a scene built in memory.
+  const std::string& file() const;
 
   struct Impl;
 

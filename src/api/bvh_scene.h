@@ -2,13 +2,16 @@
 #pragma once
 
 #include <chrono>
+#include <concepts>
 #include <cstdint>
+#include <cstring>
 #include <functional>
 #include <string>
 #include <vector>
 
 #include <tbb/enumerable_thread_specific.h>
 
+#include "api/scene_file.h"
 #include "api/scene_impl.h"
 #include "bvh/build.h"
 #include "bvh/bvh8.h"
@@ -114,6 +117,74 @@ class BvhScene : public Scene::Impl {
     }
     return true;
   }
+
+  // Scene files: the BVH's arenas and figures, the source fingerprint and the leaf context's
+  // buffers (Leaf::context_sections), under `p` ("" or "tris." for a second BVH).
+  struct BvhMeta {
+    uint64_t root;
+    Box3f bounds;
+    uint32_t block_bytes, reserved;
+    uint64_t node_bytes, multileaf_bytes, leaf_data_bytes;
+    Bvh8Stats stats;
+  };
+  void bvh_sections(SectionVisitor& v, const std::string& p) {
+    v.arena(p + "bvh.nodes", bvh.nodes);
+    v.arena(p + "bvh.leaves", bvh.leaves);
+    BvhMeta m;
+    std::memset(static_cast<void*>(&m), 0, sizeof m);  // no uninitialized padding in the file
+    m.root = bvh.root;
+    m.bounds = bvh.bounds;
+    m.block_bytes = bvh.block_bytes;
+    m.node_bytes = bvh.node_bytes;
+    m.multileaf_bytes = bvh.multileaf_bytes;
+    m.leaf_data_bytes = bvh.leaf_data_bytes;
+    m.stats = bvh.stats;
+    v.pod(p + "bvh.meta", m);
+    bvh.root = m.root;
+    bvh.bounds = m.bounds;
+    bvh.block_bytes = m.block_bytes;
+    bvh.node_bytes = m.node_bytes;
+    bvh.multileaf_bytes = m.multileaf_bytes;
+    bvh.leaf_data_bytes = m.leaf_data_bytes;
+    bvh.stats = m.stats;
+    v.pod(p + "bvh.expected", expected);
+    if constexpr (requires { Leaf::context_sections(v, p, ctx); })
+      Leaf::context_sections(v, p, ctx);
+  }
+  void sections(SectionVisitor& v) override { bvh_sections(v, ""); }
+
+  // The checks of an opened BVH (Scene::Impl::check_opened). The deep walk needs the leaf's
+  // block check (Leaf::check_block, and Leaf::check_multileaf for layouts with data of their
+  // own); formats without them cannot be checked that way (README.md).
+  static constexpr bool kCheckable = requires(const typename Leaf::Context& c, const uint8_t* b) {
+    { Leaf::check_block(c, b) } -> std::same_as<const char*>;
+  }
+  &&(!HasMultiLeafLayout<Leaf> ||
+     requires(const typename Leaf::Context& c, const uint8_t* b) {
+       { Leaf::check_multileaf(c, b, 1u, uint64_t(0)) } -> std::same_as<const char*>;
+     }) &&
+      !HasMultiLeafParts<Leaf>;
+  void check_bvh(const std::string& p, bool deep) const {
+    check_bvh_root(bvh, p, Leaf::kBlockBytes);
+    if (!deep) return;
+    if constexpr (kCheckable) {
+      BvhWalkHooks h;
+      const uint8_t* leaves = bvh.leaves.data();
+      h.block = [&](uint64_t off) { return Leaf::check_block(ctx, leaves + off); };
+      if constexpr (HasMultiLeafLayout<Leaf>)
+        h.multi = [&](uint64_t off, uint32_t k) {
+          // off + 72 <= size: checked by the walk.
+          return Leaf::check_multileaf(ctx, leaves + off + sizeof(MultiLeaf8), k,
+                                       bvh.leaves.size() - off - sizeof(MultiLeaf8));
+        };
+      walk_bvh_checked(bvh, p, h);
+    } else {
+      throw SectionFault{p + "bvh.leaves", 0,
+                         "the structure check (OpenOptions::check_structure) is not available "
+                         "for this leaf format; open with verify_checksums"};
+    }
+  }
+  void check_opened(bool deep) const override { check_bvh("", deep); }
 
   // Builds the BVH over `prim_count` primitives of `src` (Leaf::encode, Leaf::source_key and
   // Leaf::source_bounds read it), fills bvh, expected, bounds and the BVH part of stats/mem.

@@ -6,6 +6,8 @@
 
 #include <string>
 
+#include "api/scene_impl.h"
+
 #if defined(__x86_64__) || defined(__i386__)
 #include <cpuid.h>
 #endif
@@ -42,6 +44,22 @@ void check_cpu_isa() {
                 " (CMake SLIM_ISA) but this CPU lacks " + missing +
                 ": rebuild with -DSLIM_ISA=avx2 (or auto, or scalar)");
 #endif
+}
+
+bool cpu_has_isa(const std::string& isa) {
+  if (isa == "scalar") return true;
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_cpu_init();
+  unsigned a = 0, b = 0, c = 0, d = 0;
+  const bool f16c = __get_cpuid(1, &a, &b, &c, &d) && (c & bit_F16C);
+  const bool avx2 = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") &&
+                    __builtin_cpu_supports("bmi") && __builtin_cpu_supports("bmi2") && f16c;
+  if (isa == "avx2") return avx2;
+  if (isa == "avx512")
+    return avx2 && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+           __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
+#endif
+  return false;
 }
 
 }  // namespace slim

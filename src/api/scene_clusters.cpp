@@ -247,6 +247,7 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   side->shrink_to_fit();
   s->ctx.lattice = lat;
   s->ctx.side = side->data();
+  s->ctx.side_bytes = side->size();
   s->keepalive = side;
   s->mem.geometry_bytes += side->size();
   s->error_bound = z->max_error;  // Scene::error_bound(); 0 for cluster-lossless
@@ -296,6 +297,11 @@ ClusterTriangles cluster_triangles(const std::vector<const PolyMesh*>& meshes,
   }
   t.max_error = z.max_error;
   return t;
+}
+
+std::unique_ptr<Scene::Impl> empty_cluster_scene(const BuildOptions& opt) {
+  if (opt.leaf == Leaf::LosslessClusters) return std::make_unique<BvhScene<ClusterLeaf<true>>>();
+  return std::make_unique<BvhScene<ClusterLeaf<false>>>();
 }
 
 std::unique_ptr<Scene::Impl> build_cluster_scene(const std::vector<const PolyMesh*>& meshes,

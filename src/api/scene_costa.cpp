@@ -65,7 +65,56 @@ class CostaScene : public BvhScene<CostaLeaf<P, F, V>> {
  public:
   std::shared_ptr<const CostaData> data;
 
+  // Scene files: the BVH, the store's arrays and the face map (an opened scene has no `data`:
+  // its context points into the mapping).
+  void sections(SectionVisitor& v) override {
+    this->bvh_sections(v, "");
+    auto& c = this->ctx;
+    auto& r = c.view.r;
+    QuantizedMesh::Counts n{};
+    uint64_t face_map_bytes = 0, face_base = 0;
+    if (v.saving()) {
+      n = data->store.counts();
+      face_map_bytes = data->face_map.bytes();
+      face_base = data->face_base.size();
+    }
+    v.array("costa.offsets", r.offsets, n.offsets);
+    v.array("costa.residuals", r.residuals, n.residual_bytes);
+    v.array("costa.faces", r.faces, n.faces);
+    v.array("costa.packed_faces", r.packed_faces, n.packed_face_bytes);
+    v.array("costa.vertices", r.vertices, n.vertices);
+    v.array("costa.qvertices", r.qvertices, n.qvertices);
+    v.array("costa.face_map", c.faces.bits, face_map_bytes);
+    v.array("costa.face_base", c.faces.face_base, face_base);
+    struct {
+      double avg;
+      int64_t residual_min;
+      VertexQuantizer quant;
+      uint32_t residual_bits, face_bits, face_width, mesh_count, prim_count, reserved;
+    } k;
+    std::memset(static_cast<void*>(&k), 0, sizeof k);
+    k.avg = r.avg;
+    k.residual_min = r.residual_min;
+    k.quant = r.quant;
+    k.residual_bits = r.residual_bits;
+    k.face_bits = r.face_bits;
+    k.face_width = c.faces.width;
+    k.mesh_count = c.faces.mesh_count;
+    k.prim_count = c.prim_count;
+    v.pod("costa.params", k);
+    r.avg = k.avg;
+    r.residual_min = k.residual_min;
+    r.quant = k.quant;
+    r.residual_bits = k.residual_bits;
+    r.face_bits = k.face_bits;
+    c.faces.width = k.face_width;
+    c.faces.mesh_count = k.mesh_count;
+    c.prim_count = k.prim_count;
+  }
+
   bool validate(std::string* why) const override {
+    // An opened scene: the BVH walk only (its store is not a QuantizedMesh object).
+    if (!data) return BvhScene<CostaLeaf<P, F, V>>::validate(why);
     // The store first, so that the leaf walk below only decodes well-formed primitives.
     if (!data->store.validate(why)) return false;
     if (data->face_map.size() != data->store.prim_count()) {
@@ -283,6 +332,28 @@ NgonMesh store_order(const NgonMesh& loaded, const Bvh2& b2) {
 }
 
 }  // namespace
+
+std::unique_ptr<Scene::Impl> empty_costa_scene(const BuildOptions& opt) {
+  const CostaFlags f = CostaFlags::parse(opt.costa);
+  switch ((f.P ? 4 : 0) | (f.F ? 2 : 0) | (f.V ? 1 : 0)) {
+    case 0:
+      return std::make_unique<CostaScene<false, false, false>>();
+    case 1:
+      return std::make_unique<CostaScene<false, false, true>>();
+    case 2:
+      return std::make_unique<CostaScene<false, true, false>>();
+    case 3:
+      return std::make_unique<CostaScene<false, true, true>>();
+    case 4:
+      return std::make_unique<CostaScene<true, false, false>>();
+    case 5:
+      return std::make_unique<CostaScene<true, false, true>>();
+    case 6:
+      return std::make_unique<CostaScene<true, true, false>>();
+    default:
+      return std::make_unique<CostaScene<true, true, true>>();
+  }
+}
 
 std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*>& meshes,
                                                const BuildOptions& opt) {

@@ -305,6 +305,48 @@ class GridScene final : public BvhScene<Leaf> {
     BvhScene<Leaf>::intersect_counted(ray, hit, c);
     if (tris) tris->intersect_counted(ray, hit, c);
   }
+  // Scene files: the sub-grid BVH, the side tables (an opened scene's context points into the
+  // mapping; the vectors above stay empty) and the leftover triangles' BVH.
+  void sections(SectionVisitor& v) override {
+    this->bvh_sections(v, "");
+    auto& c = this->ctx;
+    auto table = [&](const std::string& name, const auto& vec, auto*& ptr) {
+      using T = std::remove_cvref_t<decltype(*ptr)>;
+      const T* d = vec.data();
+      uint64_t n = vec.size();
+      v.array(name, d, n);
+      if (!v.saving()) ptr = d;
+    };
+    table("grid.table", grid_table, c.grids);
+    table("grid.hot", hot, c.hot);
+    table("grid.faces", face_table, c.faces);
+    table("grid.flips", flips, c.flips);
+    if constexpr (std::is_same_v<typename Leaf::Context, LossyContext>) {
+      table("grid.exact", exact, c.exact);
+      table("grid.corners", vertices, c.corners);
+      table("grid.corner_grid", corner_grid, c.corner_grid);
+      struct {
+        uint32_t grid_count;
+        int32_t bias;
+        uint32_t parts, reserved;
+      } k{c.grid_count, c.bias, c.parts, 0};
+      v.pod("grid.params", k);
+      c.grid_count = k.grid_count;
+      c.bias = k.bias;
+      c.parts = k.parts;
+    } else {
+      table("grid.vertices", vertices, c.vertices);
+    }
+    uint32_t has_tris[2] = {tris ? 1u : 0u, 0};
+    v.pod("grid.has_leftover_triangles", has_tris);
+    if (!v.saving() && has_tris[0]) tris = std::make_unique<BvhScene<Tri4v>>();
+    if (tris) tris->bvh_sections(v, "tris.");
+  }
+  void check_opened(bool deep) const override {
+    if (tris) tris->check_bvh("tris.", false);
+    this->check_bvh("", deep);
+  }
+
   bool validate(std::string* why) const override {
     if (!BvhScene<Leaf>::validate(why)) return false;
     if (tris && !tris->validate(why)) {
@@ -800,6 +842,17 @@ std::unique_ptr<Scene::Impl> build_lossy_any(Prepared& p,
 }
 
 }  // namespace
+
+std::unique_ptr<Scene::Impl> empty_grid_scene(const BuildOptions& opt) {
+  const Layout layout = layout_of(opt);
+  const bool e1 = opt.grid_encoding == GridEncoding::Octahedral;
+  if (layout == Layout::Uncompressed) return std::make_unique<GridScene<SubGridLeaf>>();
+  if (layout == Layout::Shared)
+    return e1 ? std::unique_ptr<Scene::Impl>(std::make_unique<GridScene<LossySharedLeaf<1>>>())
+              : std::make_unique<GridScene<LossySharedLeaf<2>>>();
+  return e1 ? std::unique_ptr<Scene::Impl>(std::make_unique<GridScene<LossyGridLeaf<1>>>())
+            : std::make_unique<GridScene<LossyGridLeaf<2>>>();
+}
 
 std::unique_ptr<Scene::Impl> build_grid_scene(const std::vector<const PolyMesh*>& meshes,
                                               const BuildOptions& opt) {

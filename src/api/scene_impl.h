@@ -14,6 +14,8 @@
 
 namespace slim {
 
+class SectionVisitor;  // api/scene_file.h
+
 struct Scene::Impl {
   BuildOptions opt;
   SceneStats stats;
@@ -41,7 +43,29 @@ struct Scene::Impl {
   // overridden by the formats with their own geometry; std::nullopt where the scene intersects the
   // input's fan triangles, or cannot decode its leaves.
   virtual std::optional<DecodedTriangles> decoded_triangles() const { return std::nullopt; }
+
+  // Scene files (api/scene_file.h): the kept buffers as named sections, one visitor for saving
+  // and opening.
+  virtual void sections(SectionVisitor& v) = 0;
+  // After opening: the cheap checks every open runs (root reference, block size); with `deep`,
+  // the bounds-safe walk of every reference (OpenOptions::check_structure). Throw SectionFault.
+  virtual void check_opened(bool deep) const = 0;
+
+  std::string file;                     // the scene file mapped, "" when built in memory
+  std::shared_ptr<const void> mapping;  // the file's mapping (munmap when the scene goes)
 };
+
+// Whether this CPU has an instruction set named as simd_isa() names them ("scalar", "avx2",
+// "avx512"); false for any other name (cpu_check.cpp: a scene file's requirement).
+bool cpu_has_isa(const std::string& isa);
+
+// An empty scene of the type `opt` builds, for Scene::open to fill (scene_file.cpp dispatches to
+// the format files below).
+std::unique_ptr<Scene::Impl> empty_triangle_scene(const BuildOptions& opt);
+std::unique_ptr<Scene::Impl> empty_pair_scene(const BuildOptions& opt);
+std::unique_ptr<Scene::Impl> empty_grid_scene(const BuildOptions& opt);
+std::unique_ptr<Scene::Impl> empty_costa_scene(const BuildOptions& opt);
+std::unique_ptr<Scene::Impl> empty_cluster_scene(const BuildOptions& opt);
 
 // Format builders (one per file under api/). Each fills stats/mem/bounds except build time.
 std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMesh*>& meshes,

@@ -26,6 +26,10 @@
 
 namespace slim {
 
+std::unique_ptr<Scene::Impl> empty_pair_scene(const BuildOptions&) {
+  return std::make_unique<BvhScene<Pair4>>();
+}
+
 std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>& meshes,
                                               const BuildOptions& opt) {
   TriangleMesh tm = triangulate_fan(meshes);

@@ -18,6 +18,7 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
     // a temporary on huge pages.
     auto verts = std::make_shared<LargeVector<Vec3f, true>>(tm.vertices.begin(), tm.vertices.end());
     s->ctx.vertices = verts->data();
+    s->ctx.vertex_count = verts->size();
     s->mem.geometry_bytes += verts->size() * sizeof(Vec3f);
     s->keepalive = verts;
   }
@@ -25,6 +26,12 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
 }
 
 }  // namespace
+
+std::unique_ptr<Scene::Impl> empty_triangle_scene(const BuildOptions& opt) {
+  if (opt.leaf == Leaf::CompactTriangles) return std::make_unique<BvhScene<Tri4iCompact>>();
+  if (opt.leaf == Leaf::IndexedTriangles) return std::make_unique<BvhScene<Tri4i>>();
+  return std::make_unique<BvhScene<Tri4v>>();
+}
 
 std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMesh*>& meshes,
                                                   const BuildOptions& opt) {

@@ -24,13 +24,15 @@ namespace slim {
 // ---- AlignedBytes ---------------------------------------------------------------------------
 
 void AlignedBytes::reserve(uint64_t n) {
-  if (n <= cap_) return;
+  if (n <= cap_ && owned_) return;
+  n = std::max(n, size_);
   uint64_t cap = (n + 63) & ~uint64_t(63);
   auto* p = static_cast<uint8_t*>(large_alloc(cap, 64, /*kept=*/true));  // a scene's arena
   if (size_) std::memcpy(p, data_, size_);
-  std::free(data_);
+  if (owned_) std::free(data_);
   data_ = p;
   cap_ = cap;
+  owned_ = true;
 }
 
 uint64_t AlignedBytes::append(uint64_t n, uint64_t align, bool zero) {

@@ -79,7 +79,19 @@ Box3f dequantize_box(const QuantBoxes8& q, int i);
 class AlignedBytes {
  public:
   AlignedBytes() = default;
-  ~AlignedBytes() { std::free(data_); }
+  ~AlignedBytes() {
+    if (owned_) std::free(data_);
+  }
+  // A view of n bytes owned elsewhere (a scene file's mapping, api/scene_file.h): never freed; a
+  // later append() or reserve() copies them into memory of its own first.
+  static AlignedBytes view(const uint8_t* p, uint64_t n) {
+    AlignedBytes a;
+    a.data_ = const_cast<uint8_t*>(p);  // read through data() const only (the mapping is read-only)
+    a.size_ = a.cap_ = n;
+    a.owned_ = false;
+    return a;
+  }
+  bool owned() const { return owned_; }
   AlignedBytes(const AlignedBytes&) = delete;
   AlignedBytes& operator=(const AlignedBytes&) = delete;
   AlignedBytes(AlignedBytes&& o) noexcept { swap(o); }
@@ -91,6 +103,7 @@ class AlignedBytes {
     std::swap(data_, o.data_);
     std::swap(size_, o.size_);
     std::swap(cap_, o.cap_);
+    std::swap(owned_, o.owned_);
   }
   // Appends n zero bytes aligned to `align` (power of two <= 64); returns their offset. With
   // zero = false the bytes are left as they are (the caller writes every one of them).
@@ -105,6 +118,7 @@ class AlignedBytes {
  private:
   uint8_t* data_ = nullptr;
   uint64_t size_ = 0, cap_ = 0;
+  bool owned_ = true;
 };
 
 // ---- the BVH8 -------------------------------------------------------------------------------

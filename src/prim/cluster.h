@@ -368,7 +368,14 @@ struct ClusterLeaf {
   struct Context {
     ClusterLattice lattice;
     const uint8_t* side = nullptr;
+    uint64_t side_bytes = 0;  // scene files: the section's size
   };
+  // Scene files: the lattice and the side data.
+  template <class V>
+  static void context_sections(V& v, const std::string& p, Context& c) {
+    v.pod(p + "cluster.lattice", c.lattice);
+    v.array(p + "cluster.side", c.side, c.side_bytes);
+  }
   static constexpr uint32_t kBlockPrims = 8;
   static constexpr uint32_t kBlockBytes = 8;
   static constexpr bool kMultiLeafLayout = true;

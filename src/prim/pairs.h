@@ -37,6 +37,7 @@
 // chosen by measurement, see api/scene_pairs.cpp.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <type_traits>
@@ -121,6 +122,17 @@ struct PairLeaf {
   struct Context {};
   static constexpr uint32_t kBlockPrims = W;
   static constexpr uint32_t kBlockBytes = sizeof(Block);
+
+  // Scene files' structure check: a block refers to nothing outside itself; its order fields
+  // (test-order corners 0..2) keep corner() inside the vertex array.
+  static const char* check_block(const Context&, const uint8_t* p) {
+    uint8_t order[2 * W];
+    std::memcpy(order, p + offsetof(Block, order), sizeof order);
+    for (uint8_t o : order)
+      for (int k = 0; k < 3; ++k)
+        if (((o >> (2 * k)) & 3) > 2) return "pair corner order beyond the triangle's 3 corners";
+    return nullptr;
+  }
 
   // Input corner k of the triangle in lane i (0..2W-1) of a block.
   static SLIM_INLINE Vec3f corner(const Block* b, int i, int k) {

@@ -156,6 +156,14 @@ class QuantizedMesh {
     VertexQuantizer quant;
   };
   Raw raw() const;
+  // Element counts of the arrays raw() points to (scene files save them as sections).
+  struct Counts {
+    uint64_t offsets, residual_bytes, faces, packed_face_bytes, vertices, qvertices;
+  };
+  Counts counts() const {
+    return {offsets_.size(),       residuals_.bytes(), faces_.size(),
+            packed_faces_.bytes(), vertices_.size(),   qvertices_.size()};
+  }
 
  private:
   bool P_ = false, F_ = false, V_ = false;

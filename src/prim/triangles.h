@@ -116,6 +116,9 @@ struct Tri4v : TriangleSourceOps {
   static constexpr uint32_t kBlockPrims = 4;
   static constexpr uint32_t kBlockBytes = sizeof(Tri4vBlock);
 
+  // Scene files' structure check: a block refers to nothing outside itself.
+  static const char* check_block(const Context&, const uint8_t*) { return nullptr; }
+
   static void encode(const TriangleSource& src, const uint32_t* prims, uint32_t n, uint8_t* out) {
     auto* b = reinterpret_cast<Tri4vBlock*>(out);
     for (uint32_t l = 0; l < 4; ++l) {
@@ -179,9 +182,24 @@ static_assert(sizeof(Tri4iBlock) == 80, "Triangle4i block is 80 bytes");
 struct Tri4i : TriangleSourceOps {
   struct Context {
     const Vec3f* vertices = nullptr;
+    uint64_t vertex_count = 0;  // scene files: section size and structure check
   };
   static constexpr uint32_t kBlockPrims = 4;
   static constexpr uint32_t kBlockBytes = sizeof(Tri4iBlock);
+
+  // Scene files: the shared vertex array; the structure check of a block (indices in range).
+  template <class V>
+  static void context_sections(V& v, const std::string& p, Context& c) {
+    v.array(p + "tri4i.vertices", c.vertices, c.vertex_count);
+  }
+  static const char* check_block(const Context& ctx, const uint8_t* p) {
+    Tri4iBlock b;
+    std::memcpy(&b, p, sizeof b);
+    for (int k = 0; k < 3; ++k)
+      for (int l = 0; l < 4; ++l)
+        if (b.v[k][l] >= ctx.vertex_count) return "vertex index beyond the vertex array";
+    return nullptr;
+  }
 
   static void encode(const TriangleSource& src, const uint32_t* prims, uint32_t n, uint8_t* out) {
     auto* b = reinterpret_cast<Tri4iBlock*>(out);
@@ -256,6 +274,27 @@ static_assert(sizeof(Tri4iCompactBlock) == 44, "compact Triangle4i block is 44 b
 // Isolated leaves keep plain Tri4i blocks.
 struct Tri4iCompact : Tri4i {
   static constexpr bool kMultiLeafLayout = true;
+
+  // Scene files' structure check of a multi-leaf's data (k blocks, then the dictionary), `avail`
+  // bytes from `data` to the end of the leaf arena.
+  static const char* check_multileaf(const Context& ctx, const uint8_t* data, uint32_t k,
+                                     uint64_t avail) {
+    const uint64_t dict = uint64_t(k) * sizeof(Tri4iCompactBlock);
+    if (dict > avail) return "multi-leaf blocks beyond the leaf arena";
+    for (uint32_t c = 0; c < k; ++c) {
+      Tri4iCompactBlock b;
+      std::memcpy(&b, data + c * sizeof(Tri4iCompactBlock), sizeof b);
+      for (int j = 0; j < 3; ++j)
+        for (int l = 0; l < 4; ++l) {
+          if (dict + 4 * uint64_t(b.v[j][l]) + 4 > avail)
+            return "vertex dictionary entry beyond the leaf arena";
+          uint32_t vi;
+          std::memcpy(&vi, data + dict + 4 * b.v[j][l], 4);
+          if (vi >= ctx.vertex_count) return "vertex index beyond the vertex array";
+        }
+    }
+    return nullptr;
+  }
 
   static std::vector<uint8_t> encode_multileaf(const TriangleSource& src,
                                                const uint32_t* const* prims, const uint32_t* counts,

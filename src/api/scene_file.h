@@ -1,0 +1,80 @@
+// Scene files (DESIGN.md "Scene files"; Scene::save / Scene::open in slimrt/scene.h): the buffers a
+// scene keeps, enumerated as named sections by one visitor that serves both directions. Saving
+// reads each buffer and writes it as a 64-byte aligned section; opening points the scene's
+// pointers (Leaf::Context pointers, the BVH arenas as AlignedBytes views) straight into the
+// read-only mapping. Node data holds no pointers (NodeRef offsets are relative to the arenas), so
+// nothing is relocated: only the contexts' pointers are set at open.
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+#include <functional>
+#include <string>
+#include <type_traits>
+
+#include "bvh/bvh8.h"
+
+namespace slim {
+
+class SectionVisitor {
+ public:
+  virtual ~SectionVisitor() = default;
+  bool saving() const { return saving_; }
+
+  // A buffer of `count` elements of `elem` bytes at `data`. Saving writes them; opening sets
+  // `data` to the section in the mapping and `count` to its element count (the section's size
+  // must be a multiple of elem, its element size must be elem).
+  virtual void raw(const std::string& name, const void*& data, uint64_t& count, uint32_t elem) = 0;
+  // A small fixed-size record: saving writes it, opening copies the section into it (the
+  // section's size must be `size`).
+  virtual void record(const std::string& name, void* p, uint32_t size) = 0;
+
+  template <class T>
+  void array(const std::string& name, const T*& data, uint64_t& count) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    const void* d = data;
+    raw(name, d, count, uint32_t(sizeof(T)));
+    data = static_cast<const T*>(d);
+  }
+  template <class T>
+  void pod(const std::string& name, T& v) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    record(name, &v, uint32_t(sizeof(T)));
+  }
+  // A BVH arena: saved as is, opened as a view of the mapping.
+  void arena(const std::string& name, AlignedBytes& a) {
+    const void* d = a.data();
+    uint64_t n = a.size();
+    raw(name, d, n, 1);
+    if (!saving_) a = AlignedBytes::view(static_cast<const uint8_t*>(d), n);
+  }
+
+ protected:
+  bool saving_ = true;
+};
+
+// A bad reference found by the checks of an opened scene: the section, the byte offset inside
+// it, and what is wrong. Scene::open turns it into a slim::Error with the file offset.
+struct SectionFault {
+  std::string section;
+  uint64_t offset = 0;
+  std::string what;
+};
+
+// The bounds-safe walk of Scene::open's structure check (OpenOptions::check_structure): every
+// node reference (tag, offset, block count) inside its arena and aligned as the traversal's typed
+// loads need (Node8 64 bytes, QNode8 8, leaf blocks 4), depth within the traversal stack, at most
+// as many references as a tree over the node arena can hold (no shared subtrees or cycles). Leaf
+// blocks are handed to `block(offset)`, multi-leaves of layouts with data of their own to
+// `multi(offset, children)` (offsets into the leaf arena, already checked to hold the block / the
+// 72-byte header); both throw SectionFault. `prefix` names the sections ("" or "tris.").
+struct BvhWalkHooks {
+  // Return nullptr for a good block, else what is wrong with it.
+  std::function<const char*(uint64_t off)> block;
+  std::function<const char*(uint64_t off, uint32_t children)> multi;  // layouts with own data
+};
+void walk_bvh_checked(const Bvh8& bvh, const std::string& prefix, const BvhWalkHooks& hooks);
+// The cheap check every open runs: root reference and block size.
+void check_bvh_root(const Bvh8& bvh, const std::string& prefix, uint32_t block_bytes);
+
+}  // namespace slim

@@ -397,7 +397,7 @@ class RaycastingScene {
       py::gil_scoped_release release;
       return slim::Scene::open(path, o);
     }();
-    auto r = std::make_unique<RaycastingScene>(s.options().config_name(), 0);
+    auto r = std::make_unique<RaycastingScene>(s.options().config_name(), 0, py::none());
     r->options_ = s.options();
     r->options_.threads = 0;
     r->scene_.emplace(std::move(s));

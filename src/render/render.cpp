@@ -174,7 +174,7 @@ class PixelShader {
         rays++;
         Hit h = scene.intersect(ray);
         auto sky = [&](Vec3f d) {
-          float a = 0.5f + 0.5f * dot(d, up);
+          float a = 0.5f + 0.5f * dot(d, up_);
           return Vec3f(0.75f, 0.8f, 0.88f) * (1.0f - a) + Vec3f(0.25f, 0.42f, 0.8f) * a;
         };
         if (!h.valid()) return sky(ray.dir);

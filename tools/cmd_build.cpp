@@ -5,7 +5,10 @@
 #include <cstdio>
 #include <filesystem>
 
+#include <unistd.h>
+
 #include "commands.h"
+#include "progress.h"
 #include "slimrt/output.h"
 #include "slimrt/scene.h"
 
@@ -27,6 +30,7 @@ int cmd_build(int argc, char** argv) {
   CLI::App app{"slimrt build: build a scene and write it as a scene file (.slim)"};
   std::string scene_name, config = "bvh8-tri4v", output;
   int threads = 0;
+  bool quiet = false;
   app.add_option("scene", scene_name, "mesh file or procedural scene")->required();
   app.add_option("--config,--accel", config, "the configuration (see the README)")
       ->capture_default_str();
@@ -34,6 +38,7 @@ int cmd_build(int argc, char** argv) {
   app.add_option("--threads", threads, "build threads, 0 = all cores")
       ->check(CLI::Range(0, 4096))
       ->capture_default_str();
+  app.add_flag("-q,--quiet", quiet, "no build progress on the terminal");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -48,8 +53,17 @@ int cmd_build(int argc, char** argv) {
   auto t0 = clock::now();
   PolyMesh mesh = out_of_memory_context("loading " + scene_name, [&] { return load(scene_name); });
   const double load_s = std::chrono::duration<double>(clock::now() - t0).count();
-  Scene scene = out_of_memory_context("building " + scene_name + " as " + config,
-                                      [&] { return Scene::build(mesh, opt); });
+  Scene scene;
+  {
+    // Phase, percentage and rate on a terminal (tools/progress.h), as render shows them.
+    BuildMeter meter(
+        !quiet && isatty(fileno(stderr)) != 0,
+        "build " + config + " (" + std::to_string(mesh.fan_triangle_count()) + " triangles)",
+        mesh.fan_triangle_count());
+    opt.progress = meter.callback();
+    scene = out_of_memory_context("building " + scene_name + " as " + config,
+                                  [&] { return Scene::build(mesh, opt); });
+  }
   mesh = PolyMesh();
   t0 = clock::now();
   scene.save(output);

@@ -19,6 +19,7 @@
 #include "mesh/chunks.h"
 #include "mesh/procedural.h"
 #include "slimrt/slimrt.h"
+#include "temp_dir.h"
 #include "test_util.h"
 
 namespace fs = std::filesystem;
@@ -26,32 +27,9 @@ using slim::PolyMesh;
 using slim::Vec3f;
 using namespace slim::detail;
 
+using slim::test::TempDir;
+
 namespace {
-
-class TempDir {
- public:
-  TempDir() {
-    static int counter = 0;
-    dir_ = fs::temp_directory_path() /
-           ("slimrt_chunks_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-  std::string write(const std::string& name, const std::string& bytes) const {
-    std::ofstream(path(name), std::ios::binary) << bytes;
-    return path(name);
-  }
-  std::string dir() const { return dir_.string(); }
-  size_t entries() const { return size_t(std::distance(fs::directory_iterator(dir_), {})); }
-
- private:
-  fs::path dir_;
-};
 
 bool same_bits(Vec3f a, Vec3f b) { return std::memcmp(&a, &b, sizeof a) == 0; }
 
@@ -367,7 +345,7 @@ TEST(FaceStream, ProceduralBadSpec) {
 // ---- PLY and OBJ files ----
 
 TEST(FaceStream, PlyAllFormatsMatchLoad) {
-  TempDir d;
+  TempDir d{"slimrt_chunks"};
   const PolyMesh m = polygon_mesh(3000, 11);
   for (const char* fmt : {"binary_little_endian", "binary_big_endian", "ascii"}) {
     for (bool faces_first : {false, true}) {
@@ -387,7 +365,7 @@ TEST(FaceStream, PlyAllFormatsMatchLoad) {
 }
 
 TEST(FaceStream, ObjMatchesLoad) {
-  TempDir d;
+  TempDir d{"slimrt_chunks"};
   const PolyMesh m = polygon_mesh(2000, 12);
   const std::string path = d.write("m.obj", obj_text(m));
   const PolyMesh ref = slim::load(path);
@@ -401,7 +379,7 @@ TEST(FaceStream, ObjMatchesLoad) {
 // Bad files: the stream gives slim::load's message (file and line or byte offset), before or
 // while streaming.
 TEST(FaceStream, BadFilesGiveLoadErrors) {
-  TempDir d;
+  TempDir d{"slimrt_chunks"};
   const PolyMesh m = polygon_mesh(400, 13);
   std::vector<std::string> bad;
   for (const char* fmt : {"binary_little_endian", "binary_big_endian", "ascii"}) {
@@ -454,7 +432,7 @@ TEST(FaceStream, BadFilesGiveLoadErrors) {
 // ---- chunking ----
 
 TEST(Chunks, ProceduralUnionIsTheMesh) {
-  TempDir d;
+  TempDir d{"slimrt_chunks"};
   ChunkOptions opt;
   opt.spill_dir = d.dir();
   opt.max_triangles = 500;
@@ -468,7 +446,7 @@ TEST(Chunks, ProceduralUnionIsTheMesh) {
 
 // The case: torus:512 in at least 16 chunks, each within the triangle limit.
 TEST(Chunks, Torus512InAtLeast16Chunks) {
-  TempDir d;
+  TempDir d{"slimrt_chunks"};
   ChunkOptions opt;
   opt.spill_dir = d.dir();
   opt.max_triangles = 512 * 256 * 2 / 20;
@@ -477,7 +455,7 @@ TEST(Chunks, Torus512InAtLeast16Chunks) {
 }
 
 TEST(Chunks, FilesUnionIsTheMesh) {
-  TempDir d;
+  TempDir d{"slimrt_chunks"};
   const PolyMesh m = polygon_mesh(3000, 21);
   ChunkOptions opt;
   opt.spill_dir = d.path("spill");
@@ -491,7 +469,7 @@ TEST(Chunks, FilesUnionIsTheMesh) {
 
 TEST(Chunks, RealMeshes) {
   SLIM_REQUIRE_SHARED_DATA();
-  TempDir d;
+  TempDir d{"slimrt_chunks"};
   ChunkOptions opt;
   opt.spill_dir = d.dir();
   const std::string data = slim::test::shared_data_dir();
@@ -510,7 +488,7 @@ TEST(Chunks, RealMeshes) {
 
 // An error while streaming (here a truncated file) leaves no spill file behind.
 TEST(Chunks, ErrorsRemoveSpillFiles) {
-  TempDir d;
+  TempDir d{"slimrt_chunks"};
   const PolyMesh m = polygon_mesh(2000, 22);
   std::string good = ply_text(m, "binary_little_endian");
   const std::string path = d.write("late.ply", good.substr(0, good.size() - 20));
@@ -531,7 +509,7 @@ TEST(Chunks, ErrorsRemoveSpillFiles) {
 // the in-memory scene's hit (same face, same t) up to ties. A stand-in for the top-level BVH,
 // which joins the chunk roots later.
 TEST(Chunks, ClosestHitOverChunksEqualsInMemory) {
-  TempDir d;
+  TempDir d{"slimrt_chunks"};
   const std::string name = "torus:512";
   const PolyMesh ref = slim::load(name);
   const slim::BuildOptions bo = slim::BuildOptions::from_config("bvh8-tri4v");

@@ -20,36 +20,15 @@
 #include <vector>
 
 #include "slimrt/mesh.h"
+#include "temp_dir.h"
 #include "test_util.h"
 
 namespace fs = std::filesystem;
 using slim::PolyMesh;
 
+using slim::test::TempDir;
+
 namespace {
-
-// A fresh directory per test, removed afterwards.
-class IoDir {
- public:
-  IoDir() {
-    static int counter = 0;
-    dir_ = fs::temp_directory_path() /
-           ("slimrt_io_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    fs::create_directories(dir_);
-  }
-  ~IoDir() {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string write(const std::string& name, const std::string& bytes) const {
-    std::string path = (dir_ / name).string();
-    std::ofstream(path, std::ios::binary) << bytes;
-    return path;
-  }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-
- private:
-  fs::path dir_;
-};
 
 std::string xz_compress(const std::string& in) {
   std::string out(lzma_stream_buffer_bound(in.size()), '\0');
@@ -241,7 +220,7 @@ TEST(MeshSummary, LongPolygonWithRepeatedIndex) {
 // ---------------------------------------------------------------- OBJ
 
 TEST(IoObj, PolygonsAttributesNegativeIndicesAndObjects) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   std::string path = d.write("mixed.obj",
                              "# test\n"
                              "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 1.5 0\n"
@@ -287,7 +266,7 @@ TEST(IoObj, PolygonsAttributesNegativeIndicesAndObjects) {
 
 TEST(IoObj, PolygonWith300CornersAndNoNewlineAtEnd) {
   // tinyobjloader stores face sizes as unsigned char; the loader must not wrap at 256.
-  IoDir d;
+  TempDir d{"slimrt_io"};
   std::string obj;
   for (int i = 0; i < 300; ++i)
     obj += "v " + std::to_string(std::cos(i * 0.0209)) + " " +
@@ -305,7 +284,7 @@ TEST(IoObj, PolygonWith300CornersAndNoNewlineAtEnd) {
 }
 
 TEST(IoObj, TruncatedFile) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   std::string good = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1/1/1 2/1/1 3/1/1\nf 2 4 3\n";
   good = "vt 0 0\nvn 0 0 1\n" + good;
   // Cut inside the last face: "f 2 4" -> a 2-vertex face on line 8.
@@ -320,14 +299,14 @@ TEST(IoObj, TruncatedFile) {
 }
 
 TEST(IoObj, BadVertexLines) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   expect_load_error(d.write("v2.obj", "v 0 0 0\nv 1 0\n"), {":2:", "2 coordinates", "x y z"});
   expect_load_error(d.write("vx.obj", "v 0 0 0\nv 1 zero 0\n"), {":2:", "not a number"});
   expect_load_error(d.write("v0.obj", "\n\nv\n"), {":3:", "0 coordinates"});
 }
 
 TEST(IoObj, GarbageBytes) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   std::mt19937 rng(42);
   std::string junk = "v 0 0 0\nv 1 0 0\n" + std::string(
                                                 "\x7f"
@@ -338,7 +317,7 @@ TEST(IoObj, GarbageBytes) {
 }
 
 TEST(IoObj, IndexOutOfRange) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   const std::string v = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
   expect_load_error(d.write("big.obj", v + "f 1 2 3\n\nf 1 2 4\n"),
                     {":6:", "vertex index out of range", "f 1 2 4"});
@@ -351,7 +330,7 @@ TEST(IoObj, IndexOutOfRange) {
 }
 
 TEST(IoObj, FacesWithFewerThanThreeVertices) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   const std::string v = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
   expect_load_error(d.write("two.obj", v + "f 1 2 3\nf 1 2\n"), {":5:", "face has 2 vertices"});
   expect_load_error(d.write("none.obj", v + "f\n"), {":4:", "face has 0 vertices"});
@@ -360,7 +339,7 @@ TEST(IoObj, FacesWithFewerThanThreeVertices) {
 // tinyobjloader would read 1e39 as float infinity and the face would be dropped later without a
 // word; a coordinate beyond the float range is an error naming the line, like a literal inf.
 TEST(IoObj, FloatOverflowIsAnError) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   expect_error([&] { slim::load(d.write("inf.obj", "v 1 0 0\nv 0 1 0\nv 1e39 0 0\nf 1 2 3\n")); },
                {"inf.obj:3: ", "'1e39' overflows float"});
   expect_error([&] { slim::load(d.write("neg.obj", "v 0 0 -1e40\nv 0 1 0\nv 1 0 0\nf 1 2 3\n")); },
@@ -370,7 +349,7 @@ TEST(IoObj, FloatOverflowIsAnError) {
 // Empty meshes: a file that parses but has no faces loads with 0 faces (a point cloud or an
 // empty export is valid input); deciding whether an empty scene is useful is left to the caller.
 TEST(IoObj, EmptyMeshLoadsWithZeroFaces) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   PolyMesh m = slim::load(d.write("points.obj", "# only points\nv 0 0 0\nv 1 1 1\n"));
   EXPECT_EQ(m.face_count(), 0u);
   EXPECT_EQ(m.vertex_count(), 2u);
@@ -381,7 +360,7 @@ TEST(IoObj, EmptyMeshLoadsWithZeroFaces) {
 // ---------------------------------------------------------------- PLY
 
 TEST(IoPly, AsciiWithNormalsUvsAndSkippedProperties) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   std::string ply =
       "ply\r\nformat ascii 1.0\ncomment made by hand\n"
       "element vertex 5\nproperty float x\nproperty float y\nproperty float z\n"
@@ -413,7 +392,7 @@ TEST(IoPly, AsciiWithNormalsUvsAndSkippedProperties) {
 
 // Overflow (1e999) is an error naming the line; underflow (1e-999) reads as 0.
 TEST(IoPly, AsciiOverflowAndUnderflow) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   const std::string head =
       "ply\nformat ascii 1.0\nelement vertex 1\nproperty double x\nproperty double y\n"
       "property double z\nend_header\n";
@@ -487,7 +466,7 @@ const std::vector<std::vector<int64_t>> kSquareFaces = {{0, 1, 4}, {1, 2, 4}, {0
 }  // namespace
 
 TEST(IoPly, BinaryEndiannessAndScalarTypes) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   int n = 0;
   for (bool be : {false, true})
     for (std::string pos : {"float", "double", "short", "uchar"})
@@ -511,7 +490,7 @@ TEST(IoPly, BinaryEndiannessAndScalarTypes) {
 }
 
 TEST(IoPly, DoublePositionsKeepFloatPrecision) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   PlySpec s;
   s.pos_type = "double";
   auto v = kSquare;
@@ -521,7 +500,7 @@ TEST(IoPly, DoublePositionsKeepFloatPrecision) {
 }
 
 TEST(IoPly, HeaderCountLargerThanFile) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   // 2^40 vertices: must be refused from the file size, not allocated.
   std::string bin =
       "ply\nformat binary_little_endian 1.0\nelement vertex 1099511627776\n"
@@ -554,7 +533,7 @@ TEST(IoPly, HeaderCountLargerThanFile) {
 }
 
 TEST(IoPly, TruncatedBinary) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   std::string good = binary_ply({}, kSquare, kSquareFaces);
   size_t body = good.find("end_header\n") + 11;
   // Cut in the middle of vertex 2: the element-size check fires at the body start.
@@ -573,7 +552,7 @@ TEST(IoPly, TruncatedBinary) {
 }
 
 TEST(IoPly, TruncatedAscii) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   // Blank-padded values, so that cuts pass the element-size check and end inside a record.
   std::string ply =
       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
@@ -591,7 +570,7 @@ TEST(IoPly, TruncatedAscii) {
 }
 
 TEST(IoPly, GarbageHeaderAndBytes) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   std::mt19937 rng(7);
   std::string junk;
   for (int i = 0; i < 1000; ++i) junk += char(rng() & 0xff);
@@ -627,7 +606,7 @@ TEST(IoPly, GarbageHeaderAndBytes) {
 }
 
 TEST(IoPly, IndexOutOfRangeNegativeAndShortLists) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   // Writes the file; `at` = offset of the second face's count byte.
   auto with_faces = [&](const std::string& name, std::vector<std::vector<int64_t>> f, size_t& at,
                         const std::string& type = "int") {
@@ -662,7 +641,7 @@ TEST(IoPly, IndexOutOfRangeNegativeAndShortLists) {
 }
 
 TEST(IoPly, NonFinitePositionsLoad) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   auto v = kSquare;
   v[1] = {std::numeric_limits<double>::quiet_NaN(), 0, 0};
   v[3] = {0, -std::numeric_limits<double>::infinity(), 0};
@@ -675,7 +654,7 @@ TEST(IoPly, NonFinitePositionsLoad) {
 }
 
 TEST(IoPly, NoFaceElementLoadsWithZeroFaces) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   PolyMesh m = slim::load(d.write("pts.ply",
                                   "ply\nformat ascii 1.0\nelement vertex 2\n"
                                   "property double x\nproperty double y\n"
@@ -764,7 +743,7 @@ void expect_near(slim::Vec3f a, slim::Vec3f b) {
 }  // namespace
 
 TEST(IoGltf, AsciiWithNodeTransformsAndTopologies) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   // Accessor 0: 3 positions (non-indexed "soup"), 2: all 4 (indexed square), 3: normals.
   std::string json =
       square_gltf_json(R"({"byteLength": 108, "uri": "data:application/octet-stream;base64,)" +
@@ -798,7 +777,7 @@ TEST(IoGltf, AsciiWithNodeTransformsAndTopologies) {
 }
 
 TEST(IoGltf, GlbWithByteIndicesAndExternalGltfBuffer) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   Writer w;
   for (float p : {0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 1.f, 1.f, 0.f, 0.f, 1.f, 0.f}) w.put(p);
   for (uint8_t i : {0, 1, 2, 3}) w.put(i);
@@ -826,7 +805,7 @@ TEST(IoGltf, GlbWithByteIndicesAndExternalGltfBuffer) {
 }
 
 TEST(IoGltf, BadInput) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   std::string buf = square_buffer();
   const std::string uri =
       R"({"byteLength": 108, "uri": "data:application/octet-stream;base64,)" + base64(buf) + "\"}";
@@ -872,7 +851,7 @@ TEST(IoGltf, BadInput) {
 // ---------------------------------------------------------------- .xz
 
 TEST(IoXz, RoundTripObjPlyGltf) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   std::string obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 4 3\n";
   std::string ply = binary_ply({}, kSquare, kSquareFaces);
   const std::string uri = R"({"byteLength": 108, "uri": "data:application/octet-stream;base64,)" +
@@ -895,7 +874,7 @@ TEST(IoXz, RoundTripObjPlyGltf) {
 }
 
 TEST(IoXz, TruncatedAndGarbage) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   std::string obj;
   for (int i = 0; i < 2000; ++i)
     obj += "v " + std::to_string(i) + " 0 " + std::to_string(i * i) + "\n";
@@ -918,7 +897,7 @@ TEST(IoXz, TruncatedAndGarbage) {
 // ---------------------------------------------------------------- load() dispatch
 
 TEST(IoLoad, UnknownExtensionAndMissingFile) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   std::string stl = d.write("mesh.stl", "solid x\n");
   expect_load_error(stl, {"unknown extension '.stl'", ".obj, .ply, .gltf or .glb", ".xz"});
   expect_load_error(d.write("mesh.stl.xz", "x"), {"unknown extension '.stl'"});
@@ -948,14 +927,14 @@ TEST(IoLoad, ProceduralScenes) {
 }
 
 TEST(IoLoad, UppercaseExtension) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   EXPECT_EQ(slim::load(d.write("A.OBJ", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")).face_count(), 1u);
 }
 
 // ---------------------------------------------------------------- random mutations
 
 TEST(IoFuzz, MutatedFilesNeverCrash) {
-  IoDir d;
+  TempDir d{"slimrt_io"};
   std::mt19937 rng(1234);
   const std::string uri = R"({"byteLength": 108, "uri": "data:application/octet-stream;base64,)" +
                           base64(square_buffer()) + "\"}";

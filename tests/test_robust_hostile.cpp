@@ -25,9 +25,12 @@
 #include "io/xz.h"
 #include "slimrt/output.h"
 #include "slimrt/slimrt.h"
+#include "temp_dir.h"
 #include "test_util.h"
 
 namespace fs = std::filesystem;
+
+using slim::test::TempDir;
 
 namespace {
 
@@ -63,35 +66,6 @@ Cli run_cli(const std::string& args, const std::string& prefix = "") {
   fs::remove(err_file);
   return r;
 }
-
-class TempDir {
- public:
-  TempDir() {
-    dir_ = fs::temp_directory_path() /
-           ("slim_hostile_" + std::to_string(::getpid()) + "_" + std::to_string(counter_++));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-  std::string write(const std::string& name, const std::string& bytes) const {
-    std::ofstream(path(name), std::ios::binary) << bytes;
-    return path(name);
-  }
-  // Names in the folder (to see that no temporary file was left behind).
-  std::vector<std::string> names() const {
-    std::vector<std::string> out;
-    for (const auto& e : fs::directory_iterator(dir_)) out.push_back(e.path().filename().string());
-    return out;
-  }
-
- private:
-  static inline int counter_ = 0;
-  fs::path dir_;
-};
 
 // A file size limit (RLIMIT_FSIZE) for this process: writes beyond it fail with EFBIG, like a
 // full disk. SIGXFSZ is ignored so that the write fails instead of killing the test.
@@ -257,7 +231,7 @@ TEST(RobustHostile, GltfIntPropertiesBeyondIntAreErrorsNotWrapped) {
 // ---- 3. outputs complete or absent ----
 
 TEST(RobustHostile, AtomicWriteReplacesWholeFilesAndLeavesNoTemporary) {
-  TempDir d;
+  TempDir d{"slim_hostile"};
   const std::string p = d.path("out.json");
   write_file_atomically(p, std::string(1000, 'a'));
   write_file_atomically(p, "short");
@@ -266,7 +240,7 @@ TEST(RobustHostile, AtomicWriteReplacesWholeFilesAndLeavesNoTemporary) {
 }
 
 TEST(RobustHostile, FullDiskLeavesNothingBehindAndIsAnError) {
-  TempDir d;
+  TempDir d{"slim_hostile"};
   const Image img = noise_image(200, 200);  // about 120 KB as PNG, 480 KB as EXR
   for (const char* name : {"full.png", "full.exr", "full.json"}) {
     std::string msg;
@@ -287,7 +261,7 @@ TEST(RobustHostile, FullDiskLeavesNothingBehindAndIsAnError) {
 
 TEST(RobustHostile, FullTmpfsLeavesNothingBehind) {
   if (::geteuid() != 0) GTEST_SKIP() << "mounting a 64 KiB tmpfs needs root";
-  TempDir d;
+  TempDir d{"slim_hostile"};
   const std::string mnt = d.path("tiny");
   fs::create_directories(mnt);
   if (::mount("tmpfs", mnt.c_str(), "tmpfs", 0, "size=64k") != 0)
@@ -300,7 +274,7 @@ TEST(RobustHostile, FullTmpfsLeavesNothingBehind) {
 }
 
 TEST(RobustHostile, OutputPathsAreCheckedFirst) {
-  TempDir d;
+  TempDir d{"slim_hostile"};
   EXPECT_NE(
       error_of([&] { check_output_path(d.path("no/such/dir/x.png")); }).find("does not exist"),
       std::string::npos);
@@ -322,7 +296,7 @@ TEST(RobustHostile, OutputPathsAreCheckedFirst) {
 }
 
 TEST(RobustHostile, CliOnAFullDiskExitsNonZeroAndLeavesNoFile) {
-  TempDir d;
+  TempDir d{"slim_hostile"};
   // ulimit -f 16: 8 or 16 KiB (512- or 1024-byte blocks); the noisy path-traced PNG is larger.
   const Cli r =
       run_cli("render terrain:64 --res 256x256 --spp 1 -o " + d.path("cut.png"), "ulimit -f 16;");
@@ -338,7 +312,7 @@ TEST(RobustHostile, CliOnAFullDiskExitsNonZeroAndLeavesNoFile) {
 // ---- 4. memory bounded ----
 
 TEST(RobustHostile, GltfInstancingBeyondTheMemoryBudgetIsRefusedBeforeCopying) {
-  TempDir d;
+  TempDir d{"slim_hostile"};
   const uint32_t nv = 99999;  // one mesh of 99999 vertices (1.2 MB buffer, 33333 triangles)
   std::vector<float> pos(size_t(nv) * 3);
   for (uint32_t i = 0; i < nv; ++i) pos[3 * i] = float(i % 3), pos[3 * i + 1] = float(i % 5);
@@ -390,7 +364,7 @@ TEST(RobustHostile, BufferSizingOptionsHaveLimits) {
   const Cli v = run_cli("verify sphere:1 --rays 1099511627776");
   EXPECT_EQ(v.exit_code, 1) << v.err;
   EXPECT_NE(v.err.find("--rays 1099511627776 needs about"), std::string::npos) << v.err;
-  TempDir d;
+  TempDir d{"slim_hostile"};
   const Cli r = run_cli("render terrain:8 --res 65536x65536 -o " + d.path("x.png"));
   EXPECT_EQ(r.exit_code, 1) << r.err;
   EXPECT_NE(r.err.find("--res 65536x65536: 4294967296 pixels need about"), std::string::npos)
@@ -404,7 +378,7 @@ TEST(RobustHostile, OutOfMemoryNamesTheStepAndTheScene) {
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
   GTEST_SKIP() << "an address space limit breaks the sanitizers' shadow memory";
 #endif
-  TempDir d;
+  TempDir d{"slim_hostile"};
   // 1.5 GB of address space: terrain:2048 loads, its build runs out.
   const Cli r = run_cli("render terrain:2048 --res 64x64 --threads 1 -o " + d.path("t.png"),
                         "ulimit -v 1500000;");
@@ -416,7 +390,7 @@ TEST(RobustHostile, OutOfMemoryNamesTheStepAndTheScene) {
 }
 
 TEST(RobustHostile, GnuplotFailureSaysWhatGnuplotSaid) {
-  TempDir d;
+  TempDir d{"slim_hostile"};
   // A stand-in gnuplot that answers --version and then fails like a bad script.
   d.write("gnuplot",
           "#!/bin/sh\n[ \"$1\" = --version ] && exit 0\ncat >/dev/null\n"
@@ -458,7 +432,7 @@ std::string offset_cube(double offset, double radius) {
 }
 
 TEST(RobustHostile, VerifyFindsNoLeaksFarFromTheOrigin) {
-  TempDir d;
+  TempDir d{"slim_hostile"};
   for (double radius : {1e3, 1e9}) {
     const std::string file = d.write("cube.obj", offset_cube(4e6, radius));
     const Cli r =
@@ -516,7 +490,7 @@ TEST(RobustHostile, MessagesNameWhatWasExpectedAndFound) {
   EXPECT_NE(msg.find("does not decode to its byteLength"), std::string::npos) << msg;
   EXPECT_EQ(msg.find("AAAAAAAAAA"), std::string::npos) << msg;
   // A buffer file that exists but is refused (a folder) is not "File not found".
-  TempDir d;
+  TempDir d{"slim_hostile"};
   fs::create_directories(d.path("dir.bin"));
   const std::string ext =
       "{\"asset\":{\"version\":\"2.0\"},\"buffers\":[{\"byteLength\":4,"

@@ -23,9 +23,12 @@
 #include "io/ply.h"
 #include "io/xz.h"
 #include "slimrt/analysis.h"
+#include "temp_dir.h"
 
 namespace fs = std::filesystem;
 using slim::PolyMesh;
+
+using slim::test::TempDir;
 
 namespace {
 
@@ -34,28 +37,6 @@ constexpr bool kSanitized = true;
 #else
 constexpr bool kSanitized = false;
 #endif
-
-class TempDir {
- public:
-  TempDir() {
-    static int counter = 0;
-    dir_ = fs::temp_directory_path() /
-           ("slimrt_robust_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    fs::create_directories(dir_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string write(const std::string& name, const std::string& bytes) const {
-    const std::string path = (dir_ / name).string();
-    std::ofstream(path, std::ios::binary) << bytes;
-    return path;
-  }
-
- private:
-  fs::path dir_;
-};
 
 enum class Outcome { Loaded, Error, Other };
 
@@ -123,7 +104,7 @@ bool is_binary_format(const std::string& name) {
 // ---------------------------------------------------------------- truncation sweep
 
 TEST(RobustTruncation, EveryPrefixOfOneFilePerFormat) {
-  TempDir d;
+  TempDir d{"slimrt_robust"};
   for (const slim::seeds::SeedFile& f : slim::seeds::one_per_format()) {
     SCOPED_TRACE(f.name);
     PolyMesh full, mem;
@@ -224,7 +205,7 @@ void expect_refused_without_allocating(const std::function<bool()>& fn) {
 // a clean slim::Error naming the count, decided from the file size before any allocation (a
 // header count is never trusted: DESIGN.md "check counts against file size before allocating").
 TEST(RobustLimits, HeaderClaimingTwoToThe31FacesIsAnErrorNotAnAllocation) {
-  TempDir d;
+  TempDir d{"slimrt_robust"};
   struct Case {
     std::string name, bytes, expect;
   };

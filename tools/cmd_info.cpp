@@ -33,6 +33,40 @@ uint64_t peak_rss_bytes() {
 // --chunks: the scene streamed (never loaded whole) and partitioned into spatial chunks of at
 // most `max_triangles` (mesh/chunks.h); each chunk is then read back, and built with
 // `accel` if given, one at a time. Prints the chunks and the peak resident memory.
+// The figures of a built or opened scene: JSON (config, build time, memory, details, validate)
+// and, unless `json`, the same as text. Returns the JSON; `valid` gets validate()'s answer.
+nlohmann::json scene_report(const Scene& scene, bool json, bool& valid) {
+  const MemoryStats m = scene.memory();
+  const SceneStats& st = scene.stats();
+  const std::string config = scene.options().config_name();
+  std::string why;
+  valid = scene.validate(&why);
+  nlohmann::json a;
+  a["config"] = config;
+  a["build_s"] = st.build_seconds;
+  a["primitives"] = st.primitives;
+  a["skipped_faces"] = st.skipped_faces;
+  a["bytes_geometry"] = m.geometry_bytes;
+  a["bytes_bvh"] = m.bvh_bytes;
+  a["bytes_other"] = m.other_bytes;
+  a["bytes_total"] = m.total();
+  a["bytes_per_triangle"] = m.bytes_per_triangle();
+  for (const auto& [k, v] : st.details) a["details"][k] = v;
+  a["valid"] = valid;
+  if (!why.empty()) a["validate_error"] = why;
+  if (!json) {
+    std::printf("\n%s: built in %.3f s over %llu primitives\n", config.c_str(), st.build_seconds,
+                (unsigned long long)st.primitives);
+    std::printf(
+        "  memory: geometry %llu B, bvh %llu B, other %llu B, total %llu B = %.2f B/triangle\n",
+        (unsigned long long)m.geometry_bytes, (unsigned long long)m.bvh_bytes,
+        (unsigned long long)m.other_bytes, (unsigned long long)m.total(), m.bytes_per_triangle());
+    for (const auto& [k, v] : st.details) std::printf("  %-24s %.6g\n", k.c_str(), v);
+    std::printf("  validate: %s%s\n", why.empty() ? "ok" : "FAILED: ", why.c_str());
+  }
+  return a;
+}
+
 int info_chunks(const std::string& scene_name, uint64_t max_triangles, const std::string& dir,
                 uint64_t budget_mib, const std::string& accel, bool json) {
   detail::ChunkOptions opt;
@@ -163,46 +197,21 @@ int cmd_info(int argc, char** argv) {
         BuildOptions::from_config(accel).config_name() != scene.options().config_name())
       throw Error(scene_name + " holds a " + scene.options().config_name() + " scene, not " +
                   accel);
-    const MemoryStats m = scene.memory();
     const SceneStats& st = scene.stats();
-    std::string why;
-    const bool valid = scene.validate(&why);
     nlohmann::json out;
     out["scene"] = scene_name;
     out["open_s"] = open_s;
     out["triangles"] = st.triangles;
     out["faces"] = st.input_faces;
     out["bounds"] = box_json(scene.bounds());
-    nlohmann::json a;
-    a["config"] = scene.options().config_name();
-    a["build_s"] = st.build_seconds;
-    a["primitives"] = st.primitives;
-    a["skipped_faces"] = st.skipped_faces;
-    a["bytes_geometry"] = m.geometry_bytes;
-    a["bytes_bvh"] = m.bvh_bytes;
-    a["bytes_other"] = m.other_bytes;
-    a["bytes_total"] = m.total();
-    a["bytes_per_triangle"] = m.bytes_per_triangle();
-    for (const auto& [k, v] : st.details) a["details"][k] = v;
-    a["valid"] = valid;
-    if (!why.empty()) a["validate_error"] = why;
-    out["accel"] = a;
-    if (json) {
-      std::printf("%s\n", out.dump(2).c_str());
-    } else {
+    if (!json) {
       std::printf("scene file       %s (opened in %.3f s)\n", scene_name.c_str(), open_s);
       std::printf("faces            %llu (%llu fan triangles)\n",
                   (unsigned long long)st.input_faces, (unsigned long long)st.triangles);
-      std::printf("\n%s: built in %.3f s over %llu primitives\n",
-                  scene.options().config_name().c_str(), st.build_seconds,
-                  (unsigned long long)st.primitives);
-      std::printf(
-          "  memory: geometry %llu B, bvh %llu B, other %llu B, total %llu B = %.2f B/triangle\n",
-          (unsigned long long)m.geometry_bytes, (unsigned long long)m.bvh_bytes,
-          (unsigned long long)m.other_bytes, (unsigned long long)m.total(), m.bytes_per_triangle());
-      for (const auto& [k, v] : st.details) std::printf("  %-24s %.6g\n", k.c_str(), v);
-      std::printf("  validate: %s%s\n", why.empty() ? "ok" : "FAILED: ", why.c_str());
     }
+    bool valid = false;
+    out["accel"] = scene_report(scene, json, valid);
+    if (json) std::printf("%s\n", out.dump(2).c_str());
     return valid ? 0 : 1;
   }
 
@@ -237,34 +246,9 @@ int cmd_info(int argc, char** argv) {
   if (!accel.empty()) {
     BuildOptions opt = BuildOptions::from_config(accel);
     Scene scene = Scene::build(mesh, opt);
-    MemoryStats m = scene.memory();
-    const SceneStats& st = scene.stats();
-    nlohmann::json a;
-    a["config"] = opt.config_name();
-    a["build_s"] = st.build_seconds;
-    a["primitives"] = st.primitives;
-    a["skipped_faces"] = st.skipped_faces;
-    a["bytes_geometry"] = m.geometry_bytes;
-    a["bytes_bvh"] = m.bvh_bytes;
-    a["bytes_other"] = m.other_bytes;
-    a["bytes_total"] = m.total();
-    a["bytes_per_triangle"] = m.bytes_per_triangle();
-    for (const auto& [k, v] : st.details) a["details"][k] = v;
-    std::string why;
-    a["valid"] = scene.validate(&why);
-    if (!why.empty()) a["validate_error"] = why;
-    out["accel"] = a;
-    if (!json) {
-      std::printf("\n%s: built in %.3f s over %llu primitives\n", opt.config_name().c_str(),
-                  st.build_seconds, (unsigned long long)st.primitives);
-      std::printf(
-          "  memory: geometry %llu B, bvh %llu B, other %llu B, total %llu B = %.2f B/triangle\n",
-          (unsigned long long)m.geometry_bytes, (unsigned long long)m.bvh_bytes,
-          (unsigned long long)m.other_bytes, (unsigned long long)m.total(), m.bytes_per_triangle());
-      for (const auto& [k, v] : st.details) std::printf("  %-24s %.6g\n", k.c_str(), v);
-      std::printf("  validate: %s%s\n", why.empty() ? "ok" : "FAILED: ", why.c_str());
-    }
-    if (!why.empty()) {
+    bool valid = false;
+    out["accel"] = scene_report(scene, json, valid);
+    if (!valid) {
       if (json) std::printf("%s\n", out.dump(2).c_str());
       return 1;
     }

@@ -263,23 +263,23 @@ std::vector<std::string> all_config_names() {
   return v;
 }
 
-SceneBuilder builder_of(Leaf leaf) {
+SceneFormat format_of(Leaf leaf) {
   switch (leaf) {
     case Leaf::Triangles:
     case Leaf::IndexedTriangles:
     case Leaf::CompactTriangles:
-      return build_triangle_scene;
+      return {build_triangle_scene, empty_triangle_scene};
     case Leaf::Pairs:
-      return build_pair_scene;
+      return {build_pair_scene, empty_pair_scene};
     case Leaf::Grids:
     case Leaf::LossyGrids:
     case Leaf::SharedLossyGrids:
-      return build_grid_scene;
+      return {build_grid_scene, empty_grid_scene};
     case Leaf::Costa:
-      return build_costa_scene;
+      return {build_costa_scene, empty_costa_scene};
     case Leaf::Clusters:
     case Leaf::LosslessClusters:
-      return build_cluster_scene;
+      return {build_cluster_scene, empty_cluster_scene};
   }
   throw Error("BuildOptions: unknown leaf format " + std::to_string(int(leaf)));
 }

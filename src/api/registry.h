@@ -1,4 +1,5 @@
-// The builder of each leaf format (the registry's "builder" column, src/api/registry.cpp).
+// The builder of each leaf format and its empty scene for Scene::open (the registry's "builder"
+// column, src/api/registry.cpp).
 #pragma once
 
 #include <memory>
@@ -10,7 +11,12 @@ namespace slim {
 
 using SceneBuilder = std::unique_ptr<Scene::Impl> (*)(const std::vector<const PolyMesh*>& meshes,
                                                       const BuildOptions& opt);
-// The builder of a leaf format; throws slim::Error for a value outside the enum.
-SceneBuilder builder_of(Leaf leaf);
+using EmptySceneMaker = std::unique_ptr<Scene::Impl> (*)(const BuildOptions& opt);
+struct SceneFormat {
+  SceneBuilder build;     // builds the scene from meshes
+  EmptySceneMaker empty;  // the scene's type, unfilled, for Scene::open (api/scene_file.cpp)
+};
+// The functions of a leaf format; throws slim::Error for a value outside the enum.
+SceneFormat format_of(Leaf leaf);
 
 }  // namespace slim

@@ -113,7 +113,7 @@ std::unique_ptr<Scene::Impl> build_impl(const std::vector<const PolyMesh*>& mesh
   }
   check_coordinate_range(meshes);
   opt.check();
-  std::unique_ptr<Scene::Impl> impl = builder_of(opt.leaf)(meshes, opt);
+  std::unique_ptr<Scene::Impl> impl = format_of(opt.leaf).build(meshes, opt);
   impl->opt = opt;
   impl->opt.progress = nullptr;  // the caller's callback may not outlive the build
   impl->ray_setup = RaySetupBounds(impl->bounds);

@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "api/registry.h"
 #include "api/scene_file.h"
 #include "api/scene_impl.h"
 #include "core/ray.h"
@@ -359,27 +360,6 @@ BuildOptions options_of(const OptionsRecord& r, Opener& o) {
   return b;
 }
 
-std::unique_ptr<Scene::Impl> empty_scene(const BuildOptions& opt) {
-  switch (opt.leaf) {
-    case Leaf::Triangles:
-    case Leaf::IndexedTriangles:
-    case Leaf::CompactTriangles:
-      return empty_triangle_scene(opt);
-    case Leaf::Pairs:
-      return empty_pair_scene(opt);
-    case Leaf::Grids:
-    case Leaf::LossyGrids:
-    case Leaf::SharedLossyGrids:
-      return empty_grid_scene(opt);
-    case Leaf::Costa:
-      return empty_costa_scene(opt);
-    case Leaf::Clusters:
-    case Leaf::LosslessClusters:
-      return empty_cluster_scene(opt);
-  }
-  return nullptr;
-}
-
 struct Mapping {
   void* p = MAP_FAILED;
   uint64_t n = 0;
@@ -626,7 +606,7 @@ Scene Scene::open(const std::string& path, const OpenOptions& options) {
            "written for the " + isa + " instruction set, which this CPU lacks");
   o.table(options.verify_checksums);
   const BuildOptions opt = options_of(h.options, o);
-  std::unique_ptr<Impl> impl = empty_scene(opt);
+  std::unique_ptr<Impl> impl = format_of(opt.leaf).empty(opt);
   impl->opt = opt;
   impl->stats.details = o.details();
   impl->mem = {h.mem_geometry, h.mem_bvh, h.mem_other, h.mem_triangles};

@@ -59,8 +59,8 @@ struct Scene::Impl {
 // "avx512"); false for any other name (cpu_check.cpp: a scene file's requirement).
 bool cpu_has_isa(const std::string& isa);
 
-// An empty scene of the type `opt` builds, for Scene::open to fill (scene_file.cpp dispatches to
-// the format files below).
+// An empty scene of the type `opt` builds, for Scene::open to fill (registry.cpp's format_of
+// dispatches to the format files below).
 std::unique_ptr<Scene::Impl> empty_triangle_scene(const BuildOptions& opt);
 std::unique_ptr<Scene::Impl> empty_pair_scene(const BuildOptions& opt);
 std::unique_ptr<Scene::Impl> empty_grid_scene(const BuildOptions& opt);

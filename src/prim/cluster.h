@@ -184,17 +184,20 @@ SLIM_INLINE void decode_child_avx2(const ClusterLattice& lat, const ClusterHeade
     const __m256i v = _mm256_srlv_epi32(word, _mm256_and_si256(pos, _mm256_set1_epi32(7)));
     return _mm256_and_si256(v, _mm256_set1_epi32(int((1u << w) - 1)));
   };
-  // Fields of up to 32 bits: 64-bit gathers (4 lanes each), the low 32 bits of each.
+  // The 64 bits from bit `pos` of each lane (lanes 0-3 in lo, 4-7 in hi): two 64-bit gathers.
   const auto* base64 = reinterpret_cast<const long long*>(bits);
-  auto wide_field = [&](__m256i pos, uint32_t w) {
+  auto gather64 = [&](__m256i pos, __m256i& lo, __m256i& hi) {
     const __m256i byte = _mm256_srli_epi32(pos, 3);
     const __m256i sh = _mm256_and_si256(pos, _mm256_set1_epi32(7));
-    const __m256i lo =
-        _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_castsi256_si128(byte), 1),
-                          _mm256_cvtepu32_epi64(_mm256_castsi256_si128(sh)));
-    const __m256i hi =
-        _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_extracti128_si256(byte, 1), 1),
-                          _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sh, 1)));
+    lo = _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_castsi256_si128(byte), 1),
+                           _mm256_cvtepu32_epi64(_mm256_castsi256_si128(sh)));
+    hi = _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_extracti128_si256(byte, 1), 1),
+                           _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sh, 1)));
+  };
+  // Fields of up to 32 bits: the low 32 bits of each 64-bit lane.
+  auto wide_field = [&](__m256i pos, uint32_t w) {
+    __m256i lo, hi;
+    gather64(pos, lo, hi);
     const __m256i even = _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6);
     const __m256i v = _mm256_permute2x128_si256(_mm256_permutevar8x32_epi32(lo, even),
                                                 _mm256_permutevar8x32_epi32(hi, even), 0x20);
@@ -234,14 +237,8 @@ SLIM_INLINE void decode_child_avx2(const ClusterLattice& lat, const ClusterHeade
                                     _mm256_mullo_epi32(idx, _mm256_set1_epi32(int(L.vbits))));
     if (L.vbits <= 57) {
       // The whole vertex (bx + by + bz bits) with one 64-bit load per lane.
-      const __m256i byte = _mm256_srli_epi32(vpos, 3);
-      const __m256i sh = _mm256_and_si256(vpos, _mm256_set1_epi32(7));
-      const __m256i lo =
-          _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_castsi256_si128(byte), 1),
-                            _mm256_cvtepu32_epi64(_mm256_castsi256_si128(sh)));
-      const __m256i hi =
-          _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_extracti128_si256(byte, 1), 1),
-                            _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sh, 1)));
+      __m256i lo, hi;
+      gather64(vpos, lo, hi);
       uint32_t shift = 0;
       for (int a = 0; a < 3; ++a) {
         const __m128i s64 = _mm_cvtsi32_si128(int(shift));

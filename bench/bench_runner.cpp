@@ -403,18 +403,18 @@ struct SceneRun {
     report.rows.push_back(std::move(row));
   }
 
-  // One configuration's build in round `round`, timed; the scene stays for the rays if it fits
-  // the memory budget.
+  // One configuration's build in round `round`, timed; the scene stays for the rays. A scene
+  // that does not fit the memory budget is built (and timed) at its rays' turn instead, so that
+  // it is built once per round, not twice.
   void time_build(Slot& slot) {
     BenchRow& row = report.rows[slot.row];
-    row.seconds_build.push_back(build(row, slot));
-    if (!row.kept) slot.release();
+    if (row.kept) row.seconds_build.push_back(build(row, slot));
   }
 
   // One configuration's turn in round `round`: both workloads, timed.
   void time_slot(Slot& slot, int round) {
     BenchRow& row = report.rows[slot.row];
-    if (!slot.built()) build(row, slot);  // did not fit the memory budget: rebuilt, untimed
+    if (!slot.built()) row.seconds_build.push_back(build(row, slot));  // not kept between turns
     RunResult p, d;
     if (slot.embree) {
       p = run_primary(*slot.embree, arena, w);

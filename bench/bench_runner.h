@@ -11,13 +11,14 @@
 //   4. lossy configurations: PSNR of a 256 x 256 normals render against bvh8-tri4v's;
 //   5. keep the built scene for the rounds while the scenes kept so far fit in the memory budget
 //      (Scene::memory() / EmbreeScene::memory() totals, greedily in configuration order); a scene
-//      that does not fit is freed and rebuilt (untimed) for its rays in every round;
+//      that does not fit is freed and rebuilt for its rays in every round;
 // B. time `repeat` interleaved rounds (bench_stats.h), each in an order rotating by one
-//    configuration per round: first every configuration is built once (timed; the new scene
-//    replaces the kept one), then every configuration runs workload 1 (one primary ray per pixel
-//    centre) then workload 2 (slim::trace_path, up to 8 bounces, every ray counted). Build time
-//    and MRays/s are medians over the rounds; a ratio is the median of the per-round ratios to
-//    embree-tri's MRays/s in the same round; all come with their min..max range.
+//    configuration per round: first every kept configuration is built once (timed; the new scene
+//    replaces the kept one; one not kept is built, timed, at its turn), then every configuration
+//    runs workload 1 (one primary ray per pixel centre) then workload 2 (slim::trace_path, up to 8
+//    bounces, every ray counted). Build time and MRays/s are medians over the rounds; a ratio is
+//    the median of the per-round ratios to embree-tri's MRays/s in the same round; all come with
+//    their min..max range.
 // Every timed run traces all of its rays and folds each hit distance into a checksum that is kept,
 // so that nothing is optimised away; the ray counts and checksums of the rounds must agree.
 #pragma once

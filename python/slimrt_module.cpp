@@ -340,7 +340,7 @@ class RaycastingScene {
 
   py::dict memory() {
     py::dict d;
-    if (meshes_.empty() && !opened_) {
+    if (meshes_.empty() && !opened()) {
       for (const char* k : {"geometry", "bvh", "other", "total", "triangles"}) d[k] = 0;
       d["bytes_per_triangle"] = 0.0;
     } else {
@@ -364,7 +364,7 @@ class RaycastingScene {
     py::dict d;
     d["config"] = options_.config_name();
     d["geometries"] = meshes_.size();
-    if (meshes_.empty()) return d;
+    if (meshes_.empty() && !opened()) return d;
     {
       py::gil_scoped_release release;
       built();
@@ -397,17 +397,20 @@ class RaycastingScene {
       py::gil_scoped_release release;
       return slim::Scene::open(path, o);
     }();
-    auto r = std::make_unique<RaycastingScene>(s.options().config_name(), 0, py::none());
-    r->options_ = s.options();
-    r->options_.threads = 0;
-    r->scene_.emplace(std::move(s));
-    r->opened_ = true;
-    return r;
+    return std::unique_ptr<RaycastingScene>(new RaycastingScene(std::move(s)));
   }
 
  private:
+  // A scene opened from a file: its options as saved (any combination, with or without a
+  // registry name), all cores.
+  explicit RaycastingScene(slim::Scene opened) : options_(opened.options()), progress_(py::none()) {
+    options_.threads = 0;
+    scene_.emplace(std::move(opened));
+  }
+  bool opened() const { return scene_ && !scene_->file().empty(); }
+
   uint32_t add(slim::PolyMesh&& mesh) {
-    if (opened_)
+    if (opened())
       throw py::value_error("this scene was opened from a scene file: it takes no more geometry");
     if (meshes_.size() >= size_t(kInvalid))
       throw py::value_error("at most 2^32 - 1 geometries in a scene");
@@ -478,7 +481,6 @@ class RaycastingScene {
   py::object progress_;  // None or progress(phase, done, total)
   std::vector<slim::PolyMesh> meshes_;
   std::optional<slim::Scene> scene_;
-  bool opened_ = false;  // from a scene file (open())
   std::mutex mutex_;
 };
 

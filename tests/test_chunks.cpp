@@ -2,6 +2,7 @@
 // every face of the in-memory load comes out of the stream, and lands in exactly one chunk, with
 // its face id and positions bit for bit; bad files give the same errors as slim::load.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <array>
@@ -27,6 +28,7 @@ using slim::PolyMesh;
 using slim::Vec3f;
 using namespace slim::detail;
 
+using slim::test::error_of;
 using slim::test::TempDir;
 
 namespace {
@@ -268,16 +270,6 @@ std::string obj_text(const PolyMesh& m) {
 }
 
 // Runs fn; expects a slim::Error and returns its message.
-std::string error_of(const std::function<void()>& fn) {
-  try {
-    fn();
-  } catch (const slim::Error& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected slim::Error";
-  return {};
-}
-
 // Streams all faces of `path` (for the error tests).
 void drain(const std::string& path, size_t window = 4096) {
   auto s = open_face_stream(path, 64, window);
@@ -425,6 +417,15 @@ TEST(FaceStream, BadFilesGiveLoadErrors) {
   }
   EXPECT_NE(error_of([&] { open_face_stream(d.path("missing.ply")); }).find("missing.ply"),
             std::string::npos);
+  // A FIFO without a writer: refused by its type before it is opened (an open would block), with
+  // load()'s message; so is a missing file.
+  const std::string fifo = d.path("pipe.ply");
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  for (const std::string& path : {fifo, d.path("missing.ply")}) {
+    const std::string expected = error_of([&] { slim::load(path); });
+    EXPECT_EQ(expected.rfind(path, 0), 0u) << expected;
+    EXPECT_EQ(error_of([&] { open_face_stream(path); }), expected);
+  }
   EXPECT_NE(error_of([&] { open_face_stream(d.write("a.gltf", "{}")); }).find("a.gltf"),
             std::string::npos);
 }
@@ -457,14 +458,14 @@ TEST(Chunks, Torus512InAtLeast16Chunks) {
 TEST(Chunks, FilesUnionIsTheMesh) {
   TempDir d{"slimrt_chunks"};
   const PolyMesh m = polygon_mesh(3000, 21);
+  const TempDir spill{"slimrt_spill"};
   ChunkOptions opt;
-  opt.spill_dir = d.path("spill");
-  fs::create_directories(opt.spill_dir);
+  opt.spill_dir = spill.dir();
   opt.max_triangles = 400;
   for (const char* fmt : {"binary_little_endian", "binary_big_endian", "ascii"})
     expect_chunks_match(d.write(std::string(fmt) + ".ply", ply_text(m, fmt)), opt, 8);
   expect_chunks_match(d.write("m.obj", obj_text(m)), opt, 8);
-  EXPECT_EQ(size_t(std::distance(fs::directory_iterator(opt.spill_dir), {})), 0u);
+  EXPECT_EQ(spill.entries(), 0u);
 }
 
 TEST(Chunks, RealMeshes) {
@@ -492,14 +493,14 @@ TEST(Chunks, ErrorsRemoveSpillFiles) {
   const PolyMesh m = polygon_mesh(2000, 22);
   std::string good = ply_text(m, "binary_little_endian");
   const std::string path = d.write("late.ply", good.substr(0, good.size() - 20));
+  const TempDir spill{"slimrt_spill"};
   ChunkOptions opt;
-  opt.spill_dir = d.path("spill");
-  fs::create_directories(opt.spill_dir);
+  opt.spill_dir = spill.dir();
   opt.max_triangles = 300;
   const std::string expected = error_of([&] { slim::load(path); });
   auto s = open_face_stream(path, 256, 4096);
   EXPECT_EQ(error_of([&] { ChunkSet set(*s, opt); }), expected);
-  EXPECT_EQ(size_t(std::distance(fs::directory_iterator(opt.spill_dir), {})), 0u);
+  EXPECT_EQ(spill.entries(), 0u);
   opt.spill_dir = d.path("no/such/dir");
   auto t = open_face_stream("terrain:8");
   EXPECT_NE(error_of([&] { ChunkSet set(*t, opt); }).find("no/such/dir"), std::string::npos);

@@ -30,6 +30,7 @@
 
 namespace fs = std::filesystem;
 
+using slim::test::error_of;
 using slim::test::TempDir;
 
 namespace {
@@ -37,16 +38,6 @@ namespace {
 using namespace slim;
 
 // The message of the slim::Error thrown by fn, or "" if none was thrown.
-template <class Fn>
-std::string error_of(Fn&& fn) {
-  try {
-    fn();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
-
 struct Cli {
   int exit_code = -1;
   std::string err;  // stderr
@@ -200,6 +191,12 @@ TEST(RobustHostile, ObjExponentsBeyond400AreErrorsNamingTheLine) {
     EXPECT_NE(msg.find("e.obj:4: "), std::string::npos) << line << msg;
     EXPECT_NE(msg.find("has an exponent beyond 400"), std::string::npos) << line << msg;
   }
+  // Only numbers have exponents: a tag named like one is not refused.
+  EXPECT_EQ(error_of([&] {
+              detail::read_obj("tag.obj",
+                               "v 0 0 0\nv 1 0 0\nv 0 1 0\nt file1e999 0/0/1 x\nf 1 2 3\n");
+            }),
+            "");
   // Exponents up to 400 still parse (these values underflow to 0).
   EXPECT_EQ(error_of([&] {
               detail::read_obj("ok.obj", "v 0 0 0\nv 1 0 0\nv 0 1e-400 0e400\nf 1 2 3\n");

@@ -166,6 +166,45 @@ TEST(SceneFile, EveryConfigurationRoundTrips) {
   EXPECT_EQ(tested, int(all_config_names().size()));
 }
 
+// The triangles a format with its own geometry intersects: the opened scene decodes the same ones
+// from the mapping as the built scene from its memory (same order, same bits).
+TEST(SceneFile, OpenedScenesDecodeTheTrianglesOfTheBuiltOnes) {
+  const PolyMesh terrain = test_mesh();
+  const std::string path = temp_path("decoded");
+  int compared = 0;
+  for (const ConfigInfo& c : configs()) {
+    if (!c.own_geometry) continue;
+    SCOPED_TRACE(c.name);
+    Scene built;
+    try {
+      built = Scene::build(terrain, BuildOptions::from_config(c.name));
+    } catch (const NotApplicable&) {
+      continue;
+    }
+    built.save(path);
+    const Scene opened = Scene::open(path);
+    std::optional<DecodedTriangles> a;
+    try {
+      a = built.decoded_triangles();
+    } catch (const Error&) {
+      // A format that cannot decode its leaves says so the same way when opened.
+      EXPECT_THROW((void)opened.decoded_triangles(), Error);
+      continue;
+    }
+    const std::optional<DecodedTriangles> b = opened.decoded_triangles();
+    ASSERT_EQ(a.has_value(), b.has_value());
+    if (!a) continue;
+    ASSERT_EQ(a->vertices.size(), b->vertices.size());
+    EXPECT_EQ(
+        std::memcmp(a->vertices.data(), b->vertices.data(), a->vertices.size() * sizeof(Vec3f)), 0);
+    EXPECT_EQ(a->geom, b->geom);
+    EXPECT_EQ(a->face, b->face);
+    ++compared;
+  }
+  std::filesystem::remove(path);
+  EXPECT_GT(compared, 0);
+}
+
 // A small file of a configuration the structure check covers, and its bytes.
 struct Small {
   std::string path, bytes;

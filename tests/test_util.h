@@ -17,6 +17,17 @@
 
 namespace slim::test {
 
+// The message of the slim::Error fn throws, "" when it throws none.
+template <class Fn>
+std::string error_of(Fn&& fn) {
+  try {
+    fn();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
 inline std::string shared_data_dir() { return SLIM_SHARED_DATA; }
 inline bool have_shared_data() { return std::filesystem::exists(shared_data_dir() + "/MANIFEST"); }
 // SLIM_REQUIRE_DATA=1 (set by .ci/run): a test that needs ../shared/data fails instead of

@@ -56,10 +56,7 @@ int cmd_build(int argc, char** argv) {
   Scene scene;
   {
     // Phase, percentage and rate on a terminal (tools/progress.h), as render shows them.
-    BuildMeter meter(
-        !quiet && isatty(fileno(stderr)) != 0,
-        "build " + config + " (" + std::to_string(mesh.fan_triangle_count()) + " triangles)",
-        mesh.fan_triangle_count());
+    BuildMeter meter(!quiet && isatty(fileno(stderr)) != 0, config, mesh.fan_triangle_count());
     opt.progress = meter.callback();
     scene = out_of_memory_context("building " + scene_name + " as " + config,
                                   [&] { return Scene::build(mesh, opt); });

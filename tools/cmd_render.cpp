@@ -231,17 +231,14 @@ int render_command(int argc, char** argv, const RenderRanks& ranks) {
     load_s = seconds_since(t0);
 
     t0 = std::chrono::steady_clock::now();
+    faces = mesh.face_count(), triangles = mesh.fan_triangle_count();
     {
-      BuildMeter meter(
-          show_progress,
-          "build " + config + " (" + std::to_string(mesh.fan_triangle_count()) + " triangles)",
-          mesh.fan_triangle_count());
+      BuildMeter meter(show_progress, config, triangles);
       bopt.progress = meter.callback();
       scene = out_of_memory_context("building " + scene_name + " as " + config,
                                     [&] { return Scene::build(mesh, bopt); });
     }
     build_s = seconds_since(t0);
-    faces = mesh.face_count(), triangles = mesh.fan_triangle_count();
     mesh = PolyMesh();  // the scene owns all it needs
   }
 
@@ -251,9 +248,8 @@ int render_command(int argc, char** argv, const RenderRanks& ranks) {
   RenderStats rstats;
   std::vector<int> rank_tiles;
   Image img = out_of_memory_context("rendering " + scene_name + " at " + res, [&] {
-    return ranks.distributed() ? ranks.render(scene, cam, ropt, mpi_tile, mpi_root == "render",
-                                              show_progress, &rstats, &rank_tiles)
-                               : render(scene, cam, ropt, &rstats);
+    return ranks.render(scene, cam, ropt, mpi_tile, mpi_root == "render", show_progress, &rstats,
+                        &rank_tiles);
   });
   double render_s = seconds_since(t0);
   if (!ranks.is_root()) return 0;

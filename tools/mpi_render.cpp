@@ -202,15 +202,12 @@ void RenderRanks::check_same_scene(const Scene& scene, const std::string& scene_
 Image RenderRanks::render(const Scene& scene, const Camera& cam, const RenderOptions& opt_in,
                           int tile_size, bool root_renders, bool progress, RenderStats* stats,
                           std::vector<int>* tiles_per_rank) const {
+  if (!distributed()) return slim::render(scene, cam, opt_in, stats);
   if (tile_size < 1) throw Error("render: tile size must be positive");
   RenderOptions opt = opt_in;
   opt.progress = false;
-  // The image size as slim::render takes it.
-  const int width = opt.width > 0 ? opt.width : cam.width;
-  const int height = opt.height > 0 ? opt.height : cam.height;
-  if (width <= 0 || height <= 0)
-    throw Error("render: image size must be positive, got " + std::to_string(width) + "x" +
-                std::to_string(height));
+  int width = 0, height = 0;
+  render_size(cam, opt, width, height);
   const TileGrid grid(width, height, tile_size);
   // MPI counts in int: the tiles and a tile's message must stay below 2^31.
   if (uint64_t(grid.tiles_x) * uint64_t(grid.tiles_y) > uint64_t(INT_MAX))

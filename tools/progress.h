@@ -11,6 +11,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <cstdio>
+#include <functional>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -19,12 +20,18 @@
 
 namespace slim::cli {
 
-class StepProgress {
+// The line on stderr: a thread that waits ~2 s, then draws line(seconds) every half second and
+// last(seconds) when the object goes (if it drew anything). It prints holding no lock that the
+// work takes, so the work never waits for a slow terminal. Declare it as the last member of its
+// owner: it is joined before the state its functions read goes.
+class ProgressLine {
  public:
-  StepProgress(bool enabled, std::string what) : what_(std::move(what)) {
+  using Text = std::function<std::string(double seconds)>;
+  ProgressLine(bool enabled, Text line, Text last)
+      : line_(std::move(line)), last_(std::move(last)) {
     if (enabled) thread_ = std::thread([this] { run(); });
   }
-  ~StepProgress() {
+  ~ProgressLine() {
     if (!thread_.joinable()) return;
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -33,34 +40,55 @@ class StepProgress {
     cv_.notify_one();
     thread_.join();
   }
-  StepProgress(const StepProgress&) = delete;
-  StepProgress& operator=(const StepProgress&) = delete;
+  ProgressLine(const ProgressLine&) = delete;
+  ProgressLine& operator=(const ProgressLine&) = delete;
+  bool enabled() const { return thread_.joinable(); }
 
  private:
   void run() {
     using namespace std::chrono;
-    auto t0 = steady_clock::now();
+    const auto t0 = steady_clock::now();
+    auto seconds_now = [&] { return duration<double>(steady_clock::now() - t0).count(); };
     std::unique_lock<std::mutex> lock(mutex_);
     if (cv_.wait_for(lock, seconds(2), [this] { return done_; })) return;
-    bool drawn = false;
+    size_t width = 0;  // spaces clear what a longer previous line left
     while (true) {
-      double s = duration<double>(steady_clock::now() - t0).count();
-      std::fprintf(stderr, "\r%s | %.1f s ", what_.c_str(), s);
+      lock.unlock();
+      const std::string text = "\r" + line_(seconds_now());
+      std::fprintf(stderr, "%-*s", int(width), text.c_str());
       std::fflush(stderr);
-      drawn = true;
+      width = std::max(width, text.size());
+      lock.lock();
       if (cv_.wait_for(lock, milliseconds(500), [this] { return done_; })) break;
     }
-    if (drawn) {
-      double s = duration<double>(steady_clock::now() - t0).count();
-      std::fprintf(stderr, "\r%s | done in %.1f s\n", what_.c_str(), s);
-    }
+    lock.unlock();
+    std::fprintf(stderr, "%-*s\n", int(width), ("\r" + last_(seconds_now())).c_str());
   }
 
-  std::string what_;
+  Text line_, last_;
   std::mutex mutex_;
   std::condition_variable cv_;
   bool done_ = false;
   std::thread thread_;
+};
+
+// A step the library reports nothing about while it runs (loading): its name and elapsed time.
+class StepProgress {
+ public:
+  StepProgress(bool enabled, std::string what)
+      : what_(std::move(what)),
+        line_(
+            enabled, [this](double s) { return what_ + " | " + fixed1(s) + " s "; },
+            [this](double s) { return what_ + " | done in " + fixed1(s) + " s"; }) {}
+
+ private:
+  static std::string fixed1(double s) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.1f", s);
+    return buf;
+  }
+  std::string what_;
+  ProgressLine line_;
 };
 
 // Progress of a Scene::build: pass callback() as BuildOptions::progress. Shows
@@ -69,25 +97,22 @@ class StepProgress {
 // time the phase has run.
 class BuildMeter {
  public:
-  BuildMeter(bool enabled, std::string what, uint64_t triangles)
-      : what_(std::move(what)), triangles_(triangles) {
-    if (enabled) thread_ = std::thread([this] { run(); });
-  }
-  ~BuildMeter() {
-    if (!thread_.joinable()) return;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      done_ = true;
-    }
-    cv_.notify_one();
-    thread_.join();
-  }
-  BuildMeter(const BuildMeter&) = delete;
-  BuildMeter& operator=(const BuildMeter&) = delete;
+  // The line names the configuration `config` and the scene's `triangles`.
+  BuildMeter(bool enabled, const std::string& config, uint64_t triangles)
+      : what_("build " + config + " (" + std::to_string(triangles) + " triangles)"),
+        triangles_(triangles),
+        line_(
+            enabled, [this](double s) { return line(s); },
+            [this](double s) {
+              char buf[128];
+              std::snprintf(buf, sizeof buf, " | done in %.1f s | %.2f M triangles/s", s,
+                            s > 0 ? double(triangles_) / s * 1e-6 : 0.0);
+              return what_ + buf;
+            }) {}
 
   // Empty when not enabled: the build then reports nothing.
   BuildProgressFn callback() {
-    if (!thread_.joinable()) return {};
+    if (!line_.enabled()) return {};
     return [this](const BuildProgress& p) {
       std::lock_guard<std::mutex> lock(mutex_);
       if (p.phase != phase_) {
@@ -100,55 +125,39 @@ class BuildMeter {
   }
 
  private:
-  void run() {
-    using namespace std::chrono;
-    const auto t0 = steady_clock::now();
-    std::unique_lock<std::mutex> lock(mutex_);
-    if (cv_.wait_for(lock, seconds(2), [this] { return done_; })) return;
-    bool drawn = false;
-    while (true) {
-      const auto now = steady_clock::now();
-      const double s = duration<double>(now - t0).count();
-      std::string line = "\r" + what_;
-      char buf[128];
-      if (!phase_.empty()) {
-        std::snprintf(buf, sizeof buf, " | %s %3d%%", phase_.c_str(), int(fraction_ * 100.0));
-        line += buf;
-      }
-      std::snprintf(buf, sizeof buf, " | %.1f s", s);
-      line += buf;
-      const double phase_s = duration<double>(now - phase_start_).count();
-      if (!phase_.empty() && fraction_ > 0.0 && phase_s > 0.0) {
-        std::snprintf(buf, sizeof buf, " | %.2f M triangles/s",
-                      double(triangles_) * fraction_ / phase_s * 1e-6);
-        line += buf;
-      }
-      // Spaces clear what a longer previous line left.
-      std::fprintf(stderr, "%-*s", int(width_), line.c_str());
-      width_ = std::max(width_, line.size());
-      std::fflush(stderr);
-      drawn = true;
-      if (cv_.wait_for(lock, milliseconds(500), [this] { return done_; })) break;
+  std::string line(double s) {
+    std::string phase;
+    double fraction = 0, phase_s = 0;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);  // a copy: formatting happens unlocked
+      phase = phase_;
+      fraction = fraction_;
+      phase_s =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - phase_start_).count();
     }
-    if (drawn) {
-      const double s = duration<double>(steady_clock::now() - t0).count();
-      char buf[128];
-      std::snprintf(buf, sizeof buf, " | done in %.1f s | %.2f M triangles/s", s,
-                    s > 0 ? double(triangles_) / s * 1e-6 : 0.0);
-      std::fprintf(stderr, "%-*s\n", int(width_), ("\r" + what_ + buf).c_str());
+    std::string text = what_;
+    char buf[128];
+    if (!phase.empty()) {
+      std::snprintf(buf, sizeof buf, " | %s %3d%%", phase.c_str(), int(fraction * 100.0));
+      text += buf;
     }
+    std::snprintf(buf, sizeof buf, " | %.1f s", s);
+    text += buf;
+    if (!phase.empty() && fraction > 0.0 && phase_s > 0.0) {
+      std::snprintf(buf, sizeof buf, " | %.2f M triangles/s",
+                    double(triangles_) * fraction / phase_s * 1e-6);
+      text += buf;
+    }
+    return text;
   }
 
   std::string what_;
   uint64_t triangles_;
-  std::mutex mutex_;
-  std::condition_variable cv_;
-  bool done_ = false;
-  std::string phase_;  // the phase last reported (guarded by mutex_), its start and fraction done
+  std::mutex mutex_;  // guards the phase last reported, its start and its fraction done
+  std::string phase_;
   std::chrono::steady_clock::time_point phase_start_ = std::chrono::steady_clock::now();
   double fraction_ = 0;
-  size_t width_ = 0;
-  std::thread thread_;
+  ProgressLine line_;  // last: its thread reads the members above
 };
 
 }  // namespace slim::cli

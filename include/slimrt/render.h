@@ -14,9 +14,10 @@
 
 namespace slim {
 
-// Pinhole camera. Rays start at `eye`; pixel (x, y) maps to eye + dir00 + du * (x+0.5) + dv * (y+0.5).
-// When `clip` is set (an eye beyond the supported coordinate range, see kMaxCoordinate), each ray
-// starts where it enters `clip_box` instead, so that a view from far away still sees the scene.
+// Pinhole camera. Rays start at `eye`; pixel (x, y) maps to eye + dir00 + du * (x+0.5) + dv *
+// (y+0.5). When `clip` is set (an eye beyond the supported coordinate range, see kMaxCoordinate),
+// each ray starts where it enters `clip_box` instead, so that a view from far away still sees the
+// scene.
 struct Camera {
   Vec3f eye;
   Vec3f dir00;   // direction to the top-left image corner
@@ -162,9 +163,9 @@ struct RenderOptions {
   int spp = 1;
   int max_bounces = 8;
   Shade shade = Shade::Diffuse;
-  int threads = 0;        // 0 = all cores
+  int threads = 0;             // 0 = all cores
   Vec3f up{0.0f, 0.0f, 1.0f};  // Diffuse, Sun: the scene's up direction, the sky's zenith
-  bool progress = false;  // progress on stderr (percentage, elapsed, MRays/s) after ~2 s
+  bool progress = false;       // progress on stderr (percentage, elapsed, MRays/s) after ~2 s
 };
 
 // Linear RGB float image, row-major, top row first.
@@ -177,6 +178,9 @@ struct RenderStats {
   uint64_t rays = 0;  // every ray traced (camera rays and diffuse bounces)
 };
 
+// The image size render(scene, cam, opt) makes: opt's width/height where set, else the camera's.
+// Throws slim::Error unless both are positive.
+void render_size(const Camera& cam, const RenderOptions& opt, int& width, int& height);
 // Renders the scene with the camera, tiles spread over the threads.
 Image render(const Scene& scene, const Camera& cam, const RenderOptions& opt,
              RenderStats* stats = nullptr);

@@ -25,6 +25,9 @@ def test_save_open_same_hits(tmp_path, config):
     ma, mb = s.memory(), o.memory()
     for k in ("geometry", "bvh", "other"):
         assert ma[k] == mb[k]
+    sa, sb = s.stats(), o.stats()  # an opened scene reports the figures it was saved with
+    for k in ("input_faces", "triangles"):
+        assert sa[k] == sb[k]
     with pytest.raises(ValueError):
         o.add_triangles(v, t)
 

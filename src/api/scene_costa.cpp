@@ -33,27 +33,27 @@ uint32_t mesh_of(const std::vector<uint32_t>& face_base, uint32_t g) {
 }
 
 // The triangles of the store's primitives, split by the leaves' rules (primitive_triangles), in
-// store order, each with its input mesh and face; face_of(i) is the global input face of
-// primitive i (face_base: first global face of each mesh).
-template <class FaceOf>
-DecodedTriangles store_triangles(const QuantizedMesh& q, const std::vector<uint32_t>& face_base,
-                                 FaceOf&& face_of) {
+// store order, each with its input mesh and face: face_of(i, geom, face) gives them for
+// primitive i. Store: a QuantizedMesh or the CostaView a scene traces (offset, face, vertex).
+template <class Store, class FaceOf>
+DecodedTriangles store_triangles(const Store& q, uint32_t prims, FaceOf&& face_of) {
   NgonMesh d;  // the store's primitives (indices only: primitive_triangles reads no position)
-  d.prim_offsets.reserve(q.prim_count() + 1);
-  d.faces.reserve(q.face_count());
-  for (uint32_t i = 0; i <= q.prim_count(); ++i) d.prim_offsets.push_back(q.offset(i));
-  for (uint64_t j = 0; j < q.face_count(); ++j) d.faces.push_back(q.face(j));
+  d.prim_offsets.reserve(size_t(prims) + 1);
+  for (uint32_t i = 0; i <= prims; ++i) d.prim_offsets.push_back(q.offset(i));
+  d.faces.reserve(d.prim_offsets.back());
+  for (uint64_t j = 0; j < d.prim_offsets.back(); ++j) d.faces.push_back(q.face(j));
   DecodedTriangles out;
   std::vector<uint32_t> tris;
-  for (size_t i = 0; i < d.prim_count(); ++i) {
+  for (uint32_t i = 0; i < prims; ++i) {
     tris.clear();
     primitive_triangles(d, i, tris);
-    const uint32_t g = face_of(i), mesh = mesh_of(face_base, g);
+    uint32_t geom = 0, face = 0;
+    face_of(i, geom, face);
     for (size_t k = 0; k < tris.size(); ++k) {
       out.vertices.push_back(q.vertex(tris[k]));
       if (k % 3 == 2) {
-        out.geom.push_back(mesh);
-        out.face.push_back(g - face_base[mesh]);
+        out.geom.push_back(geom);
+        out.face.push_back(face);
       }
     }
   }
@@ -130,8 +130,11 @@ class CostaScene : public BvhScene<CostaLeaf<P, F, V>> {
   }
   // Decoded from the store (in the BVH's leaf order), as the leaves decode it.
   std::optional<DecodedTriangles> decoded_triangles() const override {
-    return store_triangles(data->store, data->face_base,
-                           [&](size_t i) { return uint32_t(data->face_map.get(i)); });
+    // From the context, which a built and an opened scene both have.
+    const auto& c = this->ctx;
+    return store_triangles(c.view, c.prim_count, [&](uint32_t i, uint32_t& geom, uint32_t& face) {
+      c.faces.lookup(i, geom, face);
+    });
   }
 };
 
@@ -533,7 +536,12 @@ CostaTriangles costa_triangles(const std::vector<const PolyMesh*>& meshes,
   NgonMesh m = load_ngon_mesh(meshes);
   if (f.T) m = triangulate_ngon_mesh(m);
   const QuantizedMesh q(m, f.P, f.F, f.V);
-  return store_triangles(q, m.face_base, [&](size_t i) { return m.prim_face[i]; });
+  return store_triangles(q, uint32_t(q.prim_count()),
+                         [&](uint32_t i, uint32_t& geom, uint32_t& face) {
+                           const uint32_t g = m.prim_face[i];
+                           geom = mesh_of(m.face_base, g);
+                           face = g - m.face_base[geom];
+                         });
 }
 
 CostaSizes costa_sizes(const PolyMesh& mesh) {

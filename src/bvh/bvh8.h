@@ -157,6 +157,7 @@ struct Bvh8Stats {
   double sah_cost = 0;   // SAH cost of the BVH8 (node visit = 1, block test = 1)
   double leaf_fill = 0;  // average primitives per leaf block / block_prims
   int depth = 0;
+  int32_t reserved = 0;  // the tail padding, named and zero: scene files store this struct
 };
 
 struct Bvh8 {

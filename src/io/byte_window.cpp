@@ -1,12 +1,11 @@
 // ByteWindow: see byte_window.h.
 #include "io/byte_window.h"
 
-#include <sys/stat.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
 
+#include "io/xz.h"
 #include "slimrt/error.h"
 
 namespace slim::detail {
@@ -20,14 +19,7 @@ ByteWindow::ByteWindow(std::string_view data, uint64_t start) {
 
 ByteWindow::ByteWindow(const std::string& path, uint64_t start, size_t window, bool lines)
     : path_(path), window_(std::max<size_t>(window, 4096)), lines_(lines) {
-  file_ = std::fopen(path.c_str(), "rb");
-  if (!file_) throw Error(path + ": cannot open: " + std::strerror(errno));
-  struct stat st;
-  if (fstat(fileno(file_), &st) != 0 || !S_ISREG(st.st_mode)) {
-    std::fclose(file_);
-    throw Error(path + ": not a regular file; expected a mesh file");
-  }
-  total_ = uint64_t(st.st_size);
+  file_ = open_mesh_file(path, total_);
   owned_.resize(window_);
   seek(start);
 }

@@ -169,21 +169,31 @@ void check_floats(const std::string& src, uint64_t line, std::string_view rest, 
 // of a 'vw' line is then converted to int (both undefined behaviour, found by fuzz/fuzz_obj.cpp).
 // Up to 400 every such product is finite, and float's range ends near 1e38 and 1e-45 anyway.
 constexpr int kMaxExponent = 400;
+// The exponent tinyobjloader's parser would read from token t (its grammar: [sign] digits
+// [. digits] [e [sign] digits], or [sign] . digits ...), saturated at kMaxExponent + 1; 0 where
+// the token does not start like a number or has no exponent, so that names ("t file1000 ...")
+// are not numbers here either.
+int tinyobj_exponent(std::string_view t) {
+  auto digit = [&](size_t i) { return i < t.size() && t[i] >= '0' && t[i] <= '9'; };
+  size_t i = (!t.empty() && (t[0] == '+' || t[0] == '-')) ? 1 : 0;
+  if (!digit(i) && !(i < t.size() && t[i] == '.')) return 0;
+  while (digit(i)) ++i;
+  if (i < t.size() && t[i] == '.')
+    for (++i; digit(i);) ++i;
+  if (i >= t.size() || (t[i] != 'e' && t[i] != 'E')) return 0;
+  ++i;
+  if (i < t.size() && (t[i] == '+' || t[i] == '-')) ++i;
+  int exponent = 0;
+  for (; digit(i); ++i) exponent = std::min(exponent * 10 + (t[i] - '0'), kMaxExponent + 1);
+  return exponent;
+}
 void check_exponents(const std::string& src, uint64_t line, std::string_view rest) {
   for_each_token(rest, [&](int64_t, std::string_view t) {
-    for (size_t i = 0; i < t.size(); ++i) {
-      if (t[i] != 'e' && t[i] != 'E') continue;
-      size_t j = i + 1;
-      if (j < t.size() && (t[j] == '+' || t[j] == '-')) ++j;
-      int exponent = 0;
-      for (; j < t.size() && t[j] >= '0' && t[j] <= '9'; ++j)
-        exponent = std::min(exponent * 10 + (t[j] - '0'), kMaxExponent + 1);
-      if (exponent > kMaxExponent)
-        throw_at_line(src, line,
-                      "number " + excerpt(t) + " has an exponent beyond " +
-                          std::to_string(kMaxExponent) + "; expected one from -" +
-                          std::to_string(kMaxExponent) + " to " + std::to_string(kMaxExponent));
-    }
+    if (tinyobj_exponent(t) > kMaxExponent)
+      throw_at_line(src, line,
+                    "number " + excerpt(t) + " has an exponent beyond " +
+                        std::to_string(kMaxExponent) + "; expected one from -" +
+                        std::to_string(kMaxExponent) + " to " + std::to_string(kMaxExponent));
   });
 }
 

@@ -147,16 +147,22 @@ std::string xz_decompress(const std::string& source, const void* data, size_t si
   return std::string(decode(source, fill, size, max_file_bytes(limit)).view());
 }
 
-FileBytes read_file(const std::string& path, uint64_t limit) {
-  limit = max_file_bytes(limit);
+std::FILE* open_mesh_file(const std::string& path, uint64_t& size) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0)
     throw Error(path + ": cannot open file: " + std::strerror(errno));
   if (!S_ISREG(st.st_mode))
     throw Error(path + ": not a regular file (a folder or device); expected a mesh file");
-  FilePtr f(std::fopen(path.c_str(), "rb"));
+  std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) throw Error(path + ": cannot open file: " + std::strerror(errno));
-  uint64_t file_bytes = uint64_t(st.st_size);
+  size = uint64_t(st.st_size);
+  return f;
+}
+
+FileBytes read_file(const std::string& path, uint64_t limit) {
+  limit = max_file_bytes(limit);
+  uint64_t file_bytes = 0;
+  FilePtr f(open_mesh_file(path, file_bytes));
 
   if (has_xz_suffix(path)) {
     std::vector<uint8_t> chunk(kChunkBytes);

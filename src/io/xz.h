@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <string_view>
@@ -49,6 +50,11 @@ bool has_xz_suffix(const std::string& path);
 // needing more than kXzMemLimit to decode. Byte offsets reported later by the format parsers refer
 // to the returned (decompressed) bytes.
 FileBytes read_file(const std::string& path, uint64_t limit = 0);
+
+// Opens the mesh file `path` for reading (the caller fcloses it) and gives its size: checked to be
+// a regular file before it is opened, so that a FIFO or device cannot block the open. Throws
+// slim::Error naming the file (read_file's messages).
+std::FILE* open_mesh_file(const std::string& path, uint64_t& size);
 
 // Decompresses an in-memory .xz image; `source` names it in errors. Used by read_file and tests.
 std::string xz_decompress(const std::string& source, const void* data, size_t size,

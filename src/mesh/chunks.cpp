@@ -40,8 +40,6 @@ Vec3f centroid(const Vec3f* c, uint32_t n) {
   return s * (1.0f / float(n));
 }
 
-bool finite(Vec3f p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
-
 // Morton cell of a point in a box, `bits` per axis; NaN and out-of-box values clamp.
 class CellMap {
  public:
@@ -117,9 +115,9 @@ ChunkSet::ChunkSet(FaceStream& in, const ChunkOptions& opt) {
       const Vec3f* c = b.corners.data();
       for (uint32_t n : b.sizes) {
         const Vec3f m = centroid(c, n);
-        if (finite(m)) cbox.extend(m);
+        if (is_finite(m)) cbox.extend(m);
         for (uint32_t k = 0; k < n; ++k)
-          if (finite(c[k])) stats_.bounds.extend(c[k]);
+          if (is_finite(c[k])) stats_.bounds.extend(c[k]);
         stats_.triangles += n - 2;
         c += n;
       }
@@ -191,7 +189,7 @@ ChunkSet::ChunkSet(FaceStream& in, const ChunkOptions& opt) {
         ci.triangles += n - 2;
         ci.corners += n;
         for (uint32_t j = 0; j < n; ++j)
-          if (finite(c[j])) ci.bounds.extend(c[j]);
+          if (is_finite(c[j])) ci.bounds.extend(c[j]);
         std::vector<char>& out = buf[id];
         const size_t bytes = 12 + size_t(n) * sizeof(Vec3f);
         if (out.size() + bytes > cap && !out.empty()) flush(id);

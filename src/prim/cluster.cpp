@@ -11,8 +11,6 @@ namespace slim::cluster {
 
 namespace {
 
-uint32_t bit_length(uint32_t x) { return x ? 32u - uint32_t(__builtin_clz(x)) : 0u; }
-
 // Writes LSB-first fields of up to 32 bits; `out` holds 8 bytes beyond the last field's byte.
 struct BitWriter {
   std::vector<uint8_t>& out;
@@ -80,7 +78,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       hi = std::max<uint32_t>(hi, local[i]);
     }
     vbase[c] = lo;
-    h.ib = uint8_t(std::max(uint32_t(h.ib), bit_length(hi - lo)));
+    h.ib = uint8_t(std::max(uint32_t(h.ib), bit_width(hi - lo)));
   }
   for (int a = 0; a < 3; ++a) {
     uint32_t lo = codes[a], hi = codes[a];
@@ -89,7 +87,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       hi = std::max(hi, codes[3 * i + a]);
     }
     h.anchor[a] = lo;
-    h.bits[a] = uint8_t(bit_length(hi - lo));
+    h.bits[a] = uint8_t(bit_width(hi - lo));
   }
   uint32_t glo = ~0u, ghi = 0;
   std::vector<uint32_t> ids;
@@ -101,7 +99,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   std::sort(ids.begin(), ids.end());
   h.prim_base = ids[0];
   h.geom_base = glo;
-  h.gb = uint8_t(bit_length(ghi - glo));
+  h.gb = uint8_t(bit_width(ghi - glo));
   // PrimID runs: a run starts at the first sorted id that is 2^ob or more past the current start;
   // ob is the width with the fewest bits (run starts + per triangle run index and offset). The
   // widest ob gives one run: the plain base + offset, for meshes whose ids are in random order.
@@ -117,8 +115,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   for (uint32_t ob = 0; ob <= 32; ++ob) {
     runs_of(ob, starts);
     if (starts.size() > 255) continue;
-    const uint64_t bits = starts.size() * uint64_t(bit_length(starts.back() - h.prim_base)) +
-                          tris.size() * uint64_t(bit_length(uint32_t(starts.size()) - 1) + ob);
+    const uint64_t bits = starts.size() * uint64_t(bit_width(starts.back() - h.prim_base)) +
+                          tris.size() * uint64_t(bit_width(uint32_t(starts.size()) - 1) + ob);
     if (bits < best_bits) {
       best_bits = bits;
       best_ob = ob;
@@ -127,7 +125,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   runs_of(best_ob, starts);
   h.nruns = uint8_t(starts.size());
   h.ob = uint8_t(best_ob);
-  h.pb = uint8_t(bit_length(starts.back() - h.prim_base));
+  h.pb = uint8_t(bit_width(starts.back() - h.prim_base));
 
   const Layout L = layout(h);
   std::vector<uint8_t> out(data_bytes(h) + 8, 0);  // 8: the writer's 64-bit stores

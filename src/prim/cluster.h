@@ -10,13 +10,13 @@
 // follows it:
 //   ClusterHeader (38 B, packed)
 //   bit stream, LSB first from the byte after the header:
-//     child vertex bases: k entries of vbw = bit_length(nverts - 1) bits (k children)
+//     child vertex bases: k entries of vbw = bit_width(nverts - 1) bits (k children)
 //     topology: 3 vertex indices per triangle, `ib` bits each, minus its child's vertex base
 //               (triangles in child order; vertices numbered in order of first use, so that the
 //               vertices of one child lie in a short range)
 //     vertices: per vertex bx + by + bz bits (offsets from the anchor)
 //     id runs:  nruns run starts of pb bits (start - prim_base)
-//     ids:      per triangle rb = bit_length(nruns - 1) bits run index, ob bits offset in the
+//     ids:      per triangle rb = bit_width(nruns - 1) bits run index, ob bits offset in the
 //               run (primID = prim_base + start + offset), gb bits geomID - geom_base
 // A child's triangles are [end[i-1], end[i]) (end[-1] = 0); k is one more than the first i with
 // end[i] = ntris. Children with fewer than 8 triangles repeat their last triangle in the padding

@@ -94,6 +94,18 @@ Vec3f sun_up(Vec3f up) {
   return u.x == 0.0f && u.y == 0.0f && u.z == 0.0f ? Vec3f(0.0f, 0.0f, 1.0f) : u;
 }
 
+}  // namespace
+
+void render_size(const Camera& cam, const RenderOptions& opt, int& width, int& height) {
+  width = opt.width > 0 ? opt.width : cam.width;
+  height = opt.height > 0 ? opt.height : cam.height;
+  if (width <= 0 || height <= 0)
+    throw Error("render: image size must be positive, got " + std::to_string(width) + "x" +
+                std::to_string(height));
+}
+
+namespace {
+
 // What decides every pixel's value: the scene, the camera scaled to the image size, the options
 // and the sun of Shade::Sun. render() and render_region() shade through it, so a pixel computed by
 // either (any thread, any tile, any process) is the same bits.
@@ -104,11 +116,8 @@ class PixelShader {
     // The camera defines the view, the options the resolution: rescale the pixel steps when they
     // differ so that the whole camera view lands in the image.
     cam_ = cam_in;
-    int width = opt.width > 0 ? opt.width : cam_.width;
-    int height = opt.height > 0 ? opt.height : cam_.height;
-    if (width <= 0 || height <= 0)
-      throw Error("render: image size must be positive, got " + std::to_string(width) + "x" +
-                  std::to_string(height));
+    int width = 0, height = 0;
+    render_size(cam_in, opt, width, height);
     if (cam_.width > 0 && cam_.height > 0) {
       cam_.du = cam_.du * (float(cam_.width) / float(width));
       cam_.dv = cam_.dv * (float(cam_.height) / float(height));

@@ -296,12 +296,13 @@ int64_t prescan_line(const std::string& src, uint64_t line, std::string_view tex
   if (vertex_weight_statement(text, rest)) {
     // tinyobjloader converts the joint ids of 'vw' lines from float to int unchecked (undefined
     // behaviour for huge values, found by fuzz/fuzz_obj.cpp); slimrt ignores vertex weights, so
-    // numbers that do not fit an int are refused here.
+    // numbers beyond 1e9 are refused here. The margin below 2^31 covers tinyobjloader's own
+    // rounding: it parses to double, then rounds to float (2147483600 becomes 2^31).
     check_exponents(src, line, rest);
     for_each_token(rest, [&](int64_t, std::string_view t) {
       const std::string tok(t.substr(0, 64));
       const double v = std::strtod(tok.c_str(), nullptr);
-      if (t.size() > 32 || !(std::fabs(v) < 2147483647.0))
+      if (t.size() > 32 || !(std::fabs(v) <= 1e9))
         throw_at_line(src, line, "vertex weight line has a number out of range: " + excerpt(t));
     });
     return -1;

@@ -135,6 +135,11 @@ struct BuildOptions {
   // Leaf::Clusters: every vertex lies within this fraction of the scene's box diagonal of its
   // input position (the lattice step is the largest power of two meeting it).
   double cluster_error = 1e-5;
+  // The box the lossy formats derive their scene-wide quantities from (the cluster lattice's origin
+  // and step, the grids' displacement bias); empty = the bounds of the meshes being built. A
+  // chunked build gives every chunk the whole input's box, so that chunks quantize onto one
+  // lattice. Must contain every finite vertex of the meshes (check_mesh-style error otherwise).
+  Box3f lattice_box;
   // Optional progress report and cancellation (BuildProgress above). Empty: nothing is reported
   // and the build does no extra work.
   BuildProgressFn progress;

@@ -60,7 +60,22 @@ struct ChunkingStats {
   double seconds[3] = {0, 0, 0};  // per pass
 };
 
-class ChunkSet {
+// Where a chunked build takes its chunks from: the spill files of a ChunkSet (any face stream), or
+// chunks generated on demand (procedural tiles). Chunks are loaded one at a time, in any order.
+class ChunkSource {
+ public:
+  virtual ~ChunkSource() = default;
+  virtual size_t size() const = 0;
+  virtual const ChunkInfo& info(size_t i) const = 0;
+  virtual Chunk load(size_t i) const = 0;
+  // Figures of the whole input: faces, fan triangles, bounds of every finite corner position (the
+  // box the chunks' common lattice is derived from: BuildOptions::lattice_box).
+  virtual uint64_t faces() const = 0;
+  virtual uint64_t triangles() const = 0;
+  virtual Box3f bounds() const = 0;
+};
+
+class ChunkSet : public ChunkSource {
  public:
   // Partitions every face of `in` (rewound first). Throws slim::Error on malformed input (the
   // stream's), on a spill directory that cannot be written, or on a full disk, after removing
@@ -70,12 +85,15 @@ class ChunkSet {
   ChunkSet(const ChunkSet&) = delete;
   ChunkSet& operator=(const ChunkSet&) = delete;
 
-  size_t size() const { return info_.size(); }
-  const ChunkInfo& info(size_t i) const { return info_[i]; }
+  size_t size() const override { return info_.size(); }
+  const ChunkInfo& info(size_t i) const override { return info_[i]; }
+  uint64_t faces() const override { return stats_.faces; }
+  uint64_t triangles() const override { return stats_.triangles; }
+  Box3f bounds() const override { return stats_.bounds; }
   const ChunkingStats& stats() const { return stats_; }
   const std::string& directory() const { return dir_; }
   // Reads chunk i back from its temporary file.
-  Chunk load(size_t i) const;
+  Chunk load(size_t i) const override;
 
  private:
   std::string file(size_t i) const;

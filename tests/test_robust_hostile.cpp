@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cfloat>
 #include <csignal>
 #include <cstdio>
 #include <cstring>
@@ -151,12 +152,21 @@ TEST(RobustHostile, ObjIndicesBeyond2To32AreErrorsNotWrapped) {
 }
 
 TEST(RobustHostile, FloatOverflowIsAnErrorNamingTheLine) {
-  for (const char* line : {"v 1e39 0 0\n", "v 0 -1e39 0\n", "vn 0 0 1e40\n", "vt 1e39 0\n"}) {
+  // 3.4028236e38 lies beyond FLT_MAX plus half an ulp: it would round to inf.
+  for (const char* line :
+       {"v 1e39 0 0\n", "v 0 -1e39 0\n", "vn 0 0 1e40\n", "vt 1e39 0\n", "v 3.4028236e38 0 0\n"}) {
     const std::string obj = std::string("v 0 0 0\nv 1 0 0\nv 0 1 0\n") + line + "f 1 2 3\n";
     const std::string msg = error_of([&] { detail::read_obj("o.obj", obj); });
     EXPECT_NE(msg.find("o.obj:4: "), std::string::npos) << line << msg;
     EXPECT_NE(msg.find("overflows float"), std::string::npos) << line << msg;
   }
+  // FLT_MAX printed to 9 digits (3.40282347e+38, above FLT_MAX as a decimal) rounds to FLT_MAX:
+  // accepted, so an OBJ slimrt writes reads back (fuzz_obj's round trip).
+  const PolyMesh m = detail::read_obj(
+      "max.obj", "v 0 0 0\nv 1 0 0\nv 0 3.40282347e+38 0\nv 0 -3.4028235e38 0\nf 1 2 3 4\n");
+  ASSERT_EQ(m.positions.size(), 4u);
+  EXPECT_EQ(m.positions[2].y, FLT_MAX);
+  EXPECT_EQ(m.positions[3].y, -FLT_MAX);
   const std::string head =
       "ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\n"
       "property double z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";

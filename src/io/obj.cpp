@@ -25,6 +25,7 @@
 
 #include "io/byte_window.h"
 #include "io/face_stream.h"
+#include "io/float_range.h"
 #include "io/xz.h"
 #include "slimrt/error.h"
 
@@ -155,7 +156,7 @@ void check_floats(const std::string& src, uint64_t line, std::string_view rest, 
     if (std::string_view("+-.0123456789").find(t[0]) == t.npos) return;  // handled elsewhere
     const std::string tok(t.substr(0, 400));
     const double v = std::strtod(tok.c_str(), nullptr);
-    if (!(std::fabs(v) <= double(FLT_MAX)))
+    if (!rounds_to_finite_float(v))
       throw_at_line(src, line,
                     std::string(kw) + " value " + excerpt(t) +
                         " overflows float; expected a finite number of magnitude at most 3.4e38");

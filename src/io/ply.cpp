@@ -26,6 +26,7 @@
 
 #include "io/byte_window.h"
 #include "io/face_stream.h"
+#include "io/float_range.h"
 #include "io/xz.h"
 #include "slimrt/error.h"
 
@@ -378,7 +379,7 @@ class BinaryBody {
   // A finite double beyond the float range (1e300) would become inf and its faces be dropped
   // later without a word: refused here.
   float to_float(double d, const Prop& p) const {
-    if (std::isfinite(d) && std::fabs(d) > double(FLT_MAX))
+    if (std::isfinite(d) && !rounds_to_finite_float(d))
       throw_at_byte(src_, w_.offset(w_.cur),
                     "vertex property '" + p.name + "' is " + shortest(d) +
                         ", which overflows float; expected a magnitude of at most 3.4e38");
@@ -501,7 +502,7 @@ class AsciiBody {
   }
   std::string_view token() const { return {tok_, size_t(w_.cur - tok_)}; }
   float to_float(double d, const Prop& p) const {
-    if (std::isfinite(d) && std::fabs(d) > double(FLT_MAX))
+    if (std::isfinite(d) && !rounds_to_finite_float(d))
       throw_at_line(src_, tok_line_,
                     "vertex property '" + p.name + "' is " + quoted(token()) +
                         ", which overflows float; expected a magnitude of at most 3.4e38");

@@ -206,6 +206,25 @@ struct SceneStats {
   std::vector<std::pair<std::string, double>> details;
 };
 
+// Scene::build_chunked: an input larger than memory, built chunk by chunk (DESIGN.md "Out-of-core
+// builds"). The input is streamed (PLY, OBJ, procedural scenes; never loaded whole), cut into
+// spatial chunks, each chunk built on its own with the same BuildOptions on one lattice
+// (BuildOptions::lattice_box = the whole input's box), and a top-level BVH joins the chunk scenes.
+struct ChunkedBuildOptions {
+  // Bytes the build may hold besides the finished chunk scenes: the spill buffers while the input
+  // is partitioned, then one chunk's mesh and its build. 0 = default_memory_budget().
+  uint64_t memory_budget = 0;
+  // Fan triangles per chunk; 0 = the budget divided by kChunkBuildBytesPerTriangle.
+  uint64_t max_chunk_triangles = 0;
+  // Where the partition's temporary files go ("" = $TMPDIR, else /tmp); removed at the end.
+  std::string spill_dir;
+};
+// What one triangle of a chunk may cost at the peak of its build (the mesh, references, BVH2 and
+// the format's encoder; bvh8-tri4v needs about 140 bytes): sizes chunks from the budget.
+constexpr uint64_t kChunkBuildBytesPerTriangle = 160;
+// A quarter of the physical memory (1 GiB where it cannot be read).
+uint64_t default_memory_budget();
+
 // How Scene::open() checks a scene file (docs: the "Scene files" section of README.md).
 struct OpenOptions {
   // Checks every section's xxHash (XXH3-64) against the section table before the scene is used:
@@ -233,6 +252,13 @@ class Scene {
   static Scene build(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt = {});
   static Scene build(const std::vector<PolyMesh>& meshes, const BuildOptions& opt = {});
   static Scene build(const PolyMesh& mesh, const BuildOptions& opt = {});
+  // Builds a mesh file or procedural scene (the names slim::load takes, glTF excepted) chunk by
+  // chunk within chunking.memory_budget (ChunkedBuildOptions above): one scene (geomID 0, primID
+  // the face index slim::load would give) whose hits equal those of Scene::build on the loaded
+  // mesh up to ties, for lossless configurations; lossy ones keep their error bound and stay
+  // watertight across chunk borders. Throws slim::Error as build() and the readers do.
+  static Scene build_chunked(const std::string& input, const BuildOptions& opt = {},
+                             const ChunkedBuildOptions& chunking = {});
 
   // Closest hit in [ray.tnear, ray.tfar]; an invalid Hit on a miss. Thread-safe.
   Hit intersect(const Ray& ray) const;

@@ -103,8 +103,10 @@ void check_coordinate_range(const std::vector<const PolyMesh*>& meshes) {
                 "would underflow); scale the scene");
 }
 
-std::unique_ptr<Scene::Impl> build_impl(const std::vector<const PolyMesh*>& meshes,
-                                        const BuildOptions& opt) {
+}  // namespace
+
+std::unique_ptr<Scene::Impl> build_scene_impl(const std::vector<const PolyMesh*>& meshes,
+                                              const BuildOptions& opt) {
   // The format's builder ends "prepare" when its BVH build starts (api/bvh_scene.h).
   if (opt.progress) report_progress(opt.progress, "prepare", 0, 1);
   for (const PolyMesh* m : meshes) {
@@ -120,8 +122,6 @@ std::unique_ptr<Scene::Impl> build_impl(const std::vector<const PolyMesh*>& mesh
   return impl;
 }
 
-}  // namespace
-
 Scene Scene::build(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
   check_cpu_isa();
   const auto t0 = std::chrono::steady_clock::now();
@@ -130,9 +130,9 @@ Scene Scene::build(const std::vector<const PolyMesh*>& meshes, const BuildOption
   // opt.threads threads, the figure `slimrt bench --threads` compares with Embree's.
   if (opt.threads > 0) {
     tbb::task_arena arena(opt.threads);
-    arena.execute([&] { impl = build_impl(meshes, opt); });
+    arena.execute([&] { impl = build_scene_impl(meshes, opt); });
   } else {
-    impl = build_impl(meshes, opt);
+    impl = build_scene_impl(meshes, opt);
   }
   impl->stats.build_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -28,6 +28,7 @@
 #include "api/registry.h"
 #include "api/scene_file.h"
 #include "api/scene_impl.h"
+#include "api/scene_joined.h"
 #include "core/ray.h"
 #include "slimrt/output.h"
 #include "slimrt/scene.h"
@@ -42,7 +43,9 @@ constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
 constexpr uint32_t kVersion = 1;
 constexpr uint32_t kByteOrder = 0x01020304;
 constexpr uint64_t kAlign = 64;
-constexpr uint32_t kMaxSections = 1024;
+// Bounds the table before it is read (the header size check then bounds it by the file size): a
+// joined scene of 100,000 chunks of a dozen sections fits.
+constexpr uint32_t kMaxSections = uint32_t(1) << 21;
 constexpr uint32_t kMaxDetails = 4096;
 
 struct OptionsRecord {
@@ -73,7 +76,9 @@ struct FileHeader {
   double error_bound;
   double build_seconds;
   uint64_t input_faces, triangles, skipped_faces, primitives;
-  uint8_t reserved[208];
+  // 1 for a scene joined from `chunks` chunk scenes (api/scene_joined.h), 0 for a format's own.
+  uint32_t joined, chunks;
+  uint8_t reserved[200];
 };
 static_assert(sizeof(FileHeader) == 512);
 
@@ -534,6 +539,10 @@ void Scene::save(const std::string& path) const {
   h.triangles = s.triangles;
   h.skipped_faces = s.skipped_faces;
   h.primitives = s.primitives;
+  if (const std::optional<uint32_t> chunks = impl_->joined_chunks()) {
+    h.joined = 1;
+    h.chunks = *chunks;
+  }
 
   std::vector<SectionEntry> table(n);
   uint64_t at = h.header_bytes;
@@ -606,7 +615,10 @@ Scene Scene::open(const std::string& path, const OpenOptions& options) {
            "written for the " + isa + " instruction set, which this CPU lacks");
   o.table(options.verify_checksums);
   const BuildOptions opt = options_of(h.options, o);
-  std::unique_ptr<Impl> impl = format_of(opt.leaf).empty(opt);
+  if (h.joined > 1)
+    o.fail(offsetof(FileHeader, joined), "", "bad joined-scene flag " + std::to_string(h.joined));
+  std::unique_ptr<Impl> impl =
+      h.joined ? empty_joined_scene(opt, h.chunks) : format_of(opt.leaf).empty(opt);
   impl->opt = opt;
   impl->stats.details = o.details();
   impl->mem = {h.mem_geometry, h.mem_bvh, h.mem_other, h.mem_triangles};
@@ -620,9 +632,9 @@ Scene Scene::open(const std::string& path, const OpenOptions& options) {
   impl->stats.primitives = h.primitives;
   impl->ray_setup = RaySetupBounds(impl->bounds);
   OpenVisitor v(o);
-  impl->sections(v);
-  o.all_used();
   try {
+    impl->sections(v);
+    o.all_used();
     impl->check_opened(options.check_structure);
   } catch (const SectionFault& f) {
     o.fail(o.section_offset(f.section) + f.offset, f.section, f.what);

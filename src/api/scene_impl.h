@@ -51,6 +51,10 @@ struct Scene::Impl {
   // the bounds-safe walk of every reference (OpenOptions::check_structure). Throw SectionFault.
   virtual void check_opened(bool deep) const = 0;
 
+  // A scene joined from chunk scenes (api/scene_joined.h): its chunk count; std::nullopt for a
+  // format's own scene.
+  virtual std::optional<uint32_t> joined_chunks() const { return std::nullopt; }
+
   std::string file;                     // the scene file mapped, "" when built in memory
   std::shared_ptr<const void> mapping;  // the file's mapping (munmap when the scene goes)
 };
@@ -66,6 +70,11 @@ std::unique_ptr<Scene::Impl> empty_pair_scene(const BuildOptions& opt);
 std::unique_ptr<Scene::Impl> empty_grid_scene(const BuildOptions& opt);
 std::unique_ptr<Scene::Impl> empty_costa_scene(const BuildOptions& opt);
 std::unique_ptr<Scene::Impl> empty_cluster_scene(const BuildOptions& opt);
+
+// Checks the meshes (check_mesh, coordinate range) and options, then builds with the format's
+// builder; ray_setup set, build time not (Scene::build, the chunks of a joined scene).
+std::unique_ptr<Scene::Impl> build_scene_impl(const std::vector<const PolyMesh*>& meshes,
+                                              const BuildOptions& opt);
 
 // Format builders (one per file under api/). Each fills stats/mem/bounds except build time.
 std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMesh*>& meshes,

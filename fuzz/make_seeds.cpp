@@ -73,6 +73,16 @@ int main(int argc, char** argv) {
         .save(p.string());
     ++n;
   }
+  // A scene joined from chunk scenes (Scene::build_chunked): the join.* sections and c<i>.
+  // prefixes.
+  {
+    slim::ChunkedBuildOptions chunking;
+    chunking.max_chunk_triangles = 8;
+    const fs::path p = out / "scene_file" / "joined-bvh8-tri4v.slim";
+    slim::Scene::build_chunked("terrain:4", slim::BuildOptions::from_config("bvh8-tri4v"), chunking)
+        .save(p.string());
+    ++n;
+  }
   std::printf("make_seeds: %d files in %s\n", n, out.c_str());
   return 0;
 }

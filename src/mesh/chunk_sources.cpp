@@ -29,13 +29,6 @@ void check_max_triangles(const std::string& name, uint64_t max_triangles) {
                 "; expected 1 to 2^31");
 }
 
-uint64_t isqrt(uint64_t q) {
-  uint64_t s = uint64_t(std::sqrt(double(q)));
-  while (s > 0 && s * s > q) --s;
-  while ((s + 1) * (s + 1) <= q) ++s;
-  return s;
-}
-
 // Boundary k of `parts` nearly equal runs over [0, cells).
 int split(int cells, int parts, int k) { return int(int64_t(k) * cells / parts); }
 
@@ -138,12 +131,25 @@ ProceduralChunks::ProceduralChunks(const std::string& spec, uint64_t max_triangl
     : name_(spec), grid_(parse_procedural(spec, 65534)) {
   check_max_triangles(spec, max_triangles);
   const int cx = grid_.cells_x, cy = grid_.cells_y;
-  // Tiles of w x h quads at most, w * h <= q; then the tile counts, and nearly equal sides.
+  // The fewest tiles of at most q quads, tx x ty with sides ceil(cx / tx) x ceil(cy / ty); among
+  // those the squarest (ratio of the longer side to the shorter).
   const uint64_t q = std::max<uint64_t>(1, max_triangles / 2);
-  const uint64_t w = std::min<uint64_t>(uint64_t(cx), std::max<uint64_t>(1, isqrt(q)));
-  const uint64_t h = std::min<uint64_t>(uint64_t(cy), q / w);
-  tiles_x_ = int((uint64_t(cx) + w - 1) / w);
-  tiles_y_ = int((uint64_t(cy) + h - 1) / h);
+  uint64_t best = std::numeric_limits<uint64_t>::max();
+  double best_ratio = 0;
+  for (uint64_t tx = 1; tx <= uint64_t(cx); ++tx) {
+    const uint64_t w = (uint64_t(cx) + tx - 1) / tx;
+    if (w > q) continue;
+    const uint64_t hmax = std::min<uint64_t>(q / w, uint64_t(cy));
+    const uint64_t ty = (uint64_t(cy) + hmax - 1) / hmax;
+    const uint64_t h = (uint64_t(cy) + ty - 1) / ty;
+    const double ratio = double(std::max(w, h)) / double(std::min(w, h));
+    if (tx * ty < best || (tx * ty == best && ratio < best_ratio)) {
+      best = tx * ty;
+      best_ratio = ratio;
+      tiles_x_ = int(tx);
+      tiles_y_ = int(ty);
+    }
+  }
   const uint64_t count = uint64_t(tiles_x_) * uint64_t(tiles_y_);
   if (count > (uint64_t(1) << 24))
     throw Error(spec + ": " + std::to_string(count) + " tiles of at most " +

@@ -4,15 +4,15 @@
 //
 // Procedural tiles (open_procedural_chunks): terrain:N, canyon:N, torus:N with N up to 65534.
 // A chunk is a rectangle of the quad grid (mesh/procedural.h ProceduralGrid): the grid is cut
-// into tx x ty tiles of nearly equal sides (they differ by at most one quad), as square as
-// max_triangles allows, each of at most max_triangles fan triangles (a quad is 2; a tile has
-// at least one quad). Tiles are numbered row by row (tile row outer). load(i) generates the
-// tile's vertex rows j0..j1, columns i0..i1 (wrapped to 0 at a torus seam), bit for bit the
+// into tx x ty tiles of nearly equal sides (they differ by at most one quad), each of at most
+// max_triangles fan triangles (a quad is 2; a tile has at least one quad): the fewest tiles,
+// and among those the squarest. Tiles are numbered row by row (tile row outer). load(i) generates
+// the tile's vertex rows j0..j1, columns i0..i1 (wrapped to 0 at a torus seam), bit for bit the
 // positions of make_terrain / make_canyon / make_torus; the chunk mesh is indexed, one position
 // per grid vertex of the tile, its quads row by row (j outer, i inner) with the in-memory mesh's
 // corner order and face ids (j * cells_x + i). The constructor generates every vertex row once
-// for the exact bounds of each tile (ChunkInfo::bounds) and of the scene; that pass is the
-// source's whole set-up cost (bounds_seconds()).
+// (rows on tile borders twice) for the exact bounds of each tile (ChunkInfo::bounds) and of the
+// scene; that pass is the source's whole set-up cost (bounds_seconds()).
 //
 // Subdivided meshes (open_subdivided_chunks): a base mesh (slim::load, so a file or a procedural
 // name) is fan-triangulated as the library does ((v0, vk, vk+1) for k = 1 .. size-2; base

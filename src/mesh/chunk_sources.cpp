@@ -285,6 +285,7 @@ SubdividedChunks::SubdividedChunks(PolyMesh base, int levels, bool displaced,
     throw Error(name_ + ": " + std::to_string(levels) + " subdivision levels; expected 0 to " +
                 std::to_string(kMaxSubdivisionLevels));
   check_max_triangles(name_, max_triangles);
+  check_mesh(base);
   const auto t0 = Clock::now();
   // Base vertices welded by position bits: weld[v] = the first vertex with v's bits.
   const size_t nv = base.positions.size();

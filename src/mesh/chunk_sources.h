@@ -116,7 +116,7 @@ class SubdividedChunks : public ChunkSource {
   // Loads spec.path (slim::load's errors) and subdivides it in chunks of at most max_triangles.
   // Throws slim::Error on levels out of range or max_triangles outside [1, 2^31].
   SubdividedChunks(const SubdivisionSpec& spec, uint64_t max_triangles);
-  // The same over a mesh in memory (its name for messages); the mesh must pass check_mesh.
+  // The same over a mesh in memory (its name for messages); check_mesh's errors.
   SubdividedChunks(PolyMesh base, int levels, bool displaced, uint64_t max_triangles);
 
   size_t size() const override { return info_.size(); }

@@ -25,7 +25,7 @@
 // triangles sharing the edge therefore make the same point, and a base vertex stays itself.
 // This is midpoint subdivision applied `levels` times (every midpoint of midpoints is a lattice
 // point), with each point rounded once from the base corners instead of from its parents.
-// Displacement (kind Displaced): every point p not a base vertex moves by
+// Displacement (subdiv:, not subdiv-flat:): every point p not a base vertex moves by
 //   kDisplacement * l * h(p),  h(p) in [-1, 1)^3 a hash of p's three float bit patterns,
 // l = |A - B| / n for a point on base edge AB (the same from both sides: the difference is
 // negated exactly, its square identical) and the shortest edge of the base triangle / n for an
@@ -44,9 +44,9 @@
 // base triangles. A chunk exceeds max_triangles only when 4^levels alone does. Its mesh is
 // indexed and welded by lattice key (base vertices welded by position bits first, so a base mesh
 // whose duplicated vertices share an edge still welds): faces of 3 corners, base triangles in
-// chunk order, each one's triangles in local order. The constructor computes every point once
-// (twice on base edges) for the exact bounds; undisplaced, the base corners' box is exact (a
-// rounded convex combination of floats stays between them), and no point is generated.
+// chunk order, each one's triangles in local order. Displaced, the constructor computes every
+// point once (twice on base edges) for the exact bounds; undisplaced, the base corners' box is
+// exact (a rounded convex combination of floats stays between them) and no point is made then.
 //
 // Both sources are immutable after construction: load() may run from several threads at once.
 #pragma once

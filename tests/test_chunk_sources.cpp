@@ -3,12 +3,17 @@
 // triangles once, with the documented face ids, the base area, and a closed surface over a
 // closed base mesh (displaced or not).
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -364,6 +369,38 @@ TEST(ChunkSources, SubdividedScanIsClosed) {
   auto named = open_generated_chunks("subdiv:1:" + path, 1 << 20);
   ASSERT_NE(named, nullptr);
   EXPECT_EQ(named->faces(), base.fan_triangle_count() * 4);
+}
+
+// `slimrt info SCENE --chunks N --json`: procedural scenes and subdiv: are generated, --spill
+// streams a procedural scene instead; both give the same faces.
+nlohmann::json info_chunks_json(const std::string& args) {
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("slimrt_info_chunks_" + std::to_string(getpid()) + ".json"))
+                               .string();
+  const std::string cmd = std::string(SLIM_CLI_PATH) + " info " + args + " --json > " + path;
+  EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  std::ifstream in(path);
+  nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  std::filesystem::remove(path);
+  return j;
+}
+
+TEST(ChunkSources, InfoCli) {
+  const nlohmann::json gen = info_chunks_json("terrain:40 --chunks 300");
+  ASSERT_FALSE(gen.is_discarded());
+  EXPECT_EQ(gen["source"], "generated");
+  EXPECT_EQ(gen["faces"].get<uint64_t>(), 1600u);
+  EXPECT_EQ(gen["chunks"].get<uint64_t>(), ProceduralChunks("terrain:40", 300).size());
+  const nlohmann::json spilled = info_chunks_json("terrain:40 --chunks 300 --spill");
+  ASSERT_FALSE(spilled.is_discarded());
+  EXPECT_EQ(spilled["source"], "spilled");
+  EXPECT_EQ(spilled["faces"], gen["faces"]);
+  EXPECT_EQ(spilled["bounds"], gen["bounds"]);
+  const nlohmann::json sub = info_chunks_json("subdiv:2:torus:8 --chunks 100");
+  ASSERT_FALSE(sub.is_discarded());
+  EXPECT_EQ(sub["source"], "generated");
+  EXPECT_EQ(sub["triangles"].get<uint64_t>(), 8u * 4 * 2 * 16);
+  EXPECT_EQ(sub["chunks"].get<uint64_t>(), 11u);  // 64 base triangles, 6 a chunk
 }
 
 }  // namespace

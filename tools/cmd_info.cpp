@@ -1,16 +1,18 @@
 // slimrt info SCENE [--json] [--accel CONFIG] [--pairs [--repeat K]] [--costa] [--grids]
 //                   [--clusters [--cluster-error E]]
-//        slimrt info SCENE --chunks MAX_TRIANGLES [--spill-dir D] [--memory-budget MIB]
-//                   [--chunk-accel CONFIG] [--json]
+//        slimrt info SCENE --chunks MAX_TRIANGLES [--spill [--spill-dir D] [--memory-budget MIB]]
+//                   [--chunk-accel CONFIG] [--json]     (SCENE may also be subdiv:LEVELS:MESH)
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
 #include "io/face_stream.h"
+#include "mesh/chunk_sources.h"
 #include "mesh/chunks.h"
 #include "slimrt/analysis.h"
 #include "slimrt/output.h"
@@ -30,9 +32,6 @@ uint64_t peak_rss_bytes() {
   return uint64_t(u.ru_maxrss) * 1024;
 }
 
-// --chunks: the scene streamed (never loaded whole) and partitioned into spatial chunks of at
-// most `max_triangles` (mesh/chunks.h); each chunk is then read back, and built with
-// `accel` if given, one at a time. Prints the chunks and the peak resident memory.
 // The figures of a built or opened scene: JSON (config, build time, memory, details, validate)
 // and, unless `json`, the same as text. Returns the JSON; `valid` gets validate()'s answer.
 nlohmann::json scene_report(const Scene& scene, bool json, bool& valid) {
@@ -67,8 +66,95 @@ nlohmann::json scene_report(const Scene& scene, bool json, bool& valid) {
   return a;
 }
 
+// --chunks: the scene in spatial chunks of at most `max_triangles`, never loaded whole: a
+// procedural scene (terrain:N, canyon:N, torus:N) in tiles and a subdivided mesh
+// (subdiv:LEVELS:MESH) generated chunk by chunk (mesh/chunk_sources.h), anything else (or with
+// `spill`) streamed and spilled to temporary files (mesh/chunks.h). Each chunk is then loaded,
+// and built with `accel` if given, one at a time. Prints the chunks and the peak resident memory.
+
+// The chunks of `src`, each loaded (and built with `accel` if given) one at a time; `out` already
+// holds the source's own figures.
+int list_chunks(const detail::ChunkSource& src, uint64_t max_triangles, const std::string& accel,
+                bool json, nlohmann::json out) {
+  uint64_t max_chunk_tris = 0, scene_bytes = 0;
+  const auto t0 = std::chrono::steady_clock::now();
+  for (size_t i = 0; i < src.size(); ++i) {
+    const detail::ChunkInfo& ci = src.info(i);
+    max_chunk_tris = std::max(max_chunk_tris, ci.triangles);
+    nlohmann::json c = {
+        {"faces", ci.faces}, {"triangles", ci.triangles}, {"bounds", box_json(ci.bounds)}};
+    detail::Chunk chunk = src.load(i);
+    if (!accel.empty()) {
+      const Scene scene = Scene::build(chunk.mesh, BuildOptions::from_config(accel));
+      c["bytes_scene"] = scene.memory().total();
+      scene_bytes += scene.memory().total();
+    }
+    out["chunk"].push_back(c);
+    if (!json && (i < 8 || i + 8 >= src.size()))
+      std::printf("  chunk %5zu  %9llu triangles  [%g %g %g] - [%g %g %g]\n", i,
+                  (unsigned long long)ci.triangles, ci.bounds.lo.x, ci.bounds.lo.y, ci.bounds.lo.z,
+                  ci.bounds.hi.x, ci.bounds.hi.y, ci.bounds.hi.z);
+    else if (!json && i == 8)
+      std::printf("  ...\n");
+  }
+  const double load_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  out["load_s"] = load_s;
+  out["peak_rss"] = peak_rss_bytes();
+  if (!accel.empty()) out["bytes_chunk_scenes"] = scene_bytes;
+  if (json) {
+    std::printf("%s\n", out.dump(2).c_str());
+  } else {
+    if (!accel.empty())
+      std::printf("chunk scenes     %s: %llu B in all\n", accel.c_str(),
+                  (unsigned long long)scene_bytes);
+    std::printf("largest chunk    %llu triangles (at most %llu asked)\n",
+                (unsigned long long)max_chunk_tris, (unsigned long long)max_triangles);
+    std::printf("read back        every chunk in %.2f s%s\n", load_s,
+                accel.empty() ? "" : ", built included");
+    std::printf("peak RSS         %llu B after reading back%s every chunk\n",
+                (unsigned long long)peak_rss_bytes(), accel.empty() ? "" : " and building");
+  }
+  return 0;
+}
+
+// Chunks generated on demand (mesh/chunk_sources.h): procedural tiles or a subdivided mesh.
+int info_generated_chunks(const detail::ChunkSource& src, const std::string& scene_name,
+                          uint64_t max_triangles, double setup_s, const std::string& accel,
+                          bool json) {
+  nlohmann::json out;
+  out["scene"] = scene_name;
+  out["source"] = "generated";
+  out["faces"] = src.faces();
+  out["triangles"] = src.triangles();
+  out["bounds"] = box_json(src.bounds());
+  out["chunks"] = src.size();
+  out["max_triangles"] = max_triangles;
+  out["setup_s"] = setup_s;
+  out["peak_rss_after_setup"] = peak_rss_bytes();
+  if (!json) {
+    std::printf("scene            %s (chunks generated on demand, nothing spilled)\n",
+                scene_name.c_str());
+    std::printf("faces            %llu, %llu fan triangles\n", (unsigned long long)src.faces(),
+                (unsigned long long)src.triangles());
+    std::printf("chunks           %zu of at most %llu triangles\n", src.size(),
+                (unsigned long long)max_triangles);
+    std::printf("set-up           %.2f s (chunk table and exact bounds)\n", setup_s);
+    std::printf("peak RSS         %llu B after set-up\n", (unsigned long long)peak_rss_bytes());
+  }
+  return list_chunks(src, max_triangles, accel, json, std::move(out));
+}
+
 int info_chunks(const std::string& scene_name, uint64_t max_triangles, const std::string& dir,
-                uint64_t budget_mib, const std::string& accel, bool json) {
+                uint64_t budget_mib, const std::string& accel, bool json, bool spill) {
+  if (!spill) {
+    const auto t0 = std::chrono::steady_clock::now();
+    auto generated = detail::open_generated_chunks(scene_name, max_triangles);
+    const double setup_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (generated)
+      return info_generated_chunks(*generated, scene_name, max_triangles, setup_s, accel, json);
+  }
   detail::ChunkOptions opt;
   opt.max_triangles = max_triangles;
   opt.memory_budget = budget_mib << 20;
@@ -79,6 +165,7 @@ int info_chunks(const std::string& scene_name, uint64_t max_triangles, const std
   const uint64_t rss_partition = peak_rss_bytes();
   nlohmann::json out;
   out["scene"] = scene_name;
+  out["source"] = "spilled";
   out["faces"] = st.faces;
   out["triangles"] = st.triangles;
   out["bounds"] = box_json(st.bounds);
@@ -104,39 +191,7 @@ int info_chunks(const std::string& scene_name, uint64_t max_triangles, const std
                 format_bytes(st.stream_bytes).c_str(), format_bytes(st.spilled_bytes).c_str());
     std::printf("peak RSS         %llu B after partitioning\n", (unsigned long long)rss_partition);
   }
-  uint64_t max_chunk_tris = 0, scene_bytes = 0;
-  for (size_t i = 0; i < set.size(); ++i) {
-    const detail::ChunkInfo& ci = set.info(i);
-    max_chunk_tris = std::max(max_chunk_tris, ci.triangles);
-    nlohmann::json c = {
-        {"faces", ci.faces}, {"triangles", ci.triangles}, {"bounds", box_json(ci.bounds)}};
-    detail::Chunk chunk = set.load(i);
-    if (!accel.empty()) {
-      const Scene scene = Scene::build(chunk.mesh, BuildOptions::from_config(accel));
-      c["bytes_scene"] = scene.memory().total();
-      scene_bytes += scene.memory().total();
-    }
-    out["chunk"].push_back(c);
-    if (!json && (i < 8 || i + 8 >= set.size()))
-      std::printf("  chunk %5zu  %9llu triangles  [%g %g %g] - [%g %g %g]\n", i,
-                  (unsigned long long)ci.triangles, ci.bounds.lo.x, ci.bounds.lo.y, ci.bounds.lo.z,
-                  ci.bounds.hi.x, ci.bounds.hi.y, ci.bounds.hi.z);
-    else if (!json && i == 8)
-      std::printf("  ...\n");
-  }
-  out["peak_rss"] = peak_rss_bytes();
-  if (!accel.empty()) out["bytes_chunk_scenes"] = scene_bytes;
-  if (json) {
-    std::printf("%s\n", out.dump(2).c_str());
-  } else {
-    if (!accel.empty())
-      std::printf("chunk scenes     %s: %llu B in all\n", accel.c_str(),
-                  (unsigned long long)scene_bytes);
-    std::printf("largest chunk    %llu triangles\n", (unsigned long long)max_chunk_tris);
-    std::printf("peak RSS         %llu B after reading back%s every chunk\n",
-                (unsigned long long)peak_rss_bytes(), accel.empty() ? "" : " and building");
-  }
-  return 0;
+  return list_chunks(set, max_triangles, accel, json, std::move(out));
 }
 
 }  // namespace
@@ -168,8 +223,10 @@ int cmd_info(int argc, char** argv) {
   uint64_t chunks = 0, budget_mib = 256;
   std::string spill_dir, chunk_accel;
   app.add_option("--chunks", chunks,
-                 "stream the scene and split it into spatial chunks of at most this many "
-                 "triangles; print them and the peak resident memory")
+                 "split the scene into spatial chunks of at most this many triangles, never "
+                 "loading it whole (a mesh file streamed and spilled, a procedural scene or "
+                 "subdiv:LEVELS:MESH generated tile by tile); print them and the peak resident "
+                 "memory")
       ->check(CLI::Range(uint64_t(1), uint64_t(1) << 31));
   app.add_option("--spill-dir", spill_dir, "--chunks: directory for the temporary chunk files")
       ->needs("--chunks");
@@ -178,12 +235,18 @@ int cmd_info(int argc, char** argv) {
       ->needs("--chunks");
   app.add_option("--chunk-accel", chunk_accel, "--chunks: build every chunk with this config")
       ->needs("--chunks");
+  bool spill = false;
+  app.add_flag("--spill", spill,
+               "--chunks: stream and spill a procedural scene too (by default its tiles are "
+               "generated on demand)")
+      ->needs("--chunks");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
-  if (chunks > 0) return info_chunks(scene_name, chunks, spill_dir, budget_mib, chunk_accel, json);
+  if (chunks > 0)
+    return info_chunks(scene_name, chunks, spill_dir, budget_mib, chunk_accel, json, spill);
 
   if (is_scene_file(scene_name)) {
     // A scene file: its figures (the input mesh is not in it, so no mesh statistics).

@@ -342,9 +342,9 @@ ProceduralGrid::ProceduralGrid(const ProceduralSpec& spec, uint32_t seed) : n_(s
   verts_x = verts_y = n + 1;
 }
 
-void ProceduralGrid::vertex_row(int j, Vec3f* out) const {
+void ProceduralGrid::vertex_span(int j, int i0, int i1, Vec3f* out) const {
   if (kind_ == Kind::Torus) {
-    for (int i = 0; i < verts_x; ++i) {
+    for (int i = i0; i < i1; ++i) {
       // Outward normal and undisplaced point of the torus at (theta_i, phi_j).
       double nx = cv_[j] * cu_[i], ny = cv_[j] * su_[i], nz = sv_[j];
       double ring = kTorusMajor + kTorusMinor * cv_[j];
@@ -353,16 +353,16 @@ void ProceduralGrid::vertex_row(int j, Vec3f* out) const {
       // shared anyway, so the surface closes.
       double d = kTorusAmp * fbm3(float(px) * kTorusFreq, float(py) * kTorusFreq,
                                   float(pz) * kTorusFreq, s_, 7);
-      out[i] = Vec3f(float(px + nx * d), float(py + ny * d), float(pz + nz * d));
+      out[i - i0] = Vec3f(float(px + nx * d), float(py + ny * d), float(pz + nz * d));
     }
     return;
   }
   // (n+1)^2 heightfield vertices over [0,1]^2: x = i/n, y = j/n, the last ones exactly 1.
   const float inv_n = 1.0f / float(n_);
   const float y = j == n_ ? 1.0f : float(j) * inv_n;
-  for (int i = 0; i < verts_x; ++i) {
+  for (int i = i0; i < i1; ++i) {
     const float x = i == n_ ? 1.0f : float(i) * inv_n;
-    out[i] =
+    out[i - i0] =
         Vec3f(x, y, kind_ == Kind::Terrain ? terrain_height(x, y, s_) : canyon_height(x, y, s_));
   }
 }

@@ -28,7 +28,10 @@ class ProceduralGrid {
   int verts_x = 0, verts_y = 0;  // vertex grid: n+1 x n+1 (heightfield), n x n/2 (torus)
   bool wrap = false;
   // Vertex row j (0 <= j < verts_y): verts_x positions into out.
-  void vertex_row(int j, Vec3f* out) const;
+  void vertex_row(int j, Vec3f* out) const { vertex_span(j, 0, verts_x, out); }
+  // Vertices i0 <= i < i1 of row j (0 <= i0 <= i1 <= verts_x): the same bits as vertex_row's, each
+  // vertex computed on its own (a tile generates its columns only).
+  void vertex_span(int j, int i0, int i1, Vec3f* out) const;
   // Appends the quads (i, j) with i0 <= i < i1, j0 <= j < j1 (row by row) to sizes / face_ids /
   // corners, bit for bit the positions of the in-memory mesh.
   void tile(int i0, int i1, int j0, int j1, std::vector<uint32_t>& sizes,

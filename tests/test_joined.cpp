@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <string>
@@ -114,6 +116,51 @@ TEST(JoinedScene, TorusIn16ChunksMatchesTheInMemoryBuild) {
     expect_same_hits(whole, joined, rays, row.name, row.name == "grid" ? 1e-6f : 0.0f);
     EXPECT_EQ(leaks(joined, 5000, 11), 0) << row.name;
   }
+}
+
+// A mesh file goes the streamed way: partitioned into Morton-ordered chunks spilled to disk.
+TEST(JoinedScene, StreamedObjMatchesTheInMemoryBuild) {
+  test::TempDir dir("slimrt_joined_obj");
+  const PolyMesh torus = load("torus:96");
+  std::string obj;
+  char line[128];
+  for (const Vec3f& p : torus.positions) {
+    std::snprintf(line, sizeof line, "v %.9g %.9g %.9g\n", p.x, p.y, p.z);
+    obj += line;
+  }
+  const std::vector<uint64_t> off = torus.face_offsets();
+  for (size_t f = 0; f < torus.face_count(); ++f) {
+    obj += "f";
+    for (uint64_t k = off[f]; k < off[f + 1]; ++k)
+      obj += " " + std::to_string(torus.face_indices[k] + 1);
+    obj += "\n";
+  }
+  const std::string path = dir.write("torus.obj", obj);
+  const std::string spill = dir.path("spill");
+  std::filesystem::create_directories(spill);
+  ChunkedBuildOptions chunking;
+  chunking.max_chunk_triangles = 1024;
+  chunking.spill_dir = spill;
+  for (const char* config : {"bvh8-tri4v", "clbvh-compact", "bvh8-pairs"}) {
+    const BuildOptions opt = BuildOptions::from_config(config);
+    const Scene joined = Scene::build_chunked(path, opt, chunking);
+    EXPECT_GE(detail_of(joined, "chunks"), 8) << config;
+    EXPECT_EQ(joined.stats().input_faces, torus.face_count()) << config;
+    expect_same_hits(Scene::build(load(path), opt), joined, torus_rays(3000, 9), config);
+    EXPECT_EQ(leaks(joined, 3000, 13), 0) << config;
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(spill));  // the spill files are gone
+}
+
+// subdiv: meshes exist only chunked; a closed base mesh stays closed.
+TEST(JoinedScene, SubdividedTorusIsClosed) {
+  ChunkedBuildOptions chunking;
+  chunking.max_chunk_triangles = 2048;
+  const Scene s =
+      Scene::build_chunked("subdiv:2:torus:32", BuildOptions::from_config("bvh8-tri4v"), chunking);
+  EXPECT_EQ(s.stats().triangles, uint64_t(32 * 16 * 2) * 16);
+  EXPECT_GE(detail_of(s, "chunks"), 8);
+  EXPECT_EQ(leaks(s, 5000, 17), 0);
 }
 
 TEST(JoinedScene, RoundTripsThroughASceneFile) {

@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "commands.h"
+#include "mesh/chunk_sources.h"
 #include "progress.h"
 #include "slimrt/output.h"
 #include "slimrt/scene.h"
@@ -35,6 +36,7 @@ namespace {
 // procedural scenes, else from the file size at 16 bytes per triangle (a binary PLY triangle
 // takes about 19 with its share of the vertices, text more; an .xz file is taken as 4x smaller).
 uint64_t estimated_triangles(const std::string& name) {
+  if (detail::is_subdivision(name)) return 0;  // only chunked, its size known once loaded
   if (is_procedural(name)) {
     const size_t colon = name.find(':');
     const uint64_t n = std::strtoull(name.c_str() + colon + 1, nullptr, 10);
@@ -118,7 +120,7 @@ int cmd_build(int argc, char** argv) {
   // Chunked when asked, or when the in-memory build would need more than the budget.
   const uint64_t estimate = estimated_triangles(scene_name);
   const uint64_t budget = chunking.memory_budget ? chunking.memory_budget : default_memory_budget();
-  if (chunked || chunking.max_chunk_triangles > 0 ||
+  if (chunked || chunking.max_chunk_triangles > 0 || detail::is_subdivision(scene_name) ||
       estimate > budget / kChunkBuildBytesPerTriangle) {
     Scene scene;
     {

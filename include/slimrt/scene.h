@@ -252,8 +252,9 @@ class Scene {
   static Scene build(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt = {});
   static Scene build(const std::vector<PolyMesh>& meshes, const BuildOptions& opt = {});
   static Scene build(const PolyMesh& mesh, const BuildOptions& opt = {});
-  // Builds a mesh file or procedural scene (the names slim::load takes, glTF excepted) chunk by
-  // chunk within chunking.memory_budget (ChunkedBuildOptions above): one scene (geomID 0, primID
+  // Builds a mesh file or procedural scene (the names slim::load takes, glTF excepted; also
+  // "subdiv:LEVELS:MESH", README "Inputs larger than memory") chunk by chunk within
+  // chunking.memory_budget (ChunkedBuildOptions above): one scene (geomID 0, primID
   // the face index slim::load would give) whose hits equal those of Scene::build on the loaded
   // mesh up to ties, for lossless configurations; lossy ones keep their error bound and stay
   // watertight across chunk borders. Throws slim::Error as build() and the readers do.

@@ -29,6 +29,7 @@
 #include "bvh/build.h"
 #include "core/progress.h"
 #include "io/face_stream.h"
+#include "mesh/chunk_sources.h"
 #include "mesh/chunks.h"
 #include "slimrt/error.h"
 
@@ -477,8 +478,10 @@ Scene Scene::build_chunked(const std::string& input, const BuildOptions& opt,
           : std::max<uint64_t>(uint64_t(1) << 16, budget / kChunkBuildBytesPerTriangle);
   co.memory_budget = budget;
   co.spill_dir = chunking.spill_dir.empty() ? default_spill_dir() : chunking.spill_dir;
-  std::unique_ptr<detail::ChunkSource> src;
-  {
+  // Procedural scenes and subdivided meshes are generated chunk by chunk; files are streamed and
+  // spilled (mesh/chunk_sources.h, mesh/chunks.h).
+  std::unique_ptr<detail::ChunkSource> src = detail::open_generated_chunks(input, co.max_triangles);
+  if (!src) {
     std::unique_ptr<detail::FaceStream> stream = detail::open_face_stream(input);
     src = std::make_unique<detail::ChunkSet>(*stream, co);
   }

@@ -55,6 +55,10 @@ if(SLIM_FUZZ)
   # small scene files, with the library.
   set(SLIM_FUZZ_LIBS_scene_file slimrt ${SLIM_XXHASH_LIB})
   target_link_libraries(slimrt_make_seeds PRIVATE slimrt)
+  # cluster: its seeds are blocks of the library's cluster encoder (src/prim/cluster.h).
+  target_include_directories(slimrt_make_seeds PRIVATE src)
+  target_compile_options(slimrt_make_seeds PRIVATE ${SLIM_ISA_FLAGS})
+  target_compile_definitions(slimrt_make_seeds PRIVATE ${SLIM_ISA_DEF})
   target_compile_options(slimrt PRIVATE -fsanitize=fuzzer-no-link)
   foreach(t IN LISTS SLIM_FUZZ_TARGETS)
     add_executable(slimrt_fuzz_${t} fuzz/fuzz_${t}.cpp ${SLIM_FUZZ_SOURCES_${t}})

@@ -1,16 +1,111 @@
 // Writes the seed corpus of the fuzz targets: make_seeds OUT_DIR creates OUT_DIR/<target>/ for
 // obj, ply, gltf, glb and xz, each holding the seed files of its format (fuzz/seed_files.h), and
 // for scene, pairing, quantized_mesh and lossy_subgrid, each holding inputs in the target's own
-// byte layout (fuzz/binary_seeds.h), and for scene_file small scene files (Scene::save).
+// byte layout (fuzz/binary_seeds.h), for scene_file small scene files (Scene::save), and for
+// cluster blocks made by the library's cluster encoder (cluster_seeds() below: they follow the
+// block layout of src/prim/cluster.h whatever it becomes).
 // Run by ./fuzz.sh before fuzzing; nothing it writes is kept in git.
+#include <algorithm>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "binary_seeds.h"
+#include "prim/cluster.h"
 #include "seed_files.h"
 #include "slimrt/scene.h"
+
+namespace {
+
+// Seeds of fuzz_cluster (fuzz/fuzz_cluster.cpp): a mode byte (bits 0-2: children - 1, bit 3:
+// lossless, bits 4-7: the round trip's triangles / 4), then one cluster block as
+// cluster::encode() writes it for a real mesh (without the read slack), so that the first check
+// of the target starts from blocks check() accepts and the decoders read in full. Triangles of
+// the mesh's fan triangulation, in mesh order (neighbours, as the build's clusters hold), cut into
+// children of the given sizes.
+struct ClusterSeed {
+  std::string name;
+  std::string bytes;
+};
+
+std::vector<ClusterSeed> cluster_seeds() {
+  using namespace slim;
+  std::vector<ClusterSeed> out;
+  struct Mesh {
+    const char* name;
+    PolyMesh mesh;
+  };
+  const Mesh meshes[] = {{"sphere1", make_sphere(1, 0.01f, 5)},  // 80 triangles, jittered
+                         {"terrain4", make_terrain(4, 1)},       // 16 quads: 32 triangles
+                         {"torus8", make_torus(8, 1)}};          // 32 quads: 64 triangles
+  // Children sizes: one triangle; one full child; an uneven cut; 8 full children (64 triangles).
+  const std::vector<std::vector<uint32_t>> cuts = {
+      {1}, {8}, {5, 8, 2}, {3, 7, 1, 8, 6}, {8, 8, 8, 8, 8, 8, 8, 8}};
+  for (const Mesh& m : meshes) {
+    std::vector<uint32_t> tris, prim;
+    uint64_t c = 0;
+    for (uint32_t f = 0; f < m.mesh.face_sizes.size(); ++f) {
+      const uint32_t n = m.mesh.face_sizes[f];
+      for (uint32_t k = 1; k + 1 < n; ++k) {
+        tris.insert(tris.end(), {m.mesh.face_indices[c], m.mesh.face_indices[c + k],
+                                 m.mesh.face_indices[c + k + 1]});
+        prim.push_back(f);
+      }
+      c += n;
+    }
+    const uint32_t ntris = uint32_t(prim.size());
+    const std::vector<uint32_t> geom(ntris, 0);
+    for (bool lossless : {false, true}) {
+      const cluster::Quantized q = cluster::quantize(
+          m.mesh.positions.data(), m.mesh.positions.size(), tris.data(), ntris, 1e-5, lossless);
+      ClusterSource src;
+      src.vertices = q.decoded.data();
+      src.codes = q.codes.data();
+      src.tris = tris.data();
+      src.geom_ids = geom.data();
+      src.prim_ids = prim.data();
+      src.lossless = lossless;
+      for (const std::vector<uint32_t>& cut : cuts) {
+        uint32_t total = 0;
+        for (uint32_t n : cut) total += n;
+        if (total > ntris) continue;
+        std::vector<uint32_t> order(total);
+        for (uint32_t t = 0; t < total; ++t) order[t] = t;
+        const uint32_t* prims[8];
+        uint32_t counts[8];
+        uint32_t pos = 0;
+        for (size_t k = 0; k < cut.size(); ++k) {
+          prims[k] = &order[pos];
+          counts[k] = cut[k];
+          pos += cut[k];
+        }
+        const std::vector<uint8_t> block =
+            cluster::encode(src, prims, counts, int(cut.size()), false);
+        // The target's first check starts from blocks check() accepts (with the read slack the
+        // target adds past the block).
+        std::vector<uint8_t> padded = block;
+        padded.resize(block.size() + kClusterReadSlack, 0);
+        std::string why;
+        if (!cluster::check(padded.data(), block.size(), uint32_t(cut.size()), lossless, &why))
+          throw Error(std::string("make_seeds: cluster::check() refuses the encoder's block of ") +
+                      m.name + ": " + why);
+        const uint8_t mode = uint8_t((cut.size() - 1) | (lossless ? 8 : 0) |
+                                     (std::min<uint32_t>(15, total / 4) << 4));
+        std::string bytes(1, char(mode));
+        bytes.append(reinterpret_cast<const char*>(block.data()), block.size());
+        out.push_back({std::string(m.name) + (lossless ? "_lossless_" : "_lossy_") +
+                           std::to_string(cut.size()) + "x" + std::to_string(total),
+                       bytes});
+      }
+    }
+  }
+  return out;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   if (argc != 2) {
@@ -83,6 +178,7 @@ int main(int argc, char** argv) {
         .save(p.string());
     ++n;
   }
+  for (const ClusterSeed& seed : cluster_seeds()) put("cluster", seed.name, seed.bytes);
   std::printf("make_seeds: %d files in %s\n", n, out.c_str());
   return 0;
 }

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "render/tiling.h"
 #include "slimrt/mesh.h"
 #include "slimrt/render.h"
 
@@ -390,6 +391,26 @@ TEST(RenderScene, RegionsEqualTheWholeImage) {
   EXPECT_THROW(slim::render_region(scene, cam, opt, 0, 0, 9, 1, px.data()), slim::Error);
   EXPECT_THROW(slim::render_region(scene, cam, opt, -1, 0, 1, 1, px.data()), slim::Error);
   EXPECT_THROW(slim::render_region(scene, cam, opt, 2, 0, 2, 1, px.data()), slim::Error);
+}
+
+// The tiling of a rectangle across threads: an image keeps its 32-pixel tiles; a 64x64 tile of
+// `slimrt render` under mpirun is cut into at least 4 pieces per thread (down to 4-pixel pieces),
+// so that a rank uses all its threads on it (32-pixel pieces would give 4, whatever the threads).
+TEST(RenderScene, SmallRegionsAreCutForEveryThread) {
+  namespace rt = slim::render_tiling;
+  for (int threads : {1, 2, 4, 8, 16, 64, 256}) {
+    SCOPED_TRACE(threads);
+    EXPECT_EQ(rt::tile_size(1024, 1024, threads), 32);
+    const int t = rt::tile_size(64, 64, threads);
+    EXPECT_GE(t, 4);
+    EXPECT_GE(rt::tile_count(64, 64, t), std::min<int64_t>(4 * threads, 256));
+    // The largest tile that gives enough pieces (no needless cut).
+    if (t < 32) {
+      EXPECT_LT(rt::tile_count(64, 64, 2 * t), 4 * threads);
+    }
+  }
+  EXPECT_EQ(rt::tile_size(64, 64, 2), 16);
+  EXPECT_EQ(rt::tile_size(1, 1, 64), 4);  // one pixel: one piece
 }
 
 // ---- the CLI ----

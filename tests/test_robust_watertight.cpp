@@ -142,3 +142,34 @@ TEST(RobustWatertight, VerifyDetectsAHole) {
   for (const auto& row : rows) EXPECT_NE(row[2], "0") << row[0] << " should leak";
   std::filesystem::remove(path);
 }
+
+// Lossy hits beyond e / |cos| of the input crossing are each checked against the input surface,
+// whatever their number: with the rays traced and checked in 30 chunks of 1000, every one of them
+// is excused (none left unchecked, which would fail the configuration) and the table equals the
+// one-chunk run's; held to a tenth of its promised bound (--bound-scale 0.1), a correct scene
+// fails.
+TEST(RobustWatertight, VerifyChecksEveryLossyHitBeyondTheBound) {
+  const std::string base = "verify sphere:5 --config cluster,costa-PFV --rays 30000 --threads 2";
+  const CliResult whole = run_cli(base);
+  const CliResult chunked = run_cli(base + " --check-chunk 1000");
+  EXPECT_EQ(whole.exit_code, 0) << whole.out;
+  EXPECT_EQ(chunked.exit_code, 0) << chunked.out;
+  const auto rows = table_rows(chunked.out);
+  ASSERT_EQ(rows.size(), 2u) << chunked.out;
+  EXPECT_EQ(rows, table_rows(whole.out));
+  for (const auto& row : rows) {
+    ASSERT_GE(row.size(), 11u) << chunked.out;
+    // "N, M excused, R random (max)": N hits beyond the bound, all excused by the geometry.
+    unsigned long long beyond = 0, excused = 0;
+    ASSERT_EQ(std::sscanf(row[9].c_str(), "%llu, %llu excused", &beyond, &excused), 2) << row[9];
+    EXPECT_GE(beyond, 20u) << row[0] << ": too few hits beyond the bound to exercise the check";
+    EXPECT_EQ(excused, beyond) << row[0];
+    EXPECT_EQ(row[10].rfind("ok", 0), 0u) << row[0] << ": " << row[10];
+  }
+  const CliResult tight = run_cli(base + " --check-chunk 1000 --bound-scale 0.1");
+  EXPECT_EQ(tight.exit_code, 1) << tight.out;
+  for (const auto& row : table_rows(tight.out)) {
+    ASSERT_GE(row.size(), 11u) << tight.out;
+    EXPECT_EQ(row[10].rfind("FAIL", 0), 0u) << row[0] << ": " << row[10];
+  }
+}

@@ -2,6 +2,8 @@
 // (CMake SLIM_MPI); without it a RenderRanks is one process.
 #include "mpi_render.h"
 
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -46,13 +48,17 @@ constexpr int kTagResult = 1;  // rank > 0 -> 0: a finished tile (or none), aski
 constexpr int kTagAssign = 2;  // 0 -> rank > 0: the next tile number, -1 when none is left
 constexpr int kPrefetch = 2;   // tiles each rank keeps requested
 
-// A result message: this header, then the tile's pixels (3 floats each, row-major).
+// A result message: this header, then the tile's pixels (3 floats each, row-major). Messages are
+// held in float buffers, the header in the first kHeaderFloats, so that a tile is rendered into
+// the message it is sent in and stored into the image from the message it arrives in.
 struct ResultHeader {
   int32_t tile;  // -1: no tile (the first requests)
   int32_t reserved;
   uint64_t rays;
 };
 static_assert(sizeof(ResultHeader) == 16);
+constexpr size_t kHeaderFloats = sizeof(ResultHeader) / sizeof(float);
+static_assert(kHeaderFloats * sizeof(float) == sizeof(ResultHeader));
 
 // The tiles of a width x height image, tile x tile pixels each, numbered row-major.
 struct TileGrid {
@@ -96,26 +102,37 @@ uint64_t fnv1a(const std::string& s) {
 
 // Rank > 0: asks for tiles, renders them and sends them back until rank 0 has none left. Results
 // go out with MPI_Isend from two buffers in turn, so that the next tile renders while rank 0 takes
-// in the last one.
-void work(const Scene& scene, const Camera& cam, const RenderOptions& opt, const TileGrid& grid) {
-  const size_t tile_floats = grid.max_floats();
-  std::vector<unsigned char> msg[2];
+// in the last one; a tile is rendered straight into its message, by every thread of the rank's one
+// task arena (render_region cuts a tile into as many pieces as the threads need).
+void work(const Scene& scene, const Camera& cam, const RenderOptions& opt_in,
+          const TileGrid& grid) {
+  tbb::task_arena arena(opt_in.threads > 0 ? opt_in.threads : tbb::task_arena::automatic);
+  RenderOptions opt = opt_in;
+  opt.threads = 0;  // render_region runs in `arena`
+  std::vector<float> msg[2];
+  for (std::vector<float>& m : msg) m.resize(kHeaderFloats + grid.max_floats());
   MPI_Request sent[2] = {MPI_REQUEST_NULL, MPI_REQUEST_NULL};
   int turn = 0;
-  std::vector<float> px(tile_floats);
+  // The buffer of this turn, once its previous message is out.
+  auto buffer = [&]() -> std::vector<float>& {
+    MPI_Wait(&sent[turn], MPI_STATUS_IGNORE);
+    return msg[turn];
+  };
+  // Sends this turn's buffer: the header, then `floats` pixel floats already in it.
   auto send = [&](int tile, uint64_t rays, size_t floats) {
-    MPI_Wait(&sent[turn], MPI_STATUS_IGNORE);  // this buffer's previous message is out
-    std::vector<unsigned char>& m = msg[turn];
+    std::vector<float>& m = msg[turn];
     const ResultHeader h{tile, 0, rays};
-    m.resize(sizeof h + floats * sizeof(float));
     std::memcpy(m.data(), &h, sizeof h);
-    std::memcpy(m.data() + sizeof h, px.data(), floats * sizeof(float));
-    MPI_Isend(m.data(), int(m.size()), MPI_BYTE, 0, kTagResult, MPI_COMM_WORLD, &sent[turn]);
+    MPI_Isend(m.data(), int((kHeaderFloats + floats) * sizeof(float)), MPI_BYTE, 0, kTagResult,
+              MPI_COMM_WORLD, &sent[turn]);
     turn ^= 1;
   };
   int pending = 0;  // requests not answered yet: every message to rank 0 is one
   std::deque<int> queue;
-  for (int i = 0; i < kPrefetch; ++i, ++pending) send(-1, 0, 0);
+  for (int i = 0; i < kPrefetch; ++i, ++pending) {
+    buffer();
+    send(-1, 0, 0);
+  }
   while (true) {
     while (queue.empty() && pending > 0) {
       int tile = -1;
@@ -132,7 +149,8 @@ void work(const Scene& scene, const Camera& cam, const RenderOptions& opt, const
     int x0, y0, x1, y1;
     grid.rect(tile, x0, y0, x1, y1);
     RenderStats st;
-    render_region(scene, cam, opt, x0, y0, x1, y1, px.data(), &st);
+    float* px = buffer().data() + kHeaderFloats;
+    arena.execute([&] { render_region(scene, cam, opt, x0, y0, x1, y1, px, &st); });
     send(tile, st.rays, grid.floats(tile));
     ++pending;
   }
@@ -235,15 +253,21 @@ Image RenderRanks::render(const Scene& scene, const Camera& cam, const RenderOpt
 
   // Rank 0 renders too unless told not to (its main thread mostly sleeps between messages): with
   // K processes on K cores a coordinator alone would leave one core idle.
+  // Its tiles use every thread of one task arena (render_region cuts a tile into as many pieces
+  // as the threads need).
   std::thread renderer([&] {
     if (!root_renders) return;
     try {
+      tbb::task_arena arena(opt.threads > 0 ? opt.threads : tbb::task_arena::automatic);
+      RenderOptions arena_opt = opt;
+      arena_opt.threads = 0;  // render_region runs in `arena`
       std::vector<float> px(grid.max_floats());
       for (int t; !failed.load() && (t = next.fetch_add(1)) < count;) {
         int x0, y0, x1, y1;
         grid.rect(t, x0, y0, x1, y1);
         RenderStats st;
-        render_region(scene, cam, opt, x0, y0, x1, y1, px.data(), &st);
+        arena.execute(
+            [&] { render_region(scene, cam, arena_opt, x0, y0, x1, y1, px.data(), &st); });
         store_tile(img, grid, t, px.data());
         rays += st.rays;
         ++done;
@@ -259,7 +283,7 @@ Image RenderRanks::render(const Scene& scene, const Camera& cam, const RenderOpt
   // tile it was given, so it is finished once kPrefetch + assigned[r] messages came from it.
   std::vector<int> received(size_t(size_), 0), assigned(size_t(size_), 0);
   std::vector<int> owner(size_t(count), -1);
-  std::vector<unsigned char> msg;
+  std::vector<float> msg;  // a result message: header, then pixels (kHeaderFloats)
   const auto t0 = std::chrono::steady_clock::now();
   int shown = -1;
   auto all_in = [&] {
@@ -298,7 +322,7 @@ Image RenderRanks::render(const Scene& scene, const Camera& cam, const RenderOpt
       const int from = status.MPI_SOURCE;
       int bytes = 0;
       MPI_Get_count(&status, MPI_BYTE, &bytes);
-      msg.resize(size_t(std::max(bytes, 0)));
+      msg.resize((size_t(std::max(bytes, 0)) + sizeof(float) - 1) / sizeof(float));
       MPI_Recv(msg.data(), bytes, MPI_BYTE, from, kTagResult, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
       ResultHeader h{};
       if (size_t(bytes) < sizeof h)
@@ -314,10 +338,8 @@ Image RenderRanks::render(const Scene& scene, const Camera& cam, const RenderOpt
           throw Error("rank " + std::to_string(from) + " sent " + std::to_string(bytes) +
                       " bytes for tile " + std::to_string(h.tile) + ", expected " +
                       std::to_string(sizeof h + floats * sizeof(float)));
-        std::vector<float> px(floats);
-        std::memcpy(px.data(), msg.data() + sizeof h, floats * sizeof(float));
-        store_tile(img, grid, h.tile, px.data());
-        owner[size_t(h.tile)] = -2;  // received
+        store_tile(img, grid, h.tile, msg.data() + kHeaderFloats);  // the one copy
+        owner[size_t(h.tile)] = -2;                                 // received
         rays += h.rays;
         ++done;
       }

@@ -1,5 +1,5 @@
 // The renderer: BENCHMARK.md workload 2 (diffuse path tracing, slim::trace_path) and two debug
-// shadings, over 32x32 tiles spread across threads with TBB.
+// shadings, over 32x32 tiles spread across threads with TBB (smaller tiles for a small region).
 //
 // Rays are deterministic: sample s of pixel (x, y) uses slim::Rng(pixel_seed(x, y, s)) for its
 // jitter and its bounces, so an image does not depend on the thread count or the tile order and two
@@ -17,13 +17,12 @@
 #include <cstdio>
 #include <mutex>
 
+#include "render/tiling.h"
 #include "slimrt/render.h"
 
 namespace slim {
 
 namespace {
-
-constexpr int kTileSize = 32;
 
 // Linear RGB colour of each primitive kind (Shade::Kind).
 Vec3f kind_colour(PrimKind kind) {
@@ -235,12 +234,17 @@ class PixelShader {
 };
 
 // Shades the pixels [x0, x1) x [y0, y1) into out (row-major, `stride` floats per row, pixel
-// (x0, y0) first) over kTileSize x kTileSize tiles spread across opt.threads threads; returns the
-// rays traced.
+// (x0, y0) first) over square tiles spread across opt.threads threads (0: the current task
+// arena's); returns the rays traced. Tiles are kTileSize pixels wide, halved while the rectangle
+// holds fewer than kTilesPerThread tiles per thread (down to kMinTileSize), so that a small
+// rectangle (one tile of `slimrt render` under mpirun) still keeps every thread busy. A pixel's
+// value does not depend on the tiling (PixelShader: per-pixel seeds).
 uint64_t shade_rect(const PixelShader& shader, const RenderOptions& opt, int x0, int y0, int x1,
                     int y1, float* out, size_t stride) {
-  const int tiles_x = (x1 - x0 + kTileSize - 1) / kTileSize;
-  const int tiles_y = (y1 - y0 + kTileSize - 1) / kTileSize;
+  const int threads = opt.threads > 0 ? opt.threads : tbb::this_task_arena::max_concurrency();
+  const int tile_size = render_tiling::tile_size(x1 - x0, y1 - y0, threads);
+  const int tiles_x = (x1 - x0 + tile_size - 1) / tile_size;
+  const int tiles_y = (y1 - y0 + tile_size - 1) / tile_size;
   const int tile_count = tiles_x * tiles_y;
   Progress progress(opt.progress, tile_count);
   std::atomic<uint64_t> rays_traced{0};
@@ -250,8 +254,8 @@ uint64_t shade_rect(const PixelShader& shader, const RenderOptions& opt, int x0,
           uint64_t rays = 0;
           for (int tile = r.begin(); tile != r.end(); ++tile) {
             const uint64_t rays_before = rays;
-            int tx0 = x0 + (tile % tiles_x) * kTileSize, ty0 = y0 + (tile / tiles_x) * kTileSize;
-            int tx1 = std::min(tx0 + kTileSize, x1), ty1 = std::min(ty0 + kTileSize, y1);
+            int tx0 = x0 + (tile % tiles_x) * tile_size, ty0 = y0 + (tile / tiles_x) * tile_size;
+            int tx1 = std::min(tx0 + tile_size, x1), ty1 = std::min(ty0 + tile_size, y1);
             for (int y = ty0; y < ty1; ++y) {
               for (int x = tx0; x < tx1; ++x) {
                 Vec3f v = shader.pixel(x, y, rays);

@@ -117,7 +117,9 @@ inline bool lattice_line(uint32_t x, uint32_t res) { return x % 4 == 0 || x + 1 
 // escape_boundary (a build with BuildOptions::lattice_box: a chunk of a larger mesh) also lists
 // every vertex on a boundary edge of the meshes (an edge of one triangle or cell only, vertex
 // identity as above): a chunk's cut is such an edge in both chunks, whose grids differ, so its
-// vertices are stored exactly on both sides and decode to the input's bits in each.
+// vertices are stored exactly on both sides and decode to the input's bits in each. A cut along an
+// edge of 3+ faces (non-manifold) that leaves 2 of them in one chunk is not a boundary there:
+// that side may keep its vertices lossy.
 struct ExactPositions {
   std::vector<uint64_t> start;  // grids.size() + 1 entries
   std::vector<uint32_t> pos;

@@ -22,6 +22,8 @@
 #include <unordered_map>
 #include <vector>
 
+#include "io/face_stream.h"
+#include "mesh/chunks.h"
 #include "slimrt/analysis.h"
 #include "slimrt/slimrt.h"
 #include "temp_dir.h"
@@ -103,6 +105,11 @@ Bits bits_of(Vec3f p) {
   std::memcpy(b.data(), f, 12);
   return b;
 }
+struct BitsHash {
+  size_t operator()(const Bits& b) const {
+    return size_t((uint64_t(b[0]) * 0x9E3779B97F4A7C15ull) ^ (uint64_t(b[1]) << 21) ^ b[2]);
+  }
+};
 Vec3f from_bits(const Bits& b) {
   float f[3];
   std::memcpy(f, b.data(), 12);
@@ -381,6 +388,51 @@ TEST(LatticeBox, WithoutItPiecesDisagreeAndLeak) {
     EXPECT_GT(s.mismatched, s.shared / 4) << config << ": " << s.shared << " shared vertices";
     const LeakFigures lf = trace_cuts(edges, built, reach);
     EXPECT_GT(lf.leaks, lf.rays / 20) << config << ": " << lf.rays << " rays";
+  }
+}
+
+// The chunker's own chunks (mesh/chunks.h: Morton cells, spilled and welded by position), each
+// built with lattice_box = ChunkSet::bounds() as a chunked build does: (a) and (b) as above, vertex
+// identity across chunks by position bits.
+TEST(LatticeBox, ChunkSetChunksMeetWithoutCracks) {
+  test::TempDir dir("slimrt_lattice_chunks");
+  detail::ChunkOptions co;
+  co.spill_dir = dir.dir();
+  co.max_triangles = 800;
+  auto stream = detail::open_face_stream("torus:96");
+  detail::ChunkSet set(*stream, co);
+  ASSERT_GE(set.size(), 8u);
+  std::vector<Piece> pieces;
+  std::unordered_map<Bits, uint32_t, BitsHash> ids;
+  std::vector<Vec3f> positions;
+  for (size_t i = 0; i < set.size(); ++i) {
+    Piece p;
+    p.mesh = set.load(i).mesh;
+    for (const Vec3f& q : p.mesh.positions) {
+      auto [it, fresh] = ids.emplace(bits_of(q), uint32_t(positions.size()));
+      if (fresh) positions.push_back(q);
+      p.vertex.push_back(it->second);
+    }
+    p.face_offset = face_offsets(p.mesh);
+    pieces.push_back(std::move(p));
+  }
+  const std::vector<SharedEdge> edges = shared_edges(pieces);
+  ASSERT_GT(edges.size(), 100u);
+  double edge_len = 0;
+  for (const SharedEdge& e : edges) edge_len += length(positions[e.b] - positions[e.a]);
+  const float reach = float(2.0 * edge_len / double(edges.size()));
+  for (const char* config : {"lossy-grid", "lossy-grid-shared", "cluster", "costa-PFV"}) {
+    BuildOptions opt = BuildOptions::from_config(config);
+    opt.lattice_box = set.bounds();
+    std::vector<BuiltPiece> built;
+    for (const Piece& p : pieces) built.push_back(build_piece(p, opt));
+    const SharedFigures s = compare_shared(pieces, built);
+    EXPECT_GT(s.shared, 100u) << config;
+    EXPECT_EQ(s.mismatched, 0u) << config;
+    EXPECT_EQ(s.missing, 0u) << config;
+    const LeakFigures lf = trace_cuts(edges, built, reach);
+    EXPECT_GT(lf.rays, 1000u) << config;
+    EXPECT_EQ(lf.leaks, 0u) << config << ": " << lf.rays << " rays";
   }
 }
 

@@ -286,7 +286,7 @@ ClusterTriangles cluster_triangles(const std::vector<const PolyMesh*>& meshes,
   for (const PolyMesh* m : meshes) check_mesh(*m);
   if (opt.leaf != Leaf::Clusters && opt.leaf != Leaf::LosslessClusters)
     throw Error("cluster_triangles: " + opt.config_name() + " is not a cluster configuration");
-  const Box3f lattice_box = lattice_box_of(meshes, opt);
+  const Box3f lattice_box = opt.leaf == Leaf::Clusters ? lattice_box_of(meshes, opt) : Box3f();
   TriangleMesh tm = triangulate_fan(meshes);
   const cluster::Quantized z =
       cluster::quantize(tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(),
@@ -309,7 +309,7 @@ std::unique_ptr<Scene::Impl> empty_cluster_scene(const BuildOptions& opt) {
 
 std::unique_ptr<Scene::Impl> build_cluster_scene(const std::vector<const PolyMesh*>& meshes,
                                                  const BuildOptions& opt) {
-  const Box3f lattice_box = lattice_box_of(meshes, opt);
+  const Box3f lattice_box = opt.leaf == Leaf::Clusters ? lattice_box_of(meshes, opt) : Box3f();
   TriangleMesh tm = triangulate_fan(meshes);
   std::unique_ptr<Scene::Impl> s = opt.leaf == Leaf::LosslessClusters
                                        ? build_with<true>(tm, opt, Box3f())

@@ -436,6 +436,74 @@ TEST(LatticeBox, ChunkSetChunksMeetWithoutCracks) {
   }
 }
 
+// End to end: Scene::build_chunked (which gives every chunk lattice_box = the input's box) of the
+// closed torus:128 in 16+ chunks, for each lossy format family. Rays aimed at every edge of the
+// mesh (its ends and middle, from both sides, straight and slanted), so at every chunk cut among
+// them, must hit at the aimed point or just before: a crack lets a ray through to the far side of
+// the tube or out of the torus. The aimed points are the decoded edges where the chunks decode as
+// the whole mesh (cluster, costa V: one lattice), else the input's (the lossy grids store cut
+// vertices exactly; elsewhere their decoding error is far below the slack allowed).
+TEST(LatticeBox, ChunkedBuildOfTheTorusHasNoLeaks) {
+  test::TempDir dir("slimrt_lattice_chunked");
+  const PolyMesh m = load("torus:128");
+  ChunkedBuildOptions chunking;
+  chunking.max_chunk_triangles = 1024;
+  chunking.spill_dir = dir.dir();
+  Piece whole;
+  whole.mesh = m;
+  for (uint32_t v = 0; v < m.positions.size(); ++v) whole.vertex.push_back(v);
+  whole.face_offset = face_offsets(m);
+  // Every edge with the summed normals of its faces.
+  std::map<std::pair<uint32_t, uint32_t>, Vec3f> edges;
+  for (size_t f = 0; f + 1 < whole.face_offset.size(); ++f) {
+    const uint64_t o = whole.face_offset[f], n = whole.face_offset[f + 1] - o;
+    Vec3f nrm{0, 0, 0};
+    for (uint64_t i = 0; i < n; ++i)
+      nrm = nrm +
+            cross(m.positions[m.face_indices[o + i]], m.positions[m.face_indices[o + (i + 1) % n]]);
+    nrm = safe_normalize(nrm);
+    for (uint64_t i = 0; i < n; ++i) {
+      uint32_t u = m.face_indices[o + i], v = m.face_indices[o + (i + 1) % n];
+      if (u > v) std::swap(u, v);
+      Vec3f& e = edges[{u, v}];
+      e = e + nrm;
+    }
+  }
+  const float reach = 0.05f;  // the tube's radius is 0.4, its edges 0.02 to 0.07 long
+  for (const char* config :
+       {"lossy-grid", "lossy-grid-e2", "lossy-grid-shared", "cluster", "costa-PFV", "costa-TV"}) {
+    const BuildOptions opt = BuildOptions::from_config(config);
+    const Scene joined = Scene::build_chunked("torus:128", opt, chunking);
+    double chunks = 0;
+    for (const auto& [k, v] : joined.stats().details)
+      if (k == "chunks") chunks = v;
+    EXPECT_GE(chunks, 16) << config;
+    std::vector<Vec3f> aim = m.positions;
+    if (opt.leaf == Leaf::Clusters || opt.leaf == Leaf::Costa) {
+      BuildOptions boxed = opt;
+      boxed.lattice_box = m.bounds();
+      const BuiltPiece w = build_piece(whole, boxed);
+      for (const auto& [v, bits] : w.decoded) aim[v] = from_bits(bits);
+    }
+    uint64_t rays = 0, leaks = 0;
+    for (const auto& [key, normal] : edges) {
+      const Vec3f A = aim[key.first], B = aim[key.second];
+      const Vec3f n = safe_normalize(normal), side = safe_normalize(cross(B - A, n));
+      for (float t : {0.0f, 0.5f})
+        for (float s : {1.0f, -1.0f})
+          for (float slant : {0.0f, 0.7f}) {
+            Ray r;
+            r.dir = normalize(n * (-s) + side * slant * s);
+            r.org = A + (B - A) * t - r.dir * reach;
+            const Hit h = joined.intersect(r);
+            rays++;
+            if (!h.valid() || h.t > 1.25f * reach || !joined.occluded(r)) leaks++;
+          }
+    }
+    EXPECT_EQ(leaks, 0u) << config << ": of " << rays << " rays at " << edges.size() << " edges";
+  }
+}
+
 // Cluster and costa V quantize onto one lattice derived from the box alone: a piece built with the
 // whole mesh's box decodes every vertex exactly as the whole mesh's build does.
 TEST(LatticeBox, PiecesDecodeAsTheWholeMesh) {

@@ -560,7 +560,8 @@ TEST(LatticeBox, GridBoundaryVerticesAreExact) {
     BuildOptions boxed = plain;
     boxed.lattice_box = torus.bounds();
     auto exact = [&](const BuildOptions& o) {
-      for (const auto& [k, v] : Scene::build(torus, o).stats().details)
+      const Scene scene = Scene::build(torus, o);
+      for (const auto& [k, v] : scene.stats().details)
         if (k == "exact_vertices") return v;
       return -1.0;
     };

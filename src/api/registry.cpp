@@ -4,6 +4,8 @@
 // scene for a format's properties; nothing re-derives them from the name.
 #include "api/registry.h"
 
+#include <cmath>
+#include <cstdio>
 #include <optional>
 #include <string>
 #include <vector>
@@ -37,11 +39,13 @@ void describe_format(ConfigInfo& c) {
   else if (o.leaf == Leaf::Costa)
     c.error_bound =
         "the largest |decoded - input| over the vertices, measured at build (16 bits per "
-        "component in the scene box: half a step per axis plus float rounding)";
+        "component in the scene box, or BuildOptions::lattice_box: half a step per axis plus float "
+        "rounding)";
   else
     c.error_bound =
         "the largest |decoded - input| over the grid vertices, measured by the encoder "
-        "(displacements are quantized; corners and vertices shared with other grids are exact)";
+        "(displacements are quantized; corners, vertices shared with other grids and, with "
+        "BuildOptions::lattice_box, the meshes' boundary vertices are exact)";
 }
 
 ConfigInfo row(const char* name, Nodes nodes, Leaf leaf, const char* summary) {
@@ -116,6 +120,16 @@ std::vector<ConfigInfo> make_rows() {
     for (const char* c : {"", "P", "F", "V", "PF", "PV", "FV", "PFV"})
       v.push_back(costa_row(std::string(t) + c));
   return v;
+}
+
+std::string vec_text(const Vec3f& p) {
+  char t[96];
+  std::snprintf(t, sizeof t, "(%.9g, %.9g, %.9g)", double(p.x), double(p.y), double(p.z));
+  return t;
+}
+
+std::string box_text(const Box3f& b) {
+  return "[" + vec_text(b.lo) + " .. " + vec_text(b.hi) + "]";
 }
 
 // Any subset of T, P, F, V in that order (may be empty).
@@ -240,6 +254,31 @@ void BuildOptions::check() const {
   if (leaf == Leaf::Costa && !valid_costa(costa))
     throw Error("BuildOptions: costa letters '" + costa +
                 "' are not a subset of T, P, F, V in that order");
+  // lattice_box: the default (and any box with lo > hi on an axis) is "not given"; a given box has
+  // finite corners (an infinite or NaN one would put every vertex off the lattice).
+  for (int a = 0; a < 3; ++a)
+    if (std::isnan(lattice_box.lo[a]) || std::isnan(lattice_box.hi[a]) ||
+        (!lattice_box.empty() &&
+         !(std::isfinite(lattice_box.lo[a]) && std::isfinite(lattice_box.hi[a]))))
+      throw Error("BuildOptions: lattice_box " + box_text(lattice_box) +
+                  " is not a finite box (leave it empty for the meshes' own bounds)");
+}
+
+Box3f lattice_box_of(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
+  const Box3f& b = opt.lattice_box;
+  if (b.empty()) return Box3f();
+  for (size_t mi = 0; mi < meshes.size(); ++mi) {
+    const PolyMesh& m = *meshes[mi];
+    for (size_t v = 0; v < m.positions.size(); ++v) {
+      const Vec3f p = m.positions[v];
+      if (is_finite(p) && !b.contains(p))
+        throw Error("mesh '" + m.name + "' (" + std::to_string(mi) + "): vertex " +
+                    std::to_string(v) + " " + vec_text(p) +
+                    " lies outside BuildOptions::lattice_box " + box_text(b) +
+                    ", which must contain every finite vertex of the meshes");
+    }
+  }
+  return b;
 }
 
 ConfigInfo describe(const BuildOptions& opt) {

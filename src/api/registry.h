@@ -19,4 +19,10 @@ struct SceneFormat {
 // The functions of a leaf format; throws slim::Error for a value outside the enum.
 SceneFormat format_of(Leaf leaf);
 
+// BuildOptions::lattice_box as a lossy format's builder takes it: the empty box when none is
+// given (the format then derives its scene-wide quantities from the meshes), else the box, after
+// checking that it contains every finite vertex of the meshes (slim::Error naming the mesh, the
+// vertex and the box otherwise: a vertex outside would fall off the lattice).
+Box3f lattice_box_of(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt);
+
 }  // namespace slim

@@ -18,6 +18,7 @@
 #include <tbb/parallel_for.h>
 
 #include "api/bvh_scene.h"
+#include "api/registry.h"
 #include "mesh/triangulate.h"
 #include "prim/cluster.h"
 #include "slimrt/clusters.h"
@@ -209,12 +210,13 @@ class ClusterReshaper {
 };
 
 template <bool kLossless>
-std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& opt) {
+std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& opt,
+                                        const Box3f& lattice_box) {
   using Leaf = ClusterLeaf<kLossless>;
   auto s = std::make_unique<BvhScene<Leaf>>();
   auto z = std::make_shared<cluster::Quantized>(
       cluster::quantize(tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(),
-                        opt.cluster_error, kLossless));
+                        opt.cluster_error, kLossless, lattice_box));
   const ClusterLattice& lat = z->lattice;
   auto side = std::make_shared<std::vector<uint8_t>>();
   std::mutex side_mutex;
@@ -284,10 +286,11 @@ ClusterTriangles cluster_triangles(const std::vector<const PolyMesh*>& meshes,
   for (const PolyMesh* m : meshes) check_mesh(*m);
   if (opt.leaf != Leaf::Clusters && opt.leaf != Leaf::LosslessClusters)
     throw Error("cluster_triangles: " + opt.config_name() + " is not a cluster configuration");
+  const Box3f lattice_box = opt.leaf == Leaf::Clusters ? lattice_box_of(meshes, opt) : Box3f();
   TriangleMesh tm = triangulate_fan(meshes);
   const cluster::Quantized z =
       cluster::quantize(tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(),
-                        opt.cluster_error, opt.leaf == Leaf::LosslessClusters);
+                        opt.cluster_error, opt.leaf == Leaf::LosslessClusters, lattice_box);
   ClusterTriangles t;
   t.vertices.reserve(3 * tm.tri_count());
   for (size_t i = 0; i < tm.tri_count(); ++i) {
@@ -306,9 +309,11 @@ std::unique_ptr<Scene::Impl> empty_cluster_scene(const BuildOptions& opt) {
 
 std::unique_ptr<Scene::Impl> build_cluster_scene(const std::vector<const PolyMesh*>& meshes,
                                                  const BuildOptions& opt) {
+  const Box3f lattice_box = opt.leaf == Leaf::Clusters ? lattice_box_of(meshes, opt) : Box3f();
   TriangleMesh tm = triangulate_fan(meshes);
-  std::unique_ptr<Scene::Impl> s =
-      opt.leaf == Leaf::LosslessClusters ? build_with<true>(tm, opt) : build_with<false>(tm, opt);
+  std::unique_ptr<Scene::Impl> s = opt.leaf == Leaf::LosslessClusters
+                                       ? build_with<true>(tm, opt, Box3f())
+                                       : build_with<false>(tm, opt, lattice_box);
   s->set_input(tm.input_faces, tm.input_triangles, tm.skipped_faces);
   return s;
 }

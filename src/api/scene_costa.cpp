@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "api/bvh_scene.h"
+#include "api/registry.h"
 #include "mesh/tessellate.h"
 #include "prim/costa_leaf.h"
 #include "prim/quantized_mesh.h"
@@ -361,6 +362,8 @@ std::unique_ptr<Scene::Impl> empty_costa_scene(const BuildOptions& opt) {
 std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*>& meshes,
                                                const BuildOptions& opt) {
   const CostaFlags flags = CostaFlags::parse(opt.costa);
+  // V: one quantization box for every scene built with the same lattice_box (chunks).
+  const Box3f lattice_box = flags.V ? lattice_box_of(meshes, opt) : Box3f();
   NgonMesh loaded = load_ngon_mesh(meshes);  // section 3.1
   if (flags.T) loaded = triangulate_ngon_mesh(loaded);
   const uint32_t prim_count = uint32_t(loaded.prim_count());
@@ -369,7 +372,7 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
   std::vector<Vec3f> decoded = loaded.vertices;
   double max_error = 0;  // Scene::error_bound(): the largest |decoded - input|
   if (flags.V) {
-    VertexQuantizer q = make_vertex_quantizer(loaded.vertices);
+    VertexQuantizer q = make_vertex_quantizer(loaded.vertices, lattice_box);
     for (Vec3f& p : decoded) {
       const Vec3f in = p;
       uint16_t c[3] = {q.encode(p.x, 0), q.encode(p.y, 1), q.encode(p.z, 2)};
@@ -403,7 +406,7 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
     stats_src.fans = loaded.fans, stats_src.strips = loaded.strips;
     stats_src.tess = loaded.tess;
     loaded = {};
-    data->store = QuantizedMesh(ordered, flags.P, flags.F, flags.V);  // section 3.2
+    data->store = QuantizedMesh(ordered, flags.P, flags.F, flags.V, lattice_box);  // section 3.2
     uint32_t max_face = 0;
     for (uint32_t g : ordered.prim_face) max_face = std::max(max_face, g);
     data->face_map = BitArray(prim_count, bits_for(max_face));
@@ -533,9 +536,10 @@ CostaTriangles costa_triangles(const std::vector<const PolyMesh*>& meshes,
     check_mesh(*m);
   }
   const CostaFlags f = CostaFlags::parse(opt.costa);
+  const Box3f lattice_box = f.V ? lattice_box_of(meshes, opt) : Box3f();
   NgonMesh m = load_ngon_mesh(meshes);
   if (f.T) m = triangulate_ngon_mesh(m);
-  const QuantizedMesh q(m, f.P, f.F, f.V);
+  const QuantizedMesh q(m, f.P, f.F, f.V, lattice_box);
   return store_triangles(q, uint32_t(q.prim_count()),
                          [&](uint32_t i, uint32_t& geom, uint32_t& face) {
                            const uint32_t g = m.prim_face[i];

@@ -38,9 +38,9 @@ namespace slim {
 namespace {
 
 constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
-// Version 1. Any change of a section's layout (a node, block or context struct) or of the header
+// Version 2. Any change of a section's layout (a node, block or context struct) or of the header
 // needs a new version: the sections are the in-memory structs byte for byte.
-constexpr uint32_t kVersion = 1;
+constexpr uint32_t kVersion = 2;
 constexpr uint32_t kByteOrder = 0x01020304;
 constexpr uint64_t kAlign = 64;
 // Bounds the table before it is read (the header size check then bounds it by the file size): a
@@ -54,8 +54,10 @@ struct OptionsRecord {
   int32_t grid_parts, sah_bins, max_leaf_size, threads;
   double prescan_threshold, cluster_error;
   char costa[16];
+  float lattice_lo[3], lattice_hi[3];  // BuildOptions::lattice_box (the empty default: +inf, -inf)
+  uint8_t reserved2[8];
 };
-static_assert(sizeof(OptionsRecord) == 64);
+static_assert(sizeof(OptionsRecord) == 96);
 
 struct FileHeader {
   char magic[8];
@@ -78,7 +80,7 @@ struct FileHeader {
   uint64_t input_faces, triangles, skipped_faces, primitives;
   // 1 for a scene joined from `chunks` chunk scenes (api/scene_joined.h), 0 for a format's own.
   uint32_t joined, chunks;
-  uint8_t reserved[200];
+  uint8_t reserved[168];
 };
 static_assert(sizeof(FileHeader) == 512);
 
@@ -140,6 +142,10 @@ OptionsRecord options_record(const BuildOptions& o) {
   r.prescan_threshold = o.pairing_options.prescan_threshold;
   r.cluster_error = o.cluster_error;
   std::snprintf(r.costa, sizeof r.costa, "%s", o.costa.c_str());
+  for (int a = 0; a < 3; ++a) {
+    r.lattice_lo[a] = o.lattice_box.lo[a];
+    r.lattice_hi[a] = o.lattice_box.hi[a];
+  }
   return r;
 }
 
@@ -357,6 +363,8 @@ BuildOptions options_of(const OptionsRecord& r, Opener& o) {
   b.threads = r.threads;
   b.cluster_error = r.cluster_error;
   b.costa = r.costa;
+  b.lattice_box = Box3f({r.lattice_lo[0], r.lattice_lo[1], r.lattice_lo[2]},
+                        {r.lattice_hi[0], r.lattice_hi[1], r.lattice_hi[2]});
   try {
     b.check();
   } catch (const Error& e) {

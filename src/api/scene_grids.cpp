@@ -27,6 +27,7 @@
 #include "api/scene_grids.h"
 
 #include "api/bvh_scene.h"
+#include "api/registry.h"
 #include "mesh/grids.h"
 #include "prim/lossy_subgrid.h"
 #include "prim/subgrid.h"
@@ -695,10 +696,14 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
   auto s = std::make_unique<GridScene<Leaf>>();
   const GridSet& gs = p.gs;
   const size_t ng = gs.grids.size();
-  Box3f scene_box;
-  for (const PolyMesh* m : meshes) scene_box.extend(m->bounds());
+  // BuildOptions::lattice_box: the bias of the whole input, and the chunk's boundary vertices
+  // (its cuts among them) stored exactly, so that chunks built apart meet without a crack.
+  const Box3f lattice_box = lattice_box_of(meshes, opt);
+  Box3f scene_box = lattice_box;
+  if (lattice_box.empty())
+    for (const PolyMesh* m : meshes) scene_box.extend(m->bounds());
   const int bias = displacement_bias(scene_box.empty() ? 1.0f : length(scene_box.size()));
-  const ExactPositions ex = find_exact_positions(gs, meshes);
+  const ExactPositions ex = find_exact_positions(gs, meshes, !lattice_box.empty());
   grid_tables(p, s->grid_table, s->hot, s->face_table, s->flips);
   s->exact.resize(ex.pos.size());
   for (size_t gi = 0; gi < ng; ++gi) {
@@ -887,7 +892,9 @@ GridErrorStats extract_grid_scene(const std::vector<const PolyMesh*>& meshes,
   e.diag_max_pct = et.diag_max_pct;
   e.vertices = et.vertices;
   e.subgrids = et.subgrids;
-  e.exact_vertices = find_exact_positions(p.gs, meshes).pos.size();
+  e.exact_vertices =
+      find_exact_positions(p.gs, meshes, layout != Layout::Uncompressed && !opt.lattice_box.empty())
+          .pos.size();
   e.leftovers = p.leftover_cells + p.leftover_tris == 0 ? "none"
                 : p.tri_leaves                          ? "triangles"
                                                         : "grids";

@@ -521,7 +521,8 @@ PositionKind classify(const GridSet& gs, const VertexGrid& g, uint32_t x, uint32
 
 }  // namespace
 
-ExactPositions find_exact_positions(const GridSet& gs, const std::vector<const PolyMesh*>& meshes) {
+ExactPositions find_exact_positions(const GridSet& gs, const std::vector<const PolyMesh*>& meshes,
+                                    bool escape_boundary) {
   std::vector<uint64_t> base(meshes.size() + 1, 0);
   for (size_t g = 0; g < meshes.size(); ++g) base[g + 1] = base[g] + meshes[g]->positions.size();
   if (base.back() >= 0xffffffffull) throw Error("lossy grids: more than 2^32 - 1 vertices");
@@ -615,20 +616,71 @@ ExactPositions find_exact_positions(const GridSet& gs, const std::vector<const P
       if (uses[c] >= 2) shared[c].flags |= kExactSeen;
     }
 
+  // escape_boundary: the vertices on an edge that one triangle or cell uses. Only a multi-cell
+  // grid's non-corner positions decode lossily, and those on a boundary edge lie on its outer
+  // ring (an inner edge has a cell of the grid on each side; an inner vertex used elsewhere is a
+  // conflict above), so the edges counted are those with an end on such a ring: the rings of all
+  // grids (each ring edge is one cell's) and the leftover triangles' edges.
+  enum : uint8_t { kOnRing = 1, kOnBoundary = 2 };
+  std::vector<uint8_t> boundary;
+  bool any_boundary = false;
+  if (escape_boundary) {
+    boundary.assign(base.back(), 0);
+    auto ring_edges = [&](const VertexGrid& g, auto&& edge) {
+      const uint32_t w = g.res_x - 1, h = g.res_y - 1;
+      auto v = [&](uint32_t x, uint32_t y) { return id(g.geom, gs.vertex(g, x, y)); };
+      for (uint32_t x = 0; x < w; ++x) {
+        edge(v(x, 0), v(x + 1, 0));
+        edge(v(x, h), v(x + 1, h));
+      }
+      for (uint32_t y = 0; y < h; ++y) {
+        edge(v(0, y), v(0, y + 1));
+        edge(v(w, y), v(w, y + 1));
+      }
+    };
+    for (size_t gi = 0; gi < gs.multi_cell_grids; ++gi)
+      ring_edges(gs.grids[gi], [&](uint32_t a, uint32_t b) {
+        boundary[a] |= kOnRing;
+        boundary[b] |= kOnRing;
+      });
+    std::vector<uint64_t> edges;  // (smaller id << 32) | larger id, one entry per use
+    auto add = [&](uint32_t a, uint32_t b) {
+      if (a == b || !((boundary[a] | boundary[b]) & kOnRing)) return;
+      edges.push_back(a < b ? (uint64_t(a) << 32) | b : (uint64_t(b) << 32) | a);
+    };
+    for (const VertexGrid& g : gs.grids) ring_edges(g, add);
+    for (const LeftoverTriangle& t : gs.triangles) {
+      const uint32_t a = id(t.geom, t.v[0]), b = id(t.geom, t.v[1]), c = id(t.geom, t.v[2]);
+      add(a, b);
+      add(b, c);
+      add(c, a);
+    }
+    std::sort(edges.begin(), edges.end());
+    for (size_t i = 0, j; i < edges.size(); i = j) {
+      for (j = i + 1; j < edges.size() && edges[j] == edges[i];) ++j;
+      if (j - i != 1) continue;
+      boundary[edges[i] >> 32] |= kOnBoundary;
+      boundary[uint32_t(edges[i])] |= kOnBoundary;
+      any_boundary = true;
+    }
+  }
+
   ExactPositions ex;
   ex.start.assign(gs.grids.size() + 1, 0);
   for (size_t gi = 0; gi < gs.grids.size(); ++gi) {
     ex.start[gi] = ex.pos.size();
-    if (gi >= gs.multi_cell_grids || shared.empty()) continue;
+    if (gi >= gs.multi_cell_grids || (shared.empty() && !any_boundary)) continue;
     const VertexGrid& g = gs.grids[gi];
     for (uint32_t y = 0; y < g.res_y; ++y)
       for (uint32_t x = 0; x < g.res_x; ++x) {
         if (lattice_line(x, g.res_x) && lattice_line(y, g.res_y)) continue;
         const uint32_t v = id(g.geom, gs.vertex(g, x, y));
-        if (uses[v] < 2) continue;
-        const State& s = shared[v];
-        if ((s.flags & kConflict) || ((s.flags & kExactSeen) && (s.flags & kHasKey)))
-          ex.pos.push_back(y * g.res_x + x);
+        if (!any_boundary || !(boundary[v] & kOnBoundary)) {
+          if (uses[v] < 2) continue;
+          const State& s = shared[v];
+          if (!((s.flags & kConflict) || ((s.flags & kExactSeen) && (s.flags & kHasKey)))) continue;
+        }
+        ex.pos.push_back(y * g.res_x + x);
       }
   }
   ex.start[gs.grids.size()] = ex.pos.size();

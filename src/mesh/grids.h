@@ -114,12 +114,19 @@ inline bool lattice_line(uint32_t x, uint32_t res) { return x % 4 == 0 || x + 1 
 // across a seam, a leftover triangle or 1-cell grid) decodes to the same bits everywhere only if
 // every lossy use has the same border corners and offset (a torus grid's seam does), so all the
 // others are listed here: positions y * res_x + x, ascending, per multi-cell grid.
+// escape_boundary (a build with BuildOptions::lattice_box: a chunk of a larger mesh) also lists
+// every vertex on a boundary edge of the meshes (an edge of one triangle or cell only, vertex
+// identity as above): a chunk's cut is such an edge in both chunks, whose grids differ, so its
+// vertices are stored exactly on both sides and decode to the input's bits in each. A cut along an
+// edge of 3+ faces (non-manifold) that leaves 2 of them in one chunk is not a boundary there:
+// that side may keep its vertices lossy.
 struct ExactPositions {
   std::vector<uint64_t> start;  // grids.size() + 1 entries
   std::vector<uint32_t> pos;
   uint64_t count(size_t grid) const { return start[grid + 1] - start[grid]; }
 };
-ExactPositions find_exact_positions(const GridSet& gs, const std::vector<const PolyMesh*>& meshes);
+ExactPositions find_exact_positions(const GridSet& gs, const std::vector<const PolyMesh*>& meshes,
+                                    bool escape_boundary = false);
 
 // Appends the leftover triangles of gs as 2x2 grids (a, b / c, c): A = (a, b, c), B = (a, c, c)
 // degenerate; with_corners also extends gs.corner_of_vertex.

@@ -213,16 +213,18 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
 }
 
 Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_t ntris,
-                   double rel_error, bool lossless) {
+                   double rel_error, bool lossless, const Box3f& lattice_box) {
   constexpr uint32_t kLatticeMax = (1u << 24) - 1;
   Quantized z;
   std::vector<uint8_t> used(nv, 0);
   for (size_t i = 0; i < 3 * ntris; ++i) used[tris[i]] = 1;
-  Box3f box;
-  for (size_t i = 0; i < nv; ++i)
-    if (used[i]) box.extend(vertices[i]);
+  const bool given = !lattice_box.empty();
+  Box3f box = lattice_box;
+  if (!given)
+    for (size_t i = 0; i < nv; ++i)
+      if (used[i]) box.extend(vertices[i]);
   double ext = 0, d2 = 0;
-  if (ntris)
+  if (ntris || given)
     for (int a = 0; a < 3; ++a) {
       const double e = double(box.hi[a]) - double(box.lo[a]);
       ext = std::max(ext, e);
@@ -243,7 +245,7 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
       z.coarsened = true;
     }
     z.lattice.step = float(step);
-    for (int a = 0; a < 3; ++a) z.lattice.origin[a] = ntris ? box.lo[a] : 0.0f;
+    for (int a = 0; a < 3; ++a) z.lattice.origin[a] = ntris || given ? box.lo[a] : 0.0f;
     for (size_t i = 0; i < nv; ++i) {
       if (!used[i]) continue;
       for (int a = 0; a < 3; ++a) {

@@ -344,10 +344,13 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
                             const uint32_t* counts, int k, bool slack);
 
 // Codes and decoded positions of the vertices that the triangles use (others: code 0, position
-// unchanged). Lossy: origin = the used vertices' box minimum, step = the largest power of two with
+// unchanged). Lossy: origin = the box minimum, step = the largest power of two with
 // step * sqrt(3) / 2 <= rel_error x the box diagonal, coarsened (doubled) until the box extent
 // spans fewer than 2^24 - 1 steps (so that every offset fits a block's 24 bits and float(q) is
-// exact). Lossless: the order keys of the exact floats.
+// exact). The box is `lattice_box` when it is not empty (BuildOptions::lattice_box, which must
+// contain the vertices: meshes quantized with the same box share one lattice, so a vertex they
+// share gets the same code and decodes to the same bits in each), else the used vertices' box.
+// Lossless: the order keys of the exact floats.
 struct Quantized {
   ClusterLattice lattice;
   bool coarsened = false;
@@ -357,7 +360,8 @@ struct Quantized {
          mean_error = 0;  // error: |decoded - input| over used vertices
 };
 Quantized quantize(const Vec3f* vertices, size_t vertex_count, const uint32_t* tris,
-                   size_t tri_count, double rel_error, bool lossless);
+                   size_t tri_count, double rel_error, bool lossless,
+                   const Box3f& lattice_box = Box3f());
 }  // namespace cluster
 
 template <bool kLossless>

@@ -21,9 +21,13 @@
 //   Exponent 0 is the zero displacement. Exponent 63 is an escape: the vertex is stored exactly in
 //   the scene's exact-vertex array, at (grid's first exact vertex) + the 18 other bits. slimrt uses
 //   it for vertices shared with another grid or with leftover triangles, so that both sides decode
-//   them to the same bits (DESIGN.md: "keep them exact"); a grid's own sub-grid borders need no
-//   escape (see below).
-//   `bias` is one per scene (from its size), so that the 62 binades cover any displacement.
+//   them to the same bits (DESIGN.md: "keep them exact"), and in a build with
+//   BuildOptions::lattice_box for the vertices on the meshes' boundary edges: a chunk's cut is a
+//   boundary of both chunks, built apart with different grids, and its vertices decode to the
+//   input's bits in each (mesh/grids.h, find_exact_positions); a grid's own sub-grid borders need
+//   no escape (see below).
+//   `bias` is one per scene (from its size, or lattice_box's: the same in every chunk), so that the
+//   62 binades cover any displacement.
 //
 // Watertightness (section 4.3, DESIGN.md): patch points are lerps (1-t)*a + t*b with per-edge
 // weights w0(i) = (n-1-i)/(n-1), w1(i) = i/(n-1), exact at both ends, evaluated as

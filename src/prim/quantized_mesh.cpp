@@ -59,7 +59,9 @@ uint16_t VertexQuantizer::encode(float x, int a) const {
   return uint16_t(best);
 }
 
-VertexQuantizer make_vertex_quantizer(const std::vector<Vec3f>& vertices) {
+VertexQuantizer make_vertex_quantizer(const std::vector<Vec3f>& vertices,
+                                      const Box3f& lattice_box) {
+  if (!lattice_box.empty()) return VertexQuantizer(lattice_box);
   Box3f box;
   for (const Vec3f& p : vertices)
     if (is_finite(p)) box.extend(p);
@@ -97,7 +99,8 @@ std::string CostaFlags::letters() const {
 // ---- the store
 // -------------------------------------------------------------------------------------
 
-QuantizedMesh::QuantizedMesh(const NgonArrays& m, bool P, bool F, bool V) : P_(P), F_(F), V_(V) {
+QuantizedMesh::QuantizedMesh(const NgonArrays& m, bool P, bool F, bool V, const Box3f& lattice_box)
+    : P_(P), F_(F), V_(V) {
   const uint64_t n = m.prim_count();
   if (n >= 0xffffffffull) throw Error("costa: too many primitives");
   prim_count_ = uint32_t(n);
@@ -147,7 +150,7 @@ QuantizedMesh::QuantizedMesh(const NgonArrays& m, bool P, bool F, bool V) : P_(P
     vertices_ = m.vertices;
   } else {
     // PACKVERTICES (Listing 4): scene box coordinates, 16 bits per component.
-    quant_ = make_vertex_quantizer(m.vertices);
+    quant_ = make_vertex_quantizer(m.vertices, lattice_box);
     qvertices_.resize(3 * m.vertices.size());
     for (size_t k = 0; k < m.vertices.size(); ++k)
       for (int a = 0; a < 3; ++a) qvertices_[3 * k + a] = quant_.encode(m.vertices[k][a], a);

@@ -81,8 +81,11 @@ struct VertexQuantizer {
   uint16_t encode(float x, int a) const;
 };
 
-// The quantizer of a vertex array: the box of its finite vertices (the paper's scene box).
-VertexQuantizer make_vertex_quantizer(const std::vector<Vec3f>& vertices);
+// The quantizer of a vertex array: the box of its finite vertices (the paper's scene box), or
+// `lattice_box` when it is not empty (BuildOptions::lattice_box, which must contain the vertices:
+// meshes quantized with the same box decode a vertex they share to the same bits).
+VertexQuantizer make_vertex_quantizer(const std::vector<Vec3f>& vertices,
+                                      const Box3f& lattice_box = Box3f());
 
 // ---- the store ---------------------------------------------------------------------------------
 
@@ -113,8 +116,8 @@ class QuantizedMesh {
  public:
   QuantizedMesh() = default;
   // Encodes the primitives, faces and vertices of `mesh` (the side tables prim_face, face_base
-  // are not part of the store). V quantizes in the box of the finite vertices.
-  QuantizedMesh(const NgonArrays& mesh, bool P, bool F, bool V);
+  // are not part of the store). V quantizes with make_vertex_quantizer(vertices, lattice_box).
+  QuantizedMesh(const NgonArrays& mesh, bool P, bool F, bool V, const Box3f& lattice_box = Box3f());
 
   uint32_t prim_count() const { return prim_count_; }
   uint64_t face_count() const { return face_count_; }

@@ -265,7 +265,7 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   d.emplace_back("position_bits_per_triangle", double(est.position_bits) / tris);
   d.emplace_back("topology_bits_per_triangle", double(est.topology_bits) / tris);
   d.emplace_back("id_bits_per_triangle", double(est.id_bits) / tris);
-  d.emplace_back("header_bits_per_triangle", 8.0 * double(est.header_bytes) / tris);
+  d.emplace_back("header_bits_per_triangle", double(est.header_bits) / tris);
   d.emplace_back("lattice_step", kLossless ? 0.0 : double(lat.step));
   d.emplace_back("lattice_coarsened", z->coarsened ? 1.0 : 0.0);
   d.emplace_back("max_error", z->max_error);

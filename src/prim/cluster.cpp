@@ -324,7 +324,7 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
     const uint32_t n = child_size(sizes, c);
     uint32_t idx[3][8];
     uint64_t end = 0;
-    if (!decode_strip(h, L, get, c, n, idx, &end)) return fail("malformed strip step");
+    if (!decode_strip<true>(h, L, get, c, n, idx, &end)) return fail("malformed strip step");
     if (end > L.end) return fail("strip runs past the topology stream");
     for (uint32_t j = 0; j < n; ++j)
       for (int q = 0; q < 3; ++q)

@@ -128,6 +128,12 @@ SLIM_INLINE float decode_coord(const ClusterLattice& lat, int axis, uint32_t cod
     return lattice_coord(lat, axis, code);
 }
 
+#if defined(__GNUC__)
+#define SLIM_INLINE_LAMBDA __attribute__((always_inline))
+#else
+#define SLIM_INLINE_LAMBDA
+#endif
+
 SLIM_INLINE uint32_t bit_width(uint32_t x) { return x ? 32u - uint32_t(__builtin_clz(x)) : 0u; }
 
 SLIM_INLINE uint32_t child_sizes(const ClusterHeader& h) {
@@ -137,9 +143,10 @@ SLIM_INLINE uint32_t child_sizes(const ClusterHeader& h) {
 SLIM_INLINE uint32_t child_size(uint32_t sizes, uint32_t c) { return 1 + ((sizes >> (3 * c)) & 7); }
 // The first triangle of child c: the sizes of the children before it.
 SLIM_INLINE uint32_t child_first(uint32_t sizes, uint32_t c) {
-  uint32_t f = 0;
-  for (uint32_t i = 0; i < c; ++i) f += child_size(sizes, i);
-  return f;
+  const uint32_t m = sizes & ((1u << (3 * c)) - 1);  // c <= 8: at most 24 bits
+  return c + uint32_t(__builtin_popcount(m & 0x249249u)) +
+         2 * uint32_t(__builtin_popcount(m & 0x492492u)) +
+         4 * uint32_t(__builtin_popcount(m & 0x924924u));
 }
 
 // Bit positions of the streams of a cluster of k children.
@@ -172,54 +179,59 @@ SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, bool lossles
 }
 
 // Decodes the strip of child c (n triangles) into idx[corner][lane], lanes < n. get(pos, w) reads
-// w <= 9 bits at bit pos of the stream; *end receives the bit after the strip's last. Returns
-// false if a reused vertex lies before vertex 0 or a strip step names edge 3 (the checker's
-// concern; the decoders run on checked blocks only).
-template <class Get>
+// w <= 32 bits at bit pos of the stream (one read per triangle: a restart's 2 + 3 x 9 bits at
+// most); *end receives the bit after the strip's last. kCheck: returns false if a reused vertex
+// lies before vertex 0 or a strip step names edge 3 (the checker's; the decoders run on checked
+// blocks only and skip these tests).
+template <bool kCheck, class Get>
 SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get, uint32_t c,
                               uint32_t n, uint32_t (&idx)[3][8], uint64_t* end = nullptr) {
   uint64_t pos = L.topo;
   uint32_t cnt = 0;
   if (c) {
     const uint64_t e = L.table + uint64_t(c - 1) * (L.tb + L.vbw);
-    pos += get(e, L.tb);
-    cnt = get(e + L.tb, L.vbw);
+    const uint32_t x = get(e, L.tb + L.vbw);
+    pos += x & ((1u << L.tb) - 1);
+    cnt = x >> L.tb;
   }
   bool ok = true;
-  const uint32_t ib = h.ib;
-  auto ref = [&]() {
-    const uint32_t x = get(pos, 1 + ib);
-    if (x & 1) {
-      pos += 1;
-      return cnt++;
-    }
-    pos += 1 + ib;
-    ok &= (x >> 1) < cnt;
-    return cnt - 1 - (x >> 1);
+  const uint32_t ib = h.ib, dmask = (1u << ib) - 1;
+  // One reference from the bits x (consumed: x and used shift right).
+  auto ref = [&](uint32_t& x, uint32_t& used) SLIM_INLINE_LAMBDA {
+    const uint32_t isnew = x & 1, d = (x >> 1) & dmask;
+    const uint32_t w = isnew ? 1 : 1 + ib;
+    if constexpr (kCheck) ok &= isnew || d < cnt;
+    const uint32_t v = isnew ? cnt : cnt - 1 - d;
+    cnt += isnew;
+    x >>= w;
+    used += w;
+    return v;
   };
-  uint32_t v0 = ref(), v1 = ref(), v2 = ref();
-  idx[0][0] = v0;
-  idx[1][0] = v1;
-  idx[2][0] = v2;
-  for (uint32_t j = 1; j < n; ++j) {
-    const uint32_t ctl = get(pos, 4);
-    const uint32_t p = ctl & 3;
+  uint32_t v0 = 0, v1 = 0, v2 = 0;
+  for (uint32_t j = 0; j < n; ++j) {
+    uint32_t x = get(pos, 32), used = 0;
+    const uint32_t p = j ? x & 3 : 3;
     if (p == 3) {
-      pos += 2;
-      v0 = ref();
-      v1 = ref();
-      v2 = ref();
+      const uint32_t skip = j ? 2 : 0;
+      x >>= skip;
+      used = skip;
+      v0 = ref(x, used);
+      v1 = ref(x, used);
+      v2 = ref(x, used);
     } else {
-      pos += 4;
-      const uint32_t e = ctl >> 2;
-      ok &= e < 3;
-      const uint32_t prev[5] = {v0, v1, v2, v0, v1};
-      // Corner p + 1 takes the previous corner e + 1, corner p + 2 the previous corner e.
-      const uint32_t a = prev[e], b = prev[e + 1], r = ref();
+      const uint32_t e = (x >> 2) & 3;
+      if constexpr (kCheck) ok &= e < 3;
+      x >>= 4;
+      used = 4;
+      // Corner p + 1 takes the previous corner e + 1, corner p + 2 the previous corner e (edge 3
+      // reads as edge 0).
+      const uint32_t a = e == 1 ? v1 : e == 2 ? v2 : v0, b = e == 1 ? v2 : e == 2 ? v0 : v1;
+      const uint32_t r = ref(x, used);
       v0 = p == 0 ? r : p == 1 ? a : b;
       v1 = p == 1 ? r : p == 2 ? a : b;
       v2 = p == 2 ? r : p == 0 ? a : b;
     }
+    pos += used;
     idx[0][j] = v0;
     idx[1][j] = v1;
     idx[2][j] = v2;
@@ -283,8 +295,12 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
     }
     _mm256_store_ps(d.v[k][a], x);
   };
+  // Lanes >= n repeat lane n - 1 (their idx entries are not written).
+  const __m256i lanes =
+      _mm256_min_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), _mm256_set1_epi32(d.n - 1));
   for (int k = 0; k < 3; ++k) {
-    const __m256i vi = _mm256_load_si256(reinterpret_cast<const __m256i*>(idx[k]));
+    const __m256i vi = _mm256_permutevar8x32_epi32(
+        _mm256_load_si256(reinterpret_cast<const __m256i*>(idx[k])), lanes);
     __m256i vpos = _mm256_add_epi32(_mm256_set1_epi32(int(L.verts)),
                                     _mm256_mullo_epi32(vi, _mm256_set1_epi32(int(L.vbits))));
     if (L.vbits <= 57) {
@@ -323,16 +339,16 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, ui
   d.first = int(child_first(sizes, uint32_t(child)));
   d.n = int(child_size(sizes, uint32_t(child)));
   alignas(32) uint32_t idx[3][8];
-  decode_strip(
+  decode_strip<false>(
       h, L, [bits](uint64_t pos, uint32_t w) { return read_bits(bits, pos, w); }, uint32_t(child),
       uint32_t(d.n), idx);
-  for (int l = d.n; l < 8; ++l)
-    for (int k = 0; k < 3; ++k) idx[k][l] = idx[k][d.n - 1];
   uint32_t anchor[3];
   for (int a = 0; a < 3; ++a) anchor[a] = read_bits(bits, uint64_t(a) * L.aw, L.aw);
 #if defined(SLIM_SIMD_AVX2)
   decode_vertices_avx2<kLossless>(lat, h, bits, L, anchor, idx, d);
 #else
+  for (int l = d.n; l < 8; ++l)
+    for (int k = 0; k < 3; ++k) idx[k][l] = idx[k][d.n - 1];
   for (int l = 0; l < 8; ++l)
     for (int k = 0; k < 3; ++k) {
       uint64_t pos = L.verts + uint64_t(idx[k][l]) * L.vbits;

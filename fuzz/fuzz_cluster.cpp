@@ -8,8 +8,8 @@
 //      inside its bytes plus kClusterReadSlack (ASan: the block is copied to an exact-size
 //      buffer), for every child, with ids of every triangle;
 //   2. round trip: the input bytes as vertex codes and a topology of up to 63 triangles in up to 8
-//      children: encode(), check() accepts it, and every child decodes to the codes' positions and
-//      the ids bit for bit.
+//      children: encode(), check() accepts it, and every child decodes to its triangles (in the
+//      encoder's strip order), the codes' positions and the ids bit for bit.
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
@@ -31,16 +31,18 @@ void decode_all(const uint8_t* block, uint32_t children) {
   lat.step = 0.25f;
   ClusterHeader h;
   std::memcpy(&h, block, sizeof(h));
+  const cluster::Layout L = cluster::layout(h, children, kLossless);
+  const uint32_t prim_base = cluster::read_bits(block + sizeof(h), 3 * L.aw, h.bb);
   for (uint32_t c = 0; c < children; ++c) {
     cluster::Decoded8 d;
-    cluster::decode_child<kLossless>(lat, block, int(c), d);
+    cluster::decode_child<kLossless>(lat, block, children, int(c), d);
     SLIM_FUZZ_CHECK(d.n >= 1 && d.n <= 8, "child size");
     for (int l = 0; l < d.n; ++l) {
       uint32_t g, p;
-      cluster::decode_ids(block, uint32_t(d.first + l), g, p);
+      cluster::decode_ids<kLossless>(block, children, uint32_t(d.first + l), g, p);
       // primID = prim_base + a run start (pb bits) + an offset in the run (ob bits).
       SLIM_FUZZ_CHECK(
-          uint64_t(p - h.prim_base) <= ((uint64_t(1) << h.pb) - 1) + ((uint64_t(1) << h.ob) - 1),
+          uint64_t(p - prim_base) <= ((uint64_t(1) << h.pb) - 1) + ((uint64_t(1) << h.ob) - 1),
           "prim offset width");
     }
   }
@@ -92,19 +94,30 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
   for (int c = 0; c < k; ++c) {
     cluster::Decoded8 d;
     if (lossless)
-      cluster::decode_child<true>(lat, block.data(), c, d);
+      cluster::decode_child<true>(lat, block.data(), uint32_t(k), c, d);
     else
-      cluster::decode_child<false>(lat, block.data(), c, d);
+      cluster::decode_child<false>(lat, block.data(), uint32_t(k), c, d);
     SLIM_FUZZ_CHECK(d.n == int(counts[c]), "child size");
+    // The child's triangles in the encoder's strip order: each decoded triangle (ids and corner
+    // bits) matches one of the child's source triangles not matched yet.
+    bool used[8] = {};
     for (int l = 0; l < d.n; ++l) {
-      const uint32_t t = prims[c][l];
-      for (int j = 0; j < 3; ++j)
-        for (int a = 0; a < 3; ++a)
-          SLIM_FUZZ_CHECK(fuzz::same_bits(d.v[j][a][l], decoded[tris[3 * t + j]][a]),
-                          "vertex bits");
       uint32_t g, p;
-      cluster::decode_ids(block.data(), uint32_t(d.first + l), g, p);
-      SLIM_FUZZ_CHECK(g == geom[t] && p == prim[t], "ids");
+      if (lossless)
+        cluster::decode_ids<true>(block.data(), uint32_t(k), uint32_t(d.first + l), g, p);
+      else
+        cluster::decode_ids<false>(block.data(), uint32_t(k), uint32_t(d.first + l), g, p);
+      bool found = false;
+      for (int m = 0; m < d.n && !found; ++m) {
+        const uint32_t t = prims[c][m];
+        if (used[m] || g != geom[t] || p != prim[t]) continue;
+        bool same = true;
+        for (int j = 0; j < 3; ++j)
+          for (int a = 0; a < 3; ++a)
+            same &= fuzz::same_bits(d.v[j][a][l], decoded[tris[3 * t + j]][a]);
+        used[m] = found = same;
+      }
+      SLIM_FUZZ_CHECK(found, "decoded triangle (vertex bits and ids) not in its child");
     }
   }
 }

@@ -4,13 +4,16 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <numeric>
+#include <optional>
 #include <random>
 
 #include "mesh/triangulate.h"
 #include "prim/cluster.h"
+#include "slimrt/analysis.h"
 #include "slimrt/clusters.h"
 #include "test_util.h"
 
@@ -69,28 +72,41 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
     for (int c = 0; c < kk; ++c) {
       cluster::Decoded8 d;
       if (lossless)
-        cluster::decode_child<true>(z.lattice, data.data(), c, d);
+        cluster::decode_child<true>(z.lattice, data.data(), uint32_t(kk), c, d);
       else
-        cluster::decode_child<false>(z.lattice, data.data(), c, d);
+        cluster::decode_child<false>(z.lattice, data.data(), uint32_t(kk), c, d);
       ASSERT_EQ(d.n, int(counts[c]));
-      for (int l = 0; l < 8; ++l) {
-        const uint32_t t = prims[c][std::min(l, d.n - 1)];
-        for (int j = 0; j < 3; ++j) {
-          const uint32_t vi = tm.tris[3 * size_t(t) + j];
+      // The strip order is the encoder's: the child's triangles (positions and ids) as multisets.
+      std::vector<std::vector<uint32_t>> got, want;
+      for (int l = 0; l < d.n; ++l) {
+        uint32_t g, p;
+        if (lossless)
+          cluster::decode_ids<true>(data.data(), uint32_t(kk), uint32_t(d.first + l), g, p);
+        else
+          cluster::decode_ids<false>(data.data(), uint32_t(kk), uint32_t(d.first + l), g, p);
+        std::vector<uint32_t> row = {g, p};
+        for (int j = 0; j < 3; ++j)
+          for (int a = 0; a < 3; ++a) row.push_back(bits_of(d.v[j][a][l]));
+        got.push_back(row);
+        const uint32_t t = prims[c][l];
+        row = {tm.geom_ids[t], tm.prim_ids[t]};
+        for (int j = 0; j < 3; ++j)
           for (int a = 0; a < 3; ++a) {
-            ASSERT_EQ(bits_of(d.v[j][a][l]), bits_of(z.decoded[vi][a]));
+            const uint32_t vi = tm.tris[3 * size_t(t) + j];
+            row.push_back(bits_of(z.decoded[vi][a]));
             if (lossless) {
-              ASSERT_EQ(bits_of(d.v[j][a][l]), bits_of(tm.vertices[vi][a]));
+              ASSERT_EQ(bits_of(z.decoded[vi][a]), bits_of(tm.vertices[vi][a]));
             }
           }
-        }
-        if (l < d.n) {
-          uint32_t g, p;
-          cluster::decode_ids(data.data(), uint32_t(d.first + l), g, p);
-          ASSERT_EQ(g, tm.geom_ids[t]);
-          ASSERT_EQ(p, tm.prim_ids[t]);
-        }
+        want.push_back(row);
       }
+      std::sort(got.begin(), got.end());
+      std::sort(want.begin(), want.end());
+      ASSERT_EQ(got, want);
+      // Padding lanes repeat the last triangle.
+      for (int l = d.n; l < 8; ++l)
+        for (int j = 0; j < 3; ++j)
+          for (int a = 0; a < 3; ++a) ASSERT_EQ(bits_of(d.v[j][a][l]), bits_of(d.v[j][a][d.n - 1]));
     }
     clusters++;
   }
@@ -143,15 +159,19 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
     b[off] = value;
     return cluster::check(b.data(), b.size(), 2, false, &why);
   };
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nverts), 1));    // indices beyond the vertices
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ntris), 65));    // too many triangles
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, bits), 25));     // lossy axis wider than 24 bits
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ib), 9));        // index wider than 8 bits
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 33));       // run offset wider than 32 bits
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nruns), 0));     // no primID run
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nruns), 17));    // more runs than triangles
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, end), 0));       // empty first child
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, end) + 1, 20));  // second child of 12
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nverts), 1));     // indices beyond the vertices
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ntris), 65));     // too many triangles
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, bits), 25));      // lossy axis wider than 24 bits
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ib), 9));         // index wider than 8 bits
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 33));        // run offset wider than 32 bits
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nruns), 0));      // no primID run
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nruns), 17));     // more runs than triangles
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, bb), 33));        // prim base wider than 32 bits
+  ASSERT_EQ(good[offsetof(ClusterHeader, sizes)], 0x3f);         // children of 8 + 8
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, sizes), 0x3e));   // children of 7 + 8 (< 16)
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, sizes), 0x07));   // children of 8 + 1 (< 16)
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, sizes) + 2, 1));  // a size for a sixth child
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, tbits), 0));      // the strips past the stream
 }
 
 struct Built {
@@ -335,3 +355,32 @@ TEST(ClusterScene, BadInput) {
 }
 
 }  // namespace
+
+// The lossy scene decodes its triangles from its clusters (Scene::decoded_triangles): on a real
+// mesh, those of the rebuild from the input (decoded_triangles(meshes, options)), bit for bit and
+// corners in the input order, with the same mesh and face, in the clusters' order (compared
+// sorted).
+TEST(ClusterScene, DecodesItsOwnTrianglesRealMesh) {
+  SLIM_REQUIRE_SHARED_DATA();
+  const PolyMesh m = load(shared_data_dir() + "/stanford_bunny.obj.xz");
+  auto rows = [](const DecodedTriangles& t) {
+    std::vector<std::array<uint32_t, 11>> r(t.size());
+    for (size_t i = 0; i < t.size(); ++i) {
+      std::memcpy(r[i].data(), &t.vertices[3 * i], 36);
+      r[i][9] = t.geom[i];
+      r[i][10] = t.face[i];
+    }
+    std::sort(r.begin(), r.end());
+    return r;
+  };
+  const BuildOptions opt = BuildOptions::from_config("cluster");
+  const Scene s = Scene::build(m, opt);
+  const std::optional<DecodedTriangles> mine = s.decoded_triangles();
+  ASSERT_TRUE(mine.has_value());
+  const std::optional<DecodedTriangles> rebuilt = decoded_triangles({&m}, opt);
+  ASSERT_TRUE(rebuilt.has_value());
+  EXPECT_EQ(mine->size(), m.face_count());
+  EXPECT_EQ(rows(*mine), rows(*rebuilt));
+  // cluster-lossless intersects the input triangles: no geometry of its own to give.
+  EXPECT_FALSE(Scene::build(m, BuildOptions::from_config("cluster-lossless")).decoded_triangles());
+}

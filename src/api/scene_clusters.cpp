@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <optional>
 #include <stdexcept>
 #include <unordered_map>
 
@@ -209,11 +210,54 @@ class ClusterReshaper {
   }
 };
 
+// A cluster scene: decodes its triangles from its clusters (built or opened from a file alike).
+template <bool kLossless>
+class ClusterScene : public BvhScene<ClusterLeaf<kLossless>> {
+ public:
+  using Leaf = ClusterLeaf<kLossless>;
+  // Every cluster's triangles, decoded as the traversal decodes them, in leaf order.
+  std::optional<DecodedTriangles> decoded_triangles() const override {
+    const typename Leaf::Context& c = this->ctx;
+    DecodedTriangles out;
+    auto append = [&](const uint8_t* data, uint32_t k, uint32_t i) {
+      cluster::Decoded8 d;
+      cluster::decode_child<kLossless>(c.lattice, data, k, int(i), d);
+      for (int l = 0; l < d.n; ++l) {
+        uint32_t geom, prim;
+        cluster::decode_ids<kLossless>(data, k, uint32_t(d.first + l), geom, prim);
+        for (int q = 0; q < 3; ++q)
+          out.vertices.emplace_back(d.v[q][0][l], d.v[q][1][l], d.v[q][2][l]);
+        out.geom.push_back(geom);
+        out.face.push_back(prim);
+      }
+    };
+    // The walk of validate(): the boxes are filled in as it expects them.
+    auto leaf = [&](const uint8_t* block, Box3f& bounds, std::string*) {
+      Leaf::visit(c, block, [&](const Box3f& box, uint64_t) { bounds.extend(box); });
+      uint64_t off;
+      std::memcpy(&off, block, 8);
+      append(c.side + off, 1, 0);
+      return true;
+    };
+    MultiLeafValidator multi = [&](const uint8_t* data, uint32_t k, uint32_t i, Box3f& bounds,
+                                   std::string*) {
+      Leaf::visit_in_multileaf(c, data, k, int(i),
+                               [&](const Box3f& box, uint64_t) { bounds.extend(box); });
+      append(data, k, i);
+      return true;
+    };
+    std::string why;
+    if (!validate_bvh8(this->bvh, leaf, &why, multi))
+      throw Error("cluster scene: its leaves do not decode: " + why);
+    return out;
+  }
+};
+
 template <bool kLossless>
 std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& opt,
                                         const Box3f& lattice_box) {
   using Leaf = ClusterLeaf<kLossless>;
-  auto s = std::make_unique<BvhScene<Leaf>>();
+  auto s = std::make_unique<ClusterScene<kLossless>>();
   auto z = std::make_shared<cluster::Quantized>(
       cluster::quantize(tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(),
                         opt.cluster_error, kLossless, lattice_box));
@@ -267,7 +311,7 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   d.emplace_back("position_bits_per_triangle", double(est.position_bits) / tris);
   d.emplace_back("topology_bits_per_triangle", double(est.topology_bits) / tris);
   d.emplace_back("id_bits_per_triangle", double(est.id_bits) / tris);
-  d.emplace_back("header_bits_per_triangle", 8.0 * double(est.header_bytes) / tris);
+  d.emplace_back("header_bits_per_triangle", double(est.header_bits) / tris);
   d.emplace_back("lattice_step", kLossless ? 0.0 : double(lat.step));
   d.emplace_back("lattice_coarsened", z->coarsened ? 1.0 : 0.0);
   d.emplace_back("max_error", z->max_error);
@@ -303,8 +347,8 @@ ClusterTriangles cluster_triangles(const std::vector<const PolyMesh*>& meshes,
 }
 
 std::unique_ptr<Scene::Impl> empty_cluster_scene(const BuildOptions& opt) {
-  if (opt.leaf == Leaf::LosslessClusters) return std::make_unique<BvhScene<ClusterLeaf<true>>>();
-  return std::make_unique<BvhScene<ClusterLeaf<false>>>();
+  if (opt.leaf == Leaf::LosslessClusters) return std::make_unique<ClusterScene<true>>();
+  return std::make_unique<ClusterScene<false>>();
 }
 
 std::unique_ptr<Scene::Impl> build_cluster_scene(const std::vector<const PolyMesh*>& meshes,

@@ -2,6 +2,7 @@
 #include "prim/cluster.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <iterator>
@@ -32,74 +33,180 @@ struct BitWriter {
 std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims,
                             const uint32_t* counts, int k, bool slack) {
   if (k < 1 || k > 8) throw std::logic_error("cluster: 1..8 children");
-  std::vector<uint32_t> tris;  // triangles in child order
   ClusterHeader h{};
+  uint32_t sizes = 0, ntris = 0;
   for (int c = 0; c < k; ++c) {
     if (counts[c] < 1 || counts[c] > 8) throw std::logic_error("cluster: 1..8 triangles a child");
-    for (uint32_t j = 0; j < counts[c]; ++j) tris.push_back(prims[c][j]);
-    h.end[c] = uint8_t(tris.size());
+    sizes |= (counts[c] - 1) << (3 * c);
+    ntris += counts[c];
   }
-  for (int c = k; c < 8; ++c) h.end[c] = h.end[k - 1];
-  h.ntris = uint8_t(tris.size());
-  // Distinct vertex codes in order of first use (duplicated input vertices with the same code are
-  // stored once), found through a small open-addressing table.
-  std::vector<uint32_t> codes;  // 3 per local vertex
-  std::vector<uint8_t> local(tris.size() * 3);
+  h.ntris = uint8_t(ntris);
+  for (int i = 0; i < 3; ++i) h.sizes[i] = uint8_t(sizes >> (8 * i));
+  // Distinct vertex codes in order of first sight (duplicated input vertices with the same code
+  // are one vertex), found through a small open-addressing table: the triangles' corners as
+  // these provisional numbers, in child order.
+  std::vector<uint32_t> pcodes;  // 3 per provisional vertex
+  std::vector<std::array<uint8_t, 3>> corners;
+  std::vector<uint32_t> tris;  // input triangles in child order
   uint16_t table[1024];
   std::fill(std::begin(table), std::end(table), uint16_t(0xffff));
-  for (size_t t = 0; t < tris.size(); ++t)
-    for (int j = 0; j < 3; ++j) {
-      const uint32_t* c = &s.codes[3 * size_t(s.tris[3 * size_t(tris[t]) + j])];
-      uint32_t h = (c[0] * 0x9E3779B1u) ^ (c[1] * 0x85EBCA77u) ^ (c[2] * 0xC2B2AE3Du);
-      h = (h ^ (h >> 15)) & 1023;
-      for (;; h = (h + 1) & 1023) {
-        const uint16_t i = table[h];
-        if (i == 0xffff) {
-          table[h] = uint16_t(codes.size() / 3);
-          local[3 * t + j] = uint8_t(codes.size() / 3);
-          codes.insert(codes.end(), c, c + 3);
-          break;
-        }
-        if (codes[3 * i] == c[0] && codes[3 * i + 1] == c[1] && codes[3 * i + 2] == c[2]) {
-          local[3 * t + j] = uint8_t(i);
-          break;
+  for (int c = 0; c < k; ++c)
+    for (uint32_t j = 0; j < counts[c]; ++j) {
+      const uint32_t t = prims[c][j];
+      tris.push_back(t);
+      std::array<uint8_t, 3> tc{};
+      for (int q = 0; q < 3; ++q) {
+        const uint32_t* code = &s.codes[3 * size_t(s.tris[3 * size_t(t) + q])];
+        uint32_t x = (code[0] * 0x9E3779B1u) ^ (code[1] * 0x85EBCA77u) ^ (code[2] * 0xC2B2AE3Du);
+        for (x = (x ^ (x >> 15)) & 1023;; x = (x + 1) & 1023) {
+          const uint16_t i = table[x];
+          if (i == 0xffff) {
+            table[x] = uint16_t(pcodes.size() / 3);
+            tc[q] = uint8_t(pcodes.size() / 3);
+            pcodes.insert(pcodes.end(), code, code + 3);
+            break;
+          }
+          if (pcodes[3 * i] == code[0] && pcodes[3 * i + 1] == code[1] &&
+              pcodes[3 * i + 2] == code[2]) {
+            tc[q] = uint8_t(i);
+            break;
+          }
         }
       }
+      corners.push_back(tc);
     }
-  const uint32_t nv = uint32_t(codes.size() / 3);
+  const uint32_t nv = uint32_t(pcodes.size() / 3);
   if (nv > 255) throw std::logic_error("cluster: more than 255 vertices");
   h.nverts = uint8_t(nv);
-  // Per child: the smallest vertex index it uses is its base; ib covers the widest child range.
-  uint32_t vbase[8] = {};
-  for (int c = 0, first = 0; c < k; first = h.end[c], ++c) {
-    uint32_t lo = 255, hi = 0;
-    for (size_t i = 3 * size_t(first); i < 3 * size_t(h.end[c]); ++i) {
-      lo = std::min<uint32_t>(lo, local[i]);
-      hi = std::max<uint32_t>(hi, local[i]);
+
+  // Strips: per child, the greedy strip from each start triangle (the next triangle is the first
+  // left that continues the last one, else a restart); the one with the fewest restarts wins.
+  // steps: (index into `tris`, p, e) in decode order; p = 3 for a strip's first triangle.
+  struct Step {
+    uint32_t i;
+    uint8_t p, e;
+  };
+  auto continues = [&](uint32_t prev, uint32_t t, uint8_t& p, uint8_t& e) {
+    const auto& P = corners[prev];
+    const auto& T = corners[t];
+    for (int pp = 0; pp < 3; ++pp)
+      for (int ee = 0; ee < 3; ++ee)
+        if (T[(pp + 1) % 3] == P[(ee + 1) % 3] && T[(pp + 2) % 3] == P[ee]) {
+          p = uint8_t(pp);
+          e = uint8_t(ee);
+          return true;
+        }
+    return false;
+  };
+  std::vector<Step> steps;
+  std::vector<uint32_t> child_step(k + 1, 0);  // first step of each child
+  for (int c = 0, first = 0; c < k; first += int(counts[c]), ++c) {
+    const uint32_t n = counts[c];
+    Step best[8], cur[8];
+    uint32_t best_restarts = ~0u;
+    for (uint32_t start = 0; start < n; ++start) {
+      bool used[8] = {};
+      uint32_t restarts = 0;
+      cur[0] = {uint32_t(first) + start, 3, 0};
+      used[start] = true;
+      for (uint32_t j = 1; j < n; ++j) {
+        Step next{0, 3, 0};
+        bool found = false;
+        for (uint32_t q = 0; q < n && !found; ++q)
+          if (!used[q] && continues(cur[j - 1].i, uint32_t(first) + q, next.p, next.e)) {
+            next.i = uint32_t(first) + q;
+            used[q] = found = true;
+          }
+        if (!found) {
+          for (uint32_t q = 0; q < n; ++q)
+            if (!used[q]) {
+              next = {uint32_t(first) + q, 3, 0};
+              used[q] = true;
+              break;
+            }
+          restarts++;
+        }
+        cur[j] = next;
+      }
+      if (restarts < best_restarts) {
+        best_restarts = restarts;
+        std::copy(cur, cur + n, best);
+      }
     }
-    vbase[c] = lo;
-    h.ib = uint8_t(std::max(uint32_t(h.ib), bit_width(hi - lo)));
+    child_step[c] = uint32_t(steps.size());
+    steps.insert(steps.end(), best, best + n);
   }
+  child_step[k] = uint32_t(steps.size());
+
+  // Vertex numbers in order of first reference; each reference new or a distance back.
+  std::vector<int> number(nv, -1);
+  std::vector<uint32_t> codes;  // 3 per vertex, final numbering
+  std::vector<int32_t> refs;    // per reference: -1 new, else the distance back
+  std::vector<uint32_t> child_cnt(k, 0), child_refs(k + 1, 0);
+  uint32_t cnt = 0, max_back = 0;
+  auto reference = [&](uint8_t v) {
+    if (number[v] < 0) {
+      number[v] = int(cnt++);
+      codes.insert(codes.end(), &pcodes[3 * size_t(v)], &pcodes[3 * size_t(v)] + 3);
+      refs.push_back(-1);
+    } else {
+      const uint32_t d = cnt - 1 - uint32_t(number[v]);
+      max_back = std::max(max_back, d);
+      refs.push_back(int32_t(d));
+    }
+  };
+  for (int c = 0; c < k; ++c) {
+    child_cnt[c] = cnt;
+    child_refs[c] = uint32_t(refs.size());
+    for (uint32_t j = child_step[c]; j < child_step[c + 1]; ++j) {
+      const Step& st = steps[j];
+      if (st.p == 3)
+        for (int q = 0; q < 3; ++q) reference(corners[st.i][q]);
+      else
+        reference(corners[st.i][st.p]);
+    }
+  }
+  child_refs[k] = uint32_t(refs.size());
+  h.ib = uint8_t(bit_width(max_back));
+  // Topology bits per child: 2 bits a restart, 4 a strip step, 1 or 1 + ib a reference.
+  std::vector<uint32_t> child_off(k + 1, 0);
+  for (int c = 0; c < k; ++c) {
+    uint32_t b = 0;
+    for (uint32_t j = child_step[c] + 1; j < child_step[c + 1]; ++j) b += steps[j].p == 3 ? 2 : 4;
+    for (uint32_t r = child_refs[c]; r < child_refs[c + 1]; ++r) b += refs[r] < 0 ? 1 : 1 + h.ib;
+    child_off[c + 1] = child_off[c] + b;
+  }
+  if (child_off[k] > 0xffff) throw std::logic_error("cluster: topology beyond 65535 bits");
+  h.tbits = uint16_t(child_off[k]);
+
+  uint32_t anchor[3];
   for (int a = 0; a < 3; ++a) {
     uint32_t lo = codes[a], hi = codes[a];
     for (uint32_t i = 0; i < nv; ++i) {
       lo = std::min(lo, codes[3 * i + a]);
       hi = std::max(hi, codes[3 * i + a]);
     }
-    h.anchor[a] = lo;
+    anchor[a] = lo;
     h.bits[a] = uint8_t(bit_width(hi - lo));
   }
+  if (!s.lossless)
+    for (int a = 0; a < 3; ++a)
+      if (anchor[a] >> 24) throw std::logic_error("cluster: lattice code beyond 24 bits");
+  // Triangles in decode order, their ids.
+  std::vector<uint32_t> order;
+  for (const Step& st : steps) order.push_back(tris[st.i]);
   uint32_t glo = ~0u, ghi = 0;
   std::vector<uint32_t> ids;
-  for (uint32_t t : tris) {
+  for (uint32_t t : order) {
     ids.push_back(s.prim_ids[t]);
     glo = std::min(glo, s.geom_ids[t]);
     ghi = std::max(ghi, s.geom_ids[t]);
   }
   std::sort(ids.begin(), ids.end());
-  h.prim_base = ids[0];
-  h.geom_base = glo;
+  const uint32_t prim_base = ids[0];
   h.gb = uint8_t(bit_width(ghi - glo));
+  h.bb = uint8_t(bit_width(prim_base));
+  h.hb = uint8_t(bit_width(glo));
   // PrimID runs: a run starts at the first sorted id that is 2^ob or more past the current start;
   // ob is the width with the fewest bits (run starts + per triangle run index and offset). The
   // widest ob gives one run: the plain base + offset, for meshes whose ids are in random order.
@@ -115,8 +222,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   for (uint32_t ob = 0; ob <= 32; ++ob) {
     runs_of(ob, starts);
     if (starts.size() > 255) continue;
-    const uint64_t bits = starts.size() * uint64_t(bit_width(starts.back() - h.prim_base)) +
-                          tris.size() * uint64_t(bit_width(uint32_t(starts.size()) - 1) + ob);
+    const uint64_t bits = starts.size() * uint64_t(bit_width(starts.back() - prim_base)) +
+                          ntris * uint64_t(bit_width(uint32_t(starts.size()) - 1) + ob);
     if (bits < best_bits) {
       best_bits = bits;
       best_ob = ob;
@@ -125,20 +232,23 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   runs_of(best_ob, starts);
   h.nruns = uint8_t(starts.size());
   h.ob = uint8_t(best_ob);
-  h.pb = uint8_t(bit_width(starts.back() - h.prim_base));
+  h.pb = uint8_t(bit_width(starts.back() - prim_base));
 
-  const Layout L = layout(h);
-  std::vector<uint8_t> out(data_bytes(h) + 8, 0);  // 8: the writer's 64-bit stores
+  const Layout L = layout(h, uint32_t(k), s.lossless);
+  std::vector<uint8_t> out(data_bytes(h, uint32_t(k), s.lossless) + 8, 0);  // 8: 64-bit stores
   std::memcpy(out.data(), &h, sizeof(h));
   BitWriter w{out, sizeof(ClusterHeader)};
-  for (int c = 0; c < k; ++c) w.put(vbase[c], L.vbw);
-  for (int c = 0, first = 0; c < k; first = h.end[c], ++c)
-    for (size_t i = 3 * size_t(first); i < 3 * size_t(h.end[c]); ++i)
-      w.put(local[i] - vbase[c], h.ib);
+  for (int a = 0; a < 3; ++a) w.put(anchor[a], L.aw);
+  w.put(prim_base, h.bb);
+  w.put(glo, h.hb);
+  for (int c = 1; c < k; ++c) {
+    w.put(child_off[c], L.tb);
+    w.put(child_cnt[c], L.vbw);
+  }
   for (uint32_t i = 0; i < nv; ++i)
-    for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - h.anchor[a], h.bits[a]);
-  for (uint32_t st : starts) w.put(st - h.prim_base, h.pb);
-  for (uint32_t t : tris) {
+    for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], h.bits[a]);
+  for (uint32_t st : starts) w.put(st - prim_base, h.pb);
+  for (uint32_t t : order) {
     const uint32_t id = s.prim_ids[t];
     const uint32_t run =
         uint32_t(std::upper_bound(starts.begin(), starts.end(), id) - starts.begin()) - 1;
@@ -146,18 +256,32 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     w.put(id - starts[run], h.ob);
     w.put(s.geom_ids[t] - glo, h.gb);
   }
-  if (w.pos != L.end) throw std::logic_error("cluster: stream size mismatch");
-  out.resize(data_bytes(h) + (slack ? kClusterReadSlack : 0));
+  size_t r = 0;
+  auto put_ref = [&] {
+    const int32_t d = refs[r++];
+    if (d < 0)
+      w.put(1, 1);
+    else
+      w.put(uint32_t(d) << 1, 1 + h.ib);
+  };
+  for (int c = 0; c < k; ++c)
+    for (uint32_t j = child_step[c]; j < child_step[c + 1]; ++j) {
+      const Step& st = steps[j];
+      if (j > child_step[c]) w.put(uint32_t(st.p) | uint32_t(st.e) << 2, st.p == 3 ? 2 : 4);
+      for (int q = 0; q < (st.p == 3 ? 3 : 1); ++q) put_ref();
+    }
+  if (w.pos != L.end || r != refs.size()) throw std::logic_error("cluster: stream size mismatch");
+  out.resize(data_bytes(h, uint32_t(k), s.lossless) + (slack ? kClusterReadSlack : 0));
   if (s.stats) {
     std::lock_guard<std::mutex> lock(s.stats->m);
     EncodeStats& st = *s.stats;
     st.clusters++;
-    st.triangles += h.ntris;
+    st.triangles += ntris;
     st.vertices += nv;
     st.position_bits += uint64_t(nv) * L.vbits;
-    st.topology_bits += L.verts + 8 * sizeof(h.end);
-    st.id_bits += L.end - L.runs + 64;
-    st.header_bytes += sizeof(ClusterHeader);
+    st.topology_bits += h.tbits + (L.verts - L.table) + 8 * (sizeof(h.sizes) + sizeof(h.tbits));
+    st.id_bits += (L.topo - L.runs) + h.bb + h.hb + 6 * 8;  // + pb, gb, nruns, ob, bb, hb
+    st.header_bits += 6 * 8 + 3 * L.aw;                     // nverts, ntris, bits, ib; anchors
   }
   return out;
 }
@@ -178,32 +302,34 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
   for (int a = 0; a < 3; ++a)
     if (h.bits[a] > max_bits)
       return fail("axis width beyond " + std::to_string(max_bits) + " bits");
-  if (h.ib > 8 || h.pb > 32 || h.gb > 32 || h.ob > 32)
+  if (h.ib > 8 || h.pb > 32 || h.gb > 32 || h.ob > 32 || h.bb > 32 || h.hb > 32)
     return fail("index or id width beyond its limit");
   if (h.nruns < 1 || h.nruns > h.ntris) return fail("run count must be 1..ntris");
-  uint32_t prev = 0;
-  for (uint32_t c = 0; c < children; ++c) {
-    if (h.end[c] <= prev || h.end[c] - prev > 8) return fail("child of 0 or more than 8 triangles");
-    prev = h.end[c];
-  }
-  if (prev != h.ntris) return fail("children do not cover the triangles");
-  if (child_count(h) != children) return fail("child ends disagree with the child count");
-  if (data_bytes(h) > size) return fail("stream runs past the data");
+  const uint32_t sizes = child_sizes(h);
+  if (child_first(sizes, children) != h.ntris) return fail("children do not cover the triangles");
+  if (children < 8 && (sizes >> (3 * children)) != 0)
+    return fail("sizes given for children beyond the child count");
+  if (data_bytes(h, children, lossless) > size) return fail("stream runs past the data");
   const uint8_t* bits = data + sizeof(ClusterHeader);
-  const Layout L = layout(h);
-  // Bytes beyond `size` are not read: every field read here lies inside data_bytes(h).
+  const Layout L = layout(h, children, lossless);
+  // Bits at or beyond L.end (inside `size` or not) read as 0 here; the decoders may read them
+  // (with the slack) but use none of them on a block this accepts.
   auto get = [&](uint64_t pos, uint32_t w) {
     uint32_t v = 0;
-    for (uint32_t b = 0; b < w; ++b)
+    for (uint32_t b = 0; b < w && pos + b < L.end; ++b)
       v |= uint32_t((bits[(pos + b) >> 3] >> ((pos + b) & 7)) & 1) << b;
     return v;
   };
-  for (uint32_t c = 0, first = 0; c < children; first = h.end[c], ++c) {
-    const uint32_t vbase = get(uint64_t(c) * L.vbw, L.vbw);
-    for (uint32_t i = 3 * first; i < 3u * h.end[c]; ++i) {
-      const uint64_t v = uint64_t(vbase) + get(L.topo + uint64_t(i) * h.ib, h.ib);
-      if (v >= h.nverts) return fail("vertex index " + std::to_string(v) + " >= vertex count");
-    }
+  for (uint32_t c = 0; c < children; ++c) {
+    const uint32_t n = child_size(sizes, c);
+    uint32_t idx[3][8];
+    uint64_t end = 0;
+    if (!decode_strip<true>(h, L, get, c, n, idx, &end)) return fail("malformed strip step");
+    if (end > L.end) return fail("strip runs past the topology stream");
+    for (uint32_t j = 0; j < n; ++j)
+      for (int q = 0; q < 3; ++q)
+        if (idx[q][j] >= h.nverts)
+          return fail("vertex index " + std::to_string(idx[q][j]) + " >= vertex count");
   }
   for (uint32_t t = 0; t < h.ntris; ++t) {
     const uint32_t run = get(L.ids + uint64_t(t) * L.idbits, L.rb);

@@ -1,26 +1,36 @@
 // Compressed triangle clusters (configurations `cluster` and `cluster-lossless`), after AMD's Dense
 // Geometry Format (DGF, HPG 2024): positions on one scene-wide integer lattice with a power-of-two
-// step, each cluster an anchor plus per-axis bit widths and bit-packed offsets, local vertex
-// indices relative to a per-child base as topology, and primIDs as runs (a run start per run, a
-// run index and an offset per triangle).
+// step, each cluster an anchor plus per-axis bit widths and bit-packed offsets, topology as
+// generalized triangle strips (DGF's control bits and implicit new-vertex indices), and primIDs as
+// runs (a run start per run, a run index and an offset per triangle).
 //
 // A cluster is one multi-leaf of the compressed-leaf BVH (bvh8.h; QBVH8 inner nodes above the
 // multi-leaves, NodeKind::QCompressedLeaf): its 72-byte header holds the quantized boxes of up to
 // 8 children of up to 8 triangles each (one 8-wide watertight test per child); the cluster data
 // follows it:
-//   ClusterHeader (38 B, packed)
+//   ClusterHeader (17 B, packed)
 //   bit stream, LSB first from the byte after the header:
-//     child vertex bases: k entries of vbw = bit_width(nverts - 1) bits (k children)
-//     topology: 3 vertex indices per triangle, `ib` bits each, minus its child's vertex base
-//               (triangles in child order; vertices numbered in order of first use, so that the
-//               vertices of one child lie in a short range)
+//     anchors:  3 x aw bits (aw = 24 lossy, 32 lossless)
+//     bases:    prim_base (bb bits), geom_base (hb bits)
+//     children: for children 1..k-1, the child's topology offset (tb = bit_width(tbits) bits,
+//               from the topology start) and its first new vertex (vbw = bit_width(nverts) bits)
 //     vertices: per vertex bx + by + bz bits (offsets from the anchor)
 //     id runs:  nruns run starts of pb bits (start - prim_base)
 //     ids:      per triangle rb = bit_width(nruns - 1) bits run index, ob bits offset in the
 //               run (primID = prim_base + start + offset), gb bits geomID - geom_base
-// A child's triangles are [end[i-1], end[i]) (end[-1] = 0); k is one more than the first i with
-// end[i] = ntris. Children with fewer than 8 triangles repeat their last triangle in the padding
-// lanes (the duplicate gives the same hit).
+//     topology: tbits bits, each child a generalized strip (below)
+// Child c holds 1 + sizes[c] triangles (3 bits each); k, the child count, is the multi-leaf's.
+// Children with fewer than 8 triangles repeat their last triangle in the padding lanes (the
+// duplicate gives the same hit).
+//
+// Topology (DGF section 3.2, with the corners kept in the input order, which u, v and the
+// watertight test's rounding depend on): vertices are numbered in order of first use (children in
+// order, triangles in strip order), so a vertex reference is 1 bit "new" (the next number) or 0
+// followed by ib bits d (the vertex cnt - 1 - d, cnt being the count of vertices numbered so far).
+// A child's first triangle is three references (corners 0, 1, 2). Every later triangle starts
+// with 2 bits p: 3 restarts (three references); otherwise 2 bits e follow, and the triangle is the
+// previous one's edge e (its corners e and e + 1, mod 3) reversed, at corners p + 2 and p + 1, with
+// one reference at corner p: the strip step of a consistently oriented mesh.
 //
 // The primID runs: input faces are not stored in a cluster's order (they are the user's), but
 // neighbouring faces often have nearby numbers (scan rows, quads split in two, terrain rows), so a
@@ -67,19 +77,19 @@ struct ClusterLattice {
 
 #pragma pack(push, 1)
 struct ClusterHeader {
-  uint8_t nverts;   // distinct vertices (codes) in the cluster, <= 255
-  uint8_t ntris;    // triangles, <= 64
-  uint8_t bits[3];  // per-axis offset widths (lossy <= 24, lossless <= 32)
-  uint8_t ib;       // bits per vertex index relative to the child's base (<= 8)
-  uint8_t pb, gb;   // bits per primID run start / geomID offset (<= 32)
-  uint8_t nruns;    // primID runs, 1..ntris
-  uint8_t ob;       // bits per primID offset in its run (<= 32)
-  uint8_t end[8];   // end[i]: one past the last triangle of child i
-  uint32_t anchor[3];
-  uint32_t prim_base, geom_base;
+  uint8_t nverts;    // distinct vertices (codes) in the cluster, 1..255
+  uint8_t ntris;     // triangles, 1..64
+  uint8_t bits[3];   // per-axis offset widths (lossy <= 24, lossless <= 32)
+  uint8_t ib;        // bits of a reused vertex's distance back (<= 8)
+  uint8_t pb, gb;    // bits per primID run start / geomID offset (<= 32)
+  uint8_t nruns;     // primID runs, 1..ntris
+  uint8_t ob;        // bits per primID offset in its run (<= 32)
+  uint8_t bb, hb;    // bits of prim_base / geom_base in the stream (<= 32)
+  uint8_t sizes[3];  // child c holds 1 + (the 3 bits at 3c) triangles
+  uint16_t tbits;    // bits of the topology stream
 };
 #pragma pack(pop)
-static_assert(sizeof(ClusterHeader) == 38, "cluster header is 38 bytes");
+static_assert(sizeof(ClusterHeader) == 17, "cluster header is 17 bytes");
 
 // Bytes a decoder may read past the end of a cluster's data (64-bit bit-stream loads).
 constexpr uint32_t kClusterReadSlack = 8;
@@ -118,38 +128,116 @@ SLIM_INLINE float decode_coord(const ClusterLattice& lat, int axis, uint32_t cod
     return lattice_coord(lat, axis, code);
 }
 
+#if defined(__GNUC__)
+#define SLIM_INLINE_LAMBDA __attribute__((always_inline))
+#else
+#define SLIM_INLINE_LAMBDA
+#endif
+
 SLIM_INLINE uint32_t bit_width(uint32_t x) { return x ? 32u - uint32_t(__builtin_clz(x)) : 0u; }
 
-// Children of a cluster: one more than the first i with end[i] = ntris.
-SLIM_INLINE uint32_t child_count(const ClusterHeader& h) {
-  uint32_t k = 1;
-  while (k < 8 && h.end[k - 1] != h.ntris) ++k;
-  return k;
+SLIM_INLINE uint32_t child_sizes(const ClusterHeader& h) {
+  return uint32_t(h.sizes[0]) | uint32_t(h.sizes[1]) << 8 | uint32_t(h.sizes[2]) << 16;
+}
+// Triangles of child c.
+SLIM_INLINE uint32_t child_size(uint32_t sizes, uint32_t c) { return 1 + ((sizes >> (3 * c)) & 7); }
+// The first triangle of child c: the sizes of the children before it.
+SLIM_INLINE uint32_t child_first(uint32_t sizes, uint32_t c) {
+  const uint32_t m = sizes & ((1u << (3 * c)) - 1);  // c <= 8: at most 24 bits
+  return c + uint32_t(__builtin_popcount(m & 0x249249u)) +
+         2 * uint32_t(__builtin_popcount(m & 0x492492u)) +
+         4 * uint32_t(__builtin_popcount(m & 0x924924u));
 }
 
-// Bit positions of the streams of a cluster.
+// Bit positions of the streams of a cluster of k children.
 struct Layout {
-  uint64_t topo = 0, verts = 0, runs = 0, ids = 0, end = 0;  // bit offsets from the stream start
-  uint32_t vbits = 0;                                        // bits per vertex
-  uint32_t vbw = 0;                                          // bits per child vertex base
+  uint64_t table = 0, verts = 0, runs = 0, ids = 0, topo = 0, end = 0;  // from the stream start
+  uint32_t aw = 0;                                                      // bits per anchor
+  uint32_t vbits = 0;                                                   // bits per vertex
+  uint32_t tb = 0, vbw = 0;     // bits per child topology offset / first new vertex
   uint32_t rb = 0, idbits = 0;  // bits per run index; per triangle's ids (rb + ob + gb)
 };
-SLIM_INLINE Layout layout(const ClusterHeader& h) {
+SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, bool lossless) {
   Layout l;
+  l.aw = lossless ? 32 : 24;
   l.vbits = uint32_t(h.bits[0]) + h.bits[1] + h.bits[2];
-  l.vbw = h.nverts ? bit_width(uint32_t(h.nverts) - 1) : 0;
+  l.tb = bit_width(h.tbits);
+  l.vbw = bit_width(h.nverts);
   l.rb = h.nruns ? bit_width(uint32_t(h.nruns) - 1) : 0;
   l.idbits = l.rb + h.ob + h.gb;
-  l.topo = uint64_t(child_count(h)) * l.vbw;
-  l.verts = l.topo + uint64_t(h.ntris) * 3 * h.ib;
+  l.table = 3 * l.aw + uint32_t(h.bb) + h.hb;
+  l.verts = l.table + uint64_t(k ? k - 1 : 0) * (l.tb + l.vbw);
   l.runs = l.verts + uint64_t(h.nverts) * l.vbits;
   l.ids = l.runs + uint64_t(h.nruns) * h.pb;
-  l.end = l.ids + uint64_t(h.ntris) * l.idbits;
+  l.topo = l.ids + uint64_t(h.ntris) * l.idbits;
+  l.end = l.topo + h.tbits;
   return l;
 }
 // Total bytes of a cluster's data (header + stream), without the read slack.
-SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h) {
-  return sizeof(ClusterHeader) + (layout(h).end + 7) / 8;
+SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, bool lossless) {
+  return sizeof(ClusterHeader) + (layout(h, k, lossless).end + 7) / 8;
+}
+
+// Decodes the strip of child c (n triangles) into idx[corner][lane], lanes < n. get(pos, w) reads
+// w <= 32 bits at bit pos of the stream (one read per triangle: a restart's 2 + 3 x 9 bits at
+// most); *end receives the bit after the strip's last. kCheck: returns false if a reused vertex
+// lies before vertex 0 or a strip step names edge 3 (the checker's; the decoders run on checked
+// blocks only and skip these tests).
+template <bool kCheck, class Get>
+SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get, uint32_t c,
+                              uint32_t n, uint32_t (&idx)[3][8], uint64_t* end = nullptr) {
+  uint64_t pos = L.topo;
+  uint32_t cnt = 0;
+  if (c) {
+    const uint64_t e = L.table + uint64_t(c - 1) * (L.tb + L.vbw);
+    const uint32_t x = get(e, L.tb + L.vbw);
+    pos += x & ((1u << L.tb) - 1);
+    cnt = x >> L.tb;
+  }
+  bool ok = true;
+  const uint32_t ib = h.ib, dmask = (1u << ib) - 1;
+  // One reference from the bits x (consumed: x and used shift right).
+  auto ref = [&](uint32_t& x, uint32_t& used) SLIM_INLINE_LAMBDA {
+    const uint32_t isnew = x & 1, d = (x >> 1) & dmask;
+    const uint32_t w = isnew ? 1 : 1 + ib;
+    if constexpr (kCheck) ok &= isnew || d < cnt;
+    const uint32_t v = isnew ? cnt : cnt - 1 - d;
+    cnt += isnew;
+    x >>= w;
+    used += w;
+    return v;
+  };
+  uint32_t v0 = 0, v1 = 0, v2 = 0;
+  for (uint32_t j = 0; j < n; ++j) {
+    uint32_t x = get(pos, 32), used = 0;
+    const uint32_t p = j ? x & 3 : 3;
+    if (p == 3) {
+      const uint32_t skip = j ? 2 : 0;
+      x >>= skip;
+      used = skip;
+      v0 = ref(x, used);
+      v1 = ref(x, used);
+      v2 = ref(x, used);
+    } else {
+      const uint32_t e = (x >> 2) & 3;
+      if constexpr (kCheck) ok &= e < 3;
+      x >>= 4;
+      used = 4;
+      // Corner p + 1 takes the previous corner e + 1, corner p + 2 the previous corner e (edge 3
+      // reads as edge 0).
+      const uint32_t a = e == 1 ? v1 : e == 2 ? v2 : v0, b = e == 1 ? v2 : e == 2 ? v0 : v1;
+      const uint32_t r = ref(x, used);
+      v0 = p == 0 ? r : p == 1 ? a : b;
+      v1 = p == 1 ? r : p == 2 ? a : b;
+      v2 = p == 2 ? r : p == 0 ? a : b;
+    }
+    pos += used;
+    idx[0][j] = v0;
+    idx[1][j] = v1;
+    idx[2][j] = v2;
+  }
+  if (end) *end = pos;
+  return ok;
 }
 
 // The triangles of child i decoded: v[corner][axis][lane], lanes >= n repeat the last triangle.
@@ -158,26 +246,15 @@ struct Decoded8 {
   int first = 0, n = 0;  // first triangle of the child in the cluster, its triangle count
 };
 
-template <bool kLossless>
-SLIM_INLINE void decode_vertex(const ClusterLattice& lat, const ClusterHeader& h,
-                               const uint8_t* bits, const Layout& L, uint32_t vi, float out[3]) {
-  uint64_t pos = L.verts + uint64_t(vi) * L.vbits;
-  for (int a = 0; a < 3; ++a) {
-    uint32_t off = read_bits(bits, pos, h.bits[a]);
-    pos += h.bits[a];
-    out[a] = decode_coord<kLossless>(lat, a, h.anchor[a] + off);
-  }
-}
-
 #if defined(SLIM_SIMD_AVX2)
-// The 8 lanes at once with 32-bit gathers (unaligned 4-byte loads at each field's byte, shifted
-// by its bit) for fields of up to 25 bits, 64-bit gathers for wider ones. The float operations are
-// the scalar decode's, lane by lane (the same conversion, product and sum), so both give the same
-// bits.
+// The 8 lanes' vertices at once: the whole vertex (bx + by + bz bits) with one 64-bit gather per
+// lane when it fits 57 bits, else each field with its own gathers (32-bit for fields of up to 25
+// bits, 64-bit for wider ones). The float operations are the scalar decode's, lane by lane (the
+// same conversion, product and sum), so both give the same bits.
 template <bool kLossless>
-SLIM_INLINE void decode_child_avx2(const ClusterLattice& lat, const ClusterHeader& h,
-                                   const uint8_t* bits, const Layout& L, uint32_t vbase,
-                                   Decoded8& d) {
+SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHeader& h,
+                                      const uint8_t* bits, const Layout& L, const uint32_t* anchor,
+                                      const uint32_t (&idx)[3][8], Decoded8& d) {
   const auto* base = reinterpret_cast<const int*>(bits);
   auto field = [&](__m256i pos, uint32_t w) {
     const __m256i word = _mm256_i32gather_epi32(base, _mm256_srli_epi32(pos, 3), 1);
@@ -194,28 +271,17 @@ SLIM_INLINE void decode_child_avx2(const ClusterLattice& lat, const ClusterHeade
     hi = _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_extracti128_si256(byte, 1), 1),
                            _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sh, 1)));
   };
-  // Fields of up to 32 bits: the low 32 bits of each 64-bit lane.
-  auto wide_field = [&](__m256i pos, uint32_t w) {
-    __m256i lo, hi;
-    gather64(pos, lo, hi);
-    const __m256i even = _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6);
-    const __m256i v = _mm256_permute2x128_si256(_mm256_permutevar8x32_epi32(lo, even),
-                                                _mm256_permutevar8x32_epi32(hi, even), 0x20);
-    return _mm256_and_si256(v, _mm256_set1_epi32(int(uint32_t((uint64_t(1) << w) - 1))));
+  // The low 32 bits of each 64-bit lane after a right shift by s, lanes 0-3 from lo, 4-7 from hi.
+  auto low32 = [&](__m256i lo, __m256i hi, uint32_t s) {
+    const __m128i s64 = _mm_cvtsi32_si128(int(s));
+    const __m256 pair =
+        _mm256_shuffle_ps(_mm256_castsi256_ps(_mm256_srl_epi64(lo, s64)),
+                          _mm256_castsi256_ps(_mm256_srl_epi64(hi, s64)), _MM_SHUFFLE(2, 0, 2, 0));
+    return _mm256_permute4x64_epi64(_mm256_castps_si256(pair), 0xD8);
   };
-  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-  const __m256i t = _mm256_add_epi32(_mm256_set1_epi32(d.first),
-                                     _mm256_min_epi32(lane, _mm256_set1_epi32(d.n - 1)));
-  // A triangle's three indices (3 x ib <= 24 bits) with one 32-bit gather.
-  const __m256i tri = [&] {
-    const __m256i tpos = _mm256_add_epi32(_mm256_set1_epi32(int(L.topo)),
-                                          _mm256_mullo_epi32(t, _mm256_set1_epi32(3 * int(h.ib))));
-    const __m256i word = _mm256_i32gather_epi32(base, _mm256_srli_epi32(tpos, 3), 1);
-    return _mm256_srlv_epi32(word, _mm256_and_si256(tpos, _mm256_set1_epi32(7)));
-  }();
-  const __m256i imask = _mm256_set1_epi32(int((1u << h.ib) - 1));
+  auto mask = [](uint32_t w) { return _mm256_set1_epi32(int(uint32_t((uint64_t(1) << w) - 1))); };
   auto store = [&](int k, int a, __m256i off) {
-    const __m256i code = _mm256_add_epi32(off, _mm256_set1_epi32(int(h.anchor[a])));
+    const __m256i code = _mm256_add_epi32(off, _mm256_set1_epi32(int(anchor[a])));
     __m256 x;
     if constexpr (kLossless) {
       const __m256i neg = _mm256_srai_epi32(code, 31);  // key's top bit: a positive float
@@ -229,93 +295,103 @@ SLIM_INLINE void decode_child_avx2(const ClusterLattice& lat, const ClusterHeade
     }
     _mm256_store_ps(d.v[k][a], x);
   };
+  // Lanes >= n repeat lane n - 1 (their idx entries are not written).
+  const __m256i lanes =
+      _mm256_min_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), _mm256_set1_epi32(d.n - 1));
   for (int k = 0; k < 3; ++k) {
-    const __m256i idx = _mm256_add_epi32(
-        _mm256_and_si256(_mm256_srlv_epi32(tri, _mm256_set1_epi32(k * int(h.ib))), imask),
-        _mm256_set1_epi32(int(vbase)));
+    const __m256i vi = _mm256_permutevar8x32_epi32(
+        _mm256_load_si256(reinterpret_cast<const __m256i*>(idx[k])), lanes);
     __m256i vpos = _mm256_add_epi32(_mm256_set1_epi32(int(L.verts)),
-                                    _mm256_mullo_epi32(idx, _mm256_set1_epi32(int(L.vbits))));
+                                    _mm256_mullo_epi32(vi, _mm256_set1_epi32(int(L.vbits))));
     if (L.vbits <= 57) {
-      // The whole vertex (bx + by + bz bits) with one 64-bit load per lane.
       __m256i lo, hi;
       gather64(vpos, lo, hi);
       uint32_t shift = 0;
       for (int a = 0; a < 3; ++a) {
-        const __m128i s64 = _mm_cvtsi32_si128(int(shift));
-        // The low 32 bits of each 64-bit lane, lanes 0-3 from lo and 4-7 from hi.
-        const __m256 pair = _mm256_shuffle_ps(_mm256_castsi256_ps(_mm256_srl_epi64(lo, s64)),
-                                              _mm256_castsi256_ps(_mm256_srl_epi64(hi, s64)),
-                                              _MM_SHUFFLE(2, 0, 2, 0));
-        const __m256i v = _mm256_permute4x64_epi64(_mm256_castps_si256(pair), 0xD8);
-        store(
-            k, a,
-            _mm256_and_si256(v, _mm256_set1_epi32(int(uint32_t((uint64_t(1) << h.bits[a]) - 1)))));
+        store(k, a, _mm256_and_si256(low32(lo, hi, shift), mask(h.bits[a])));
         shift += h.bits[a];
       }
       continue;
     }
     for (int a = 0; a < 3; ++a) {
-      store(k, a, h.bits[a] <= 25 ? field(vpos, h.bits[a]) : wide_field(vpos, h.bits[a]));
+      if (h.bits[a] <= 25) {
+        store(k, a, field(vpos, h.bits[a]));
+      } else {
+        __m256i lo, hi;
+        gather64(vpos, lo, hi);
+        store(k, a, _mm256_and_si256(low32(lo, hi, 0), mask(h.bits[a])));
+      }
       vpos = _mm256_add_epi32(vpos, _mm256_set1_epi32(h.bits[a]));
     }
   }
 }
 #endif
 
+// Child `child` of a cluster of `children` children (the multi-leaf's count).
 template <bool kLossless>
-SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, int child,
-                              Decoded8& d) {
+SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, uint32_t children,
+                              int child, Decoded8& d) {
   ClusterHeader h;
   std::memcpy(&h, data, sizeof(h));
   const uint8_t* bits = data + sizeof(ClusterHeader);
-  const Layout L = layout(h);
-  d.first = child ? h.end[child - 1] : 0;
-  d.n = int(h.end[child]) - d.first;
-  const uint32_t vbase = read_bits(bits, uint64_t(child) * L.vbw, L.vbw);
+  const Layout L = layout(h, children, kLossless);
+  const uint32_t sizes = child_sizes(h);
+  d.first = int(child_first(sizes, uint32_t(child)));
+  d.n = int(child_size(sizes, uint32_t(child)));
+  alignas(32) uint32_t idx[3][8];
+  decode_strip<false>(
+      h, L, [bits](uint64_t pos, uint32_t w) { return read_bits(bits, pos, w); }, uint32_t(child),
+      uint32_t(d.n), idx);
+  uint32_t anchor[3];
+  for (int a = 0; a < 3; ++a) anchor[a] = read_bits(bits, uint64_t(a) * L.aw, L.aw);
 #if defined(SLIM_SIMD_AVX2)
-  decode_child_avx2<kLossless>(lat, h, bits, L, vbase, d);
+  decode_vertices_avx2<kLossless>(lat, h, bits, L, anchor, idx, d);
 #else
-  for (int l = 0; l < 8; ++l) {
-    const uint32_t t = uint32_t(d.first + (l < d.n ? l : d.n - 1));
+  for (int l = d.n; l < 8; ++l)
+    for (int k = 0; k < 3; ++k) idx[k][l] = idx[k][d.n - 1];
+  for (int l = 0; l < 8; ++l)
     for (int k = 0; k < 3; ++k) {
-      const uint32_t vi = vbase + read_bits(bits, L.topo + (uint64_t(t) * 3 + k) * h.ib, h.ib);
-      float p[3];
-      decode_vertex<kLossless>(lat, h, bits, L, vi, p);
-      d.v[k][0][l] = p[0];
-      d.v[k][1][l] = p[1];
-      d.v[k][2][l] = p[2];
+      uint64_t pos = L.verts + uint64_t(idx[k][l]) * L.vbits;
+      for (int a = 0; a < 3; ++a) {
+        d.v[k][a][l] = decode_coord<kLossless>(lat, a, anchor[a] + read_bits(bits, pos, h.bits[a]));
+        pos += h.bits[a];
+      }
     }
-  }
 #endif
 }
 
-// primID and geomID of triangle t of a cluster.
-SLIM_INLINE void decode_ids(const uint8_t* data, uint32_t t, uint32_t& geom, uint32_t& prim) {
+// primID and geomID of triangle t of a cluster of `children` children.
+template <bool kLossless>
+SLIM_INLINE void decode_ids(const uint8_t* data, uint32_t children, uint32_t t, uint32_t& geom,
+                            uint32_t& prim) {
   ClusterHeader h;
   std::memcpy(&h, data, sizeof(h));
   const uint8_t* bits = data + sizeof(ClusterHeader);
-  const Layout L = layout(h);
+  const Layout L = layout(h, children, kLossless);
   const uint64_t pos = L.ids + uint64_t(t) * L.idbits;
   const uint32_t run = read_bits(bits, pos, L.rb);
-  prim = h.prim_base + read_bits(bits, L.runs + uint64_t(run) * h.pb, h.pb) +
+  const uint32_t prim_base = read_bits(bits, 3 * L.aw, h.bb);
+  const uint32_t geom_base = read_bits(bits, 3 * L.aw + h.bb, h.hb);
+  prim = prim_base + read_bits(bits, L.runs + uint64_t(run) * h.pb, h.pb) +
          read_bits(bits, pos + L.rb, h.ob);
-  geom = h.geom_base + read_bits(bits, pos + L.rb + h.ob, h.gb);
+  geom = geom_base + read_bits(bits, pos + L.rb + h.ob, h.gb);
 }
 
 // Checks that `size` bytes at `data` hold a well-formed cluster of `children` children (header
-// fields in range, child ranges of 1..8 triangles, every vertex index (child base + local) below
-// nverts, every run index below nruns, the stream inside `size`). The decoders read only what this
-// accepts (plus kClusterReadSlack bytes).
+// fields in range, child sizes covering the triangles, every strip inside the topology stream with
+// every vertex index below nverts, every run index below nruns, the stream inside `size`). The
+// decoders read only what this accepts (plus kClusterReadSlack bytes).
 bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless, std::string* why);
 
-// Per-scene encoding figures (info --clusters).
+// Per-scene encoding figures (info --clusters). The four parts add up to the clusters' bytes
+// (but for the padding to whole bytes).
 struct EncodeStats {
   std::mutex m;
   uint64_t clusters = 0, triangles = 0, vertices = 0;
   uint64_t position_bits = 0;  // sum over clusters of nverts * (bx + by + bz)
-  uint64_t topology_bits = 0;  // index bits, child vertex bases, the 8 child end bytes
-  uint64_t id_bits = 0;        // run starts, run indices, offsets, geomIDs, the two bases
-  uint64_t header_bytes = 0;
+  uint64_t topology_bits = 0;  // strips, the child table, the child sizes and tbits
+  uint64_t id_bits = 0;        // run starts, run indices, offsets, geomIDs, the bases and widths
+  uint64_t header_bits = 0;    // the rest of the header, the anchors
 };
 
 }  // namespace cluster
@@ -426,11 +502,11 @@ struct ClusterLeaf {
   // ---- traversal side ----
   template <bool kAny, class Stats>
   static SLIM_INLINE bool intersect_in_multileaf(const Context& ctx, const uint8_t* data,
-                                                 uint32_t /*children*/, int i, TravRay& ray,
+                                                 uint32_t children, int i, TravRay& ray,
                                                  HitRecord& hit, Stats& st) {
     using namespace simd;
     cluster::Decoded8 d;
-    cluster::decode_child<kLossless>(ctx.lattice, data, i, d);
+    cluster::decode_child<kLossless>(ctx.lattice, data, children, i, d);
     st.prims(d.n);
     const WatertightRay& r = ray.wt;
     auto vert = [&](int k) {
@@ -450,7 +526,7 @@ struct ClusterLeaf {
       if (tt[j] < tt[l]) l = j;
     }
     uint32_t geom, prim;
-    cluster::decode_ids(data, uint32_t(d.first + l), geom, prim);
+    cluster::decode_ids<kLossless>(data, children, uint32_t(d.first + l), geom, prim);
     auto p = [&](int k) { return Vec3f(d.v[k][0][l], d.v[k][1][l], d.v[k][2][l]); };
     detail::record_hit(tt[l], u[l], v[l], p(0), p(1), p(2), geom, prim, ray, hit);
     return true;
@@ -465,10 +541,10 @@ struct ClusterLeaf {
   }
 
   template <class F>
-  static void visit_in_multileaf(const Context& ctx, const uint8_t* data, uint32_t /*children*/,
-                                 int i, F&& fn) {
+  static void visit_in_multileaf(const Context& ctx, const uint8_t* data, uint32_t children, int i,
+                                 F&& fn) {
     cluster::Decoded8 d;
-    cluster::decode_child<kLossless>(ctx.lattice, data, i, d);
+    cluster::decode_child<kLossless>(ctx.lattice, data, children, i, d);
     for (int l = 0; l < d.n; ++l) {
       Vec3f c[3];
       Box3f box;
@@ -477,7 +553,7 @@ struct ClusterLeaf {
         box.extend(c[k]);
       }
       uint32_t geom, prim;
-      cluster::decode_ids(data, uint32_t(d.first + l), geom, prim);
+      cluster::decode_ids<kLossless>(data, children, uint32_t(d.first + l), geom, prim);
       fn(box, triangle_key(c[0], c[1], c[2], geom, prim));
     }
   }

@@ -5,13 +5,13 @@
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 
 #include <unistd.h>
 
 #include "commands.h"
 #include "mesh/chunk_sources.h"
+#include "mesh/procedural.h"
 #include "progress.h"
 #include "slimrt/output.h"
 #include "slimrt/scene.h"
@@ -38,9 +38,8 @@ namespace {
 uint64_t estimated_triangles(const std::string& name) {
   if (detail::is_subdivision(name)) return 0;  // only chunked, its size known once loaded
   if (is_procedural(name)) {
-    const size_t colon = name.find(':');
-    const uint64_t n = std::strtoull(name.c_str() + colon + 1, nullptr, 10);
-    return 2 * n * n;
+    const detail::ProceduralGrid grid(detail::parse_procedural(name, detail::kMaxProceduralN));
+    return 2 * uint64_t(grid.cells_x) * uint64_t(grid.cells_y);
   }
   std::error_code ec;
   const uint64_t bytes = std::filesystem::file_size(name, ec);

@@ -72,12 +72,7 @@ struct FileHeader {
   char isa[16];     // simd_isa() of the writer: the CPU must have it
   char config[64];  // BuildOptions::config_name(), for people and messages
   OptionsRecord options;
-  // The scene's figures.
-  uint64_t mem_geometry, mem_bvh, mem_other, mem_triangles;
-  float bounds_lo[3], bounds_hi[3];
-  double error_bound;
-  double build_seconds;
-  uint64_t input_faces, triangles, skipped_faces, primitives;
+  SceneFigures figures;
   // 1 for a scene joined from `chunks` chunk scenes (api/scene_joined.h), 0 for a format's own.
   uint32_t joined, chunks;
   uint8_t reserved[168];
@@ -383,6 +378,36 @@ struct Mapping {
 
 }  // namespace
 
+SceneFigures figures_of(const Scene::Impl& s) {
+  SceneFigures f;
+  std::memset(&f, 0, sizeof f);
+  f.mem_geometry = s.mem.geometry_bytes;
+  f.mem_bvh = s.mem.bvh_bytes;
+  f.mem_other = s.mem.other_bytes;
+  f.mem_triangles = s.mem.triangles;
+  for (int a = 0; a < 3; ++a) f.bounds_lo[a] = s.bounds.lo[a], f.bounds_hi[a] = s.bounds.hi[a];
+  f.error_bound = s.error_bound;
+  f.build_seconds = s.stats.build_seconds;
+  f.input_faces = s.stats.input_faces;
+  f.triangles = s.stats.triangles;
+  f.skipped_faces = s.stats.skipped_faces;
+  f.primitives = s.stats.primitives;
+  return f;
+}
+
+void restore_figures(const SceneFigures& f, Scene::Impl& s) {
+  s.mem = {f.mem_geometry, f.mem_bvh, f.mem_other, f.mem_triangles};
+  s.bounds = Box3f({f.bounds_lo[0], f.bounds_lo[1], f.bounds_lo[2]},
+                   {f.bounds_hi[0], f.bounds_hi[1], f.bounds_hi[2]});
+  s.error_bound = f.error_bound;
+  s.stats.build_seconds = f.build_seconds;
+  s.stats.input_faces = f.input_faces;
+  s.stats.triangles = f.triangles;
+  s.stats.skipped_faces = f.skipped_faces;
+  s.stats.primitives = f.primitives;
+  s.ray_setup = RaySetupBounds(s.bounds);
+}
+
 // ---- the walk of OpenOptions::check_structure -------------------------------------------------
 
 void check_bvh_root(const Bvh8& bvh, const std::string& p, uint32_t block_bytes) {
@@ -532,21 +557,7 @@ void Scene::save(const std::string& path) const {
   copy_name(h.isa, sizeof h.isa, simd_isa(), "instruction set");
   copy_name(h.config, sizeof h.config, impl_->opt.config_name(), "configuration name");
   h.options = options_record(impl_->opt);
-  const MemoryStats& m = impl_->mem;
-  h.mem_geometry = m.geometry_bytes;
-  h.mem_bvh = m.bvh_bytes;
-  h.mem_other = m.other_bytes;
-  h.mem_triangles = m.triangles;
-  const Box3f& b = impl_->bounds;
-  h.bounds_lo[0] = b.lo.x, h.bounds_lo[1] = b.lo.y, h.bounds_lo[2] = b.lo.z;
-  h.bounds_hi[0] = b.hi.x, h.bounds_hi[1] = b.hi.y, h.bounds_hi[2] = b.hi.z;
-  h.error_bound = impl_->error_bound;
-  const SceneStats& s = impl_->stats;
-  h.build_seconds = s.build_seconds;
-  h.input_faces = s.input_faces;
-  h.triangles = s.triangles;
-  h.skipped_faces = s.skipped_faces;
-  h.primitives = s.primitives;
+  h.figures = figures_of(*impl_);
   if (const std::optional<uint32_t> chunks = impl_->joined_chunks()) {
     h.joined = 1;
     h.chunks = *chunks;
@@ -629,16 +640,7 @@ Scene Scene::open(const std::string& path, const OpenOptions& options) {
       h.joined ? empty_joined_scene(opt, h.chunks) : format_of(opt.leaf).empty(opt);
   impl->opt = opt;
   impl->stats.details = o.details();
-  impl->mem = {h.mem_geometry, h.mem_bvh, h.mem_other, h.mem_triangles};
-  impl->bounds = Box3f({h.bounds_lo[0], h.bounds_lo[1], h.bounds_lo[2]},
-                       {h.bounds_hi[0], h.bounds_hi[1], h.bounds_hi[2]});
-  impl->error_bound = h.error_bound;
-  impl->stats.build_seconds = h.build_seconds;
-  impl->stats.input_faces = h.input_faces;
-  impl->stats.triangles = h.triangles;
-  impl->stats.skipped_faces = h.skipped_faces;
-  impl->stats.primitives = h.primitives;
-  impl->ray_setup = RaySetupBounds(impl->bounds);
+  restore_figures(h.figures, *impl);
   OpenVisitor v(o);
   try {
     impl->sections(v);

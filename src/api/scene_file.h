@@ -12,6 +12,7 @@
 #include <string>
 #include <type_traits>
 
+#include "api/scene_impl.h"
 #include "bvh/bvh8.h"
 
 namespace slim {
@@ -52,6 +53,20 @@ class SectionVisitor {
  protected:
   bool saving_ = true;
 };
+
+// A scene's figures as a scene file records them (the file header; each chunk of a joined scene):
+// memory, bounds, error bound, build time and input counts.
+struct SceneFigures {
+  uint64_t mem_geometry, mem_bvh, mem_other, mem_triangles;
+  float bounds_lo[3], bounds_hi[3];
+  double error_bound;
+  double build_seconds;
+  uint64_t input_faces, triangles, skipped_faces, primitives;
+};
+static_assert(sizeof(SceneFigures) == 104);
+// The figures of a scene, and the scene given its saved figures (ray_setup from the bounds).
+SceneFigures figures_of(const Scene::Impl& s);
+void restore_figures(const SceneFigures& f, Scene::Impl& s);
 
 // A bad reference found by the checks of an opened scene: the section, the byte offset inside
 // it, and what is wrong. Scene::open turns it into a slim::Error with the file offset.

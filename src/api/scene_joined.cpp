@@ -48,13 +48,10 @@ static_assert(sizeof(IdRun) == 16);
 
 // A chunk's figures (its scene's, restored at open) and its id runs.
 struct ChunkRecord {
-  uint64_t mem_geometry, mem_bvh, mem_other, mem_triangles;
-  float bounds_lo[3], bounds_hi[3];
+  SceneFigures figures;
   uint64_t first_run, run_count;
-  double error_bound;
-  uint64_t input_faces, triangles, skipped_faces, primitives;
 };
-static_assert(sizeof(ChunkRecord) == 112);
+static_assert(sizeof(ChunkRecord) == 120);
 
 // The top-level BVH2's depth limit (the traversal's stack holds one entry per level plus one).
 constexpr int kMaxDepth = 64;
@@ -222,7 +219,7 @@ class JoinedScene final : public Scene::Impl {
       for (uint64_t k = 1; k < r.run_count; ++k)
         if (first[k].local_first <= first[k - 1].local_first)
           return fault("join.runs", r.first_run + k, "runs not in increasing order");
-      const uint64_t last_local = r.input_faces ? r.input_faces - 1 : 0;
+      const uint64_t last_local = r.figures.input_faces ? r.figures.input_faces - 1 : 0;
       for (uint64_t k = 0; k < r.run_count; ++k) {
         const uint64_t end_local = k + 1 < r.run_count ? first[k + 1].local_first - 1 : last_local;
         if (first[k].global_first > UINT32_MAX ||
@@ -315,15 +312,7 @@ class JoinedScene final : public Scene::Impl {
         const ChunkRecord& r = records[i];
         std::unique_ptr<Scene::Impl> c = format_of(opt.leaf).empty(opt);
         c->opt = opt;
-        c->mem = {r.mem_geometry, r.mem_bvh, r.mem_other, r.mem_triangles};
-        c->bounds = Box3f({r.bounds_lo[0], r.bounds_lo[1], r.bounds_lo[2]},
-                          {r.bounds_hi[0], r.bounds_hi[1], r.bounds_hi[2]});
-        c->error_bound = r.error_bound;
-        c->stats.input_faces = r.input_faces;
-        c->stats.triangles = r.triangles;
-        c->stats.skipped_faces = r.skipped_faces;
-        c->stats.primitives = r.primitives;
-        c->ray_setup = RaySetupBounds(c->bounds);
+        restore_figures(r.figures, *c);
         chunks.push_back(std::move(c));
       }
     }
@@ -368,18 +357,9 @@ void append_runs(const std::vector<uint64_t>& ids, std::vector<IdRun>& out) {
 ChunkRecord record_of(const Scene::Impl& c, uint64_t first_run, uint64_t run_count) {
   ChunkRecord r;
   std::memset(&r, 0, sizeof r);
-  r.mem_geometry = c.mem.geometry_bytes;
-  r.mem_bvh = c.mem.bvh_bytes;
-  r.mem_other = c.mem.other_bytes;
-  r.mem_triangles = c.mem.triangles;
-  for (int a = 0; a < 3; ++a) r.bounds_lo[a] = c.bounds.lo[a], r.bounds_hi[a] = c.bounds.hi[a];
+  r.figures = figures_of(c);
   r.first_run = first_run;
   r.run_count = run_count;
-  r.error_bound = c.error_bound;
-  r.input_faces = c.stats.input_faces;
-  r.triangles = c.stats.triangles;
-  r.skipped_faces = c.stats.skipped_faces;
-  r.primitives = c.stats.primitives;
   return r;
 }
 

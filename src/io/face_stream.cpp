@@ -13,15 +13,12 @@
 namespace slim::detail {
 namespace {
 
-// Largest N streamed: the generators' own limit ((N+1)^2 vertex indices in 32 bits).
-constexpr int kMaxStreamN = 65534;
-
 // A procedural scene made row band by row band (ProceduralGrid::tile over full rows), so face
 // ids come in the in-memory mesh's order; only the band's vertex rows are ever in memory.
 class ProceduralFaceStream final : public FaceStream {
  public:
   ProceduralFaceStream(const std::string& spec, size_t max_corners)
-      : FaceStream(spec), grid_(parse_procedural(spec, kMaxStreamN)) {
+      : FaceStream(spec), grid_(parse_procedural(spec, kMaxProceduralN)) {
     rows_ = int(std::max<size_t>(1, max_corners / (4 * size_t(grid_.cells_x))));
   }
   bool next(FaceBatch& out) override {

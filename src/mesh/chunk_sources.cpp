@@ -128,7 +128,7 @@ struct Lattice {
 // ---- procedural tiles ----
 
 ProceduralChunks::ProceduralChunks(const std::string& spec, uint64_t max_triangles)
-    : name_(spec), grid_(parse_procedural(spec, 65534)) {
+    : name_(spec), grid_(parse_procedural(spec, kMaxProceduralN)) {
   check_max_triangles(spec, max_triangles);
   const int cx = grid_.cells_x, cy = grid_.cells_y;
   // The fewest tiles of at most q quads, tx x ty with sides ceil(cx / tx) x ceil(cy / ty); among

@@ -14,6 +14,9 @@ struct ProceduralSpec {
   std::string kind;  // "terrain", "canyon" or "torus"
   int n = 0;
 };
+// The largest N of the streamed and chunked procedural scenes: the generators' own limit ((N+1)^2
+// vertex indices in 32 bits); the in-memory load stops lower.
+constexpr int kMaxProceduralN = 65534;
 // Parses "kind:N" strictly (decimal digits, no sign or leading zero) with N <= max_n; a torus
 // needs N even and >= 6. Throws slim::Error naming the spec and the accepted range.
 ProceduralSpec parse_procedural(const std::string& spec, int max_n);

@@ -21,6 +21,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -363,9 +364,12 @@ ChunkRecord record_of(const Scene::Impl& c, uint64_t first_run, uint64_t run_cou
   return r;
 }
 
+// The system's temporary directory ($TMPDIR where set, else /tmp), read through the standard
+// library: the library itself reads no environment variable.
 std::string default_spill_dir() {
-  const char* t = std::getenv("TMPDIR");
-  return t && *t ? t : "/tmp";
+  std::error_code ec;
+  const std::filesystem::path p = std::filesystem::temp_directory_path(ec);
+  return ec ? std::string("/tmp") : p.string();
 }
 
 }  // namespace

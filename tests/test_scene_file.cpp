@@ -433,5 +433,49 @@ TEST(SceneFile, SaveIsAtomicAndRefusesUnbuiltScenes) {
   EXPECT_THROW(Scene::build(make_terrain(4, 1)).save("/nonexistent-dir/x.slim"), Error);
 }
 
+// Scene::save of an opened scene (its arrays are views of the mapping) writes the file it was
+// opened from, byte for byte: every configuration and a joined scene.
+TEST(SceneFile, SavingAnOpenedSceneWritesTheSameBytes) {
+  std::vector<PolyMesh> meshes{test_mesh()};
+  PolyMesh s2 = test::random_soup(300, 5, 0.2f);
+  for (Vec3f& p : s2.positions) p = p * 20.0f;
+  meshes.push_back(s2);
+  const std::string a = temp_path("resave_a"), b = temp_path("resave_b");
+  auto check = [&](const Scene& built, const std::string& what) {
+    built.save(a);
+    for (int mode = 0; mode < 2; ++mode) {
+      OpenOptions oo;
+      oo.verify_checksums = mode == 0;
+      Scene::open(a, oo).save(b);
+      const std::string x = read_all(a), y = read_all(b);
+      EXPECT_EQ(x.size(), y.size()) << what;
+      EXPECT_TRUE(x == y) << what << ": the re-saved file differs";
+    }
+  };
+  int tested = 0;
+  for (const std::string& name : all_config_names()) {
+    Scene built;
+    try {
+      built = Scene::build(meshes, BuildOptions::from_config(name));
+    } catch (const NotApplicable&) {
+      continue;
+    }
+    check(built, name);
+    ++tested;
+  }
+  EXPECT_EQ(tested, int(all_config_names().size()));
+  ChunkedBuildOptions chunking;
+  chunking.max_chunk_triangles = 4096;
+  const Scene joined =
+      Scene::build_chunked("torus:128", BuildOptions::from_config("lossy-grid-shared"), chunking);
+  double chunks = 0;
+  for (const auto& [key, value] : joined.stats().details)
+    if (key == "chunks") chunks = value;
+  EXPECT_GE(chunks, 2) << "torus:128 in chunks of at most 4096 triangles";
+  check(joined, "joined lossy-grid-shared");
+  std::filesystem::remove(a);
+  std::filesystem::remove(b);
+}
+
 }  // namespace
 }  // namespace slim

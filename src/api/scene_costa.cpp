@@ -65,6 +65,8 @@ template <bool P, bool F, bool V>
 class CostaScene : public BvhScene<CostaLeaf<P, F, V>> {
  public:
   std::shared_ptr<const CostaData> data;
+  QuantizedMesh::Counts opened_counts{};
+  uint64_t opened_face_map_bytes = 0, opened_face_base = 0;
 
   // Scene files: the BVH, the store's arrays and the face map (an opened scene has no `data`:
   // its context points into the mapping).
@@ -72,9 +74,11 @@ class CostaScene : public BvhScene<CostaLeaf<P, F, V>> {
     this->bvh_sections(v, "");
     auto& c = this->ctx;
     auto& r = c.view.r;
-    QuantizedMesh::Counts n{};
-    uint64_t face_map_bytes = 0, face_base = 0;
-    if (v.saving()) {
+    // Element counts: from the store of a built scene, else those of the opened file.
+    QuantizedMesh::Counts& n = opened_counts;
+    uint64_t& face_map_bytes = opened_face_map_bytes;
+    uint64_t& face_base = opened_face_base;
+    if (v.saving() && data) {
       n = data->store.counts();
       face_map_bytes = data->face_map.bytes();
       face_base = data->face_base.size();

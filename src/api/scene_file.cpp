@@ -47,6 +47,11 @@ constexpr uint64_t kAlign = 64;
 // joined scene of 100,000 chunks of a dozen sections fits.
 constexpr uint32_t kMaxSections = uint32_t(1) << 21;
 constexpr uint32_t kMaxDetails = 4096;
+// Sections up to this size are written first, right after the section table: what Scene::open
+// reads (records, BVH metadata, a joined scene's top level and chunk records) then lies in one
+// contiguous stretch of the file, so a cold open reads it in a few sequential requests instead of
+// one seek per chunk.
+constexpr uint64_t kSmallSection = 64 * 1024;
 
 struct OptionsRecord {
   uint8_t nodes, leaf, grid_encoding, pairing, collapse, grid_leftovers;
@@ -535,6 +540,8 @@ void Scene::save(const std::string& path) const {
   if (!impl_) throw Error("Scene::save('" + path + "'): the scene was not built");
   SaveVisitor v;
   impl_->sections(v);
+  std::stable_partition(v.out.begin(), v.out.end(),
+                        [](const Pending& p) { return p.bytes <= kSmallSection; });
   const uint32_t n = uint32_t(v.out.size());
 
   std::string det;

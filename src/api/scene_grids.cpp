@@ -19,6 +19,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -294,6 +295,8 @@ class GridScene final : public BvhScene<Leaf> {
   LargeVector<Vec3f, true> exact;     // lossy: exact vertices
   std::vector<uint32_t> corner_grid;  // shared layout: grid of each 16-corner chunk
   std::unique_ptr<BvhScene<Tri4v>> tris;
+  // An opened scene's table sizes (its vectors stay empty, the context points into the mapping).
+  std::array<uint64_t, 8> opened_count{};
 
   void intersect(TravRay& ray, HitRecord& hit) const override {
     BvhScene<Leaf>::intersect(ray, hit);
@@ -311,12 +314,17 @@ class GridScene final : public BvhScene<Leaf> {
   void sections(SectionVisitor& v) override {
     this->bvh_sections(v, "");
     auto& c = this->ctx;
+    size_t slot = 0;
     auto table = [&](const std::string& name, const auto& vec, auto*& ptr) {
       using T = std::remove_cvref_t<decltype(*ptr)>;
-      const T* d = vec.data();
-      uint64_t n = vec.size();
+      uint64_t& opened = opened_count.at(slot++);
+      const T* d = vec.size() ? vec.data() : ptr;
+      uint64_t n = vec.size() ? vec.size() : opened;
       v.array(name, d, n);
-      if (!v.saving()) ptr = d;
+      if (!v.saving()) {
+        ptr = d;
+        opened = n;
+      }
     };
     table("grid.table", grid_table, c.grids);
     table("grid.hot", hot, c.hot);

@@ -114,9 +114,15 @@ TEST(BuildFlags, HelpShowsEachDefault) {
   EXPECT_EQ(app.get_option("--max-leaf-size")->get_default_str(), std::to_string(d.max_leaf_size));
   EXPECT_EQ(app.get_option("--grid-parts")->get_default_str(), std::to_string(d.grid_parts));
   EXPECT_EQ(app.get_option("--threads")->get_default_str(), std::to_string(d.threads));
-  for (const char* f : {"--cluster-error", "--pair-prescan", "--pair-weld", "--pair-augment",
-                        "--pair-coordinate-keys"})
+  for (const char* f : {"--cluster-error", "--pair-prescan"})
     EXPECT_FALSE(app.get_option(f)->get_default_str().empty()) << f;
+  // The flags state theirs in their help text.
+  EXPECT_NE(app.get_option("--pair-weld")->get_description().find("(default off)"),
+            std::string::npos);
+  EXPECT_NE(app.get_option("--pair-coordinate-keys")->get_description().find("(default off)"),
+            std::string::npos);
+  EXPECT_NE(app.get_option("--pair-augment")->get_description().find("(default on)"),
+            std::string::npos);
   const std::string help = app.help();
   for (const char* f : {"--threads", "--collapse", "--grid-parts", "--grid-leftovers", "--sah-bins",
                         "--max-leaf-size", "--cluster-error", "--pair-coordinate-keys",

@@ -75,19 +75,21 @@ void add_build_options(CLI::App& app, BuildOptions& tuning) {
       ->check(CLI::PositiveNumber & CLI::Range(0.0, 1.0))
       ->capture_default_str()
       ->group(group);
+  // Flags: their default (on or off) is stated in the help text.
   PairingOptions& p = tuning.pairing_options;
+  auto state = [](bool on) { return std::string(on ? " (default on)" : " (default off)"); };
   app.add_flag("--pair-coordinate-keys", p.coordinate_keys,
                "pairs: key half-edges by edge midpoint and edge-box area instead of vertex "
-               "indices (meshes whose vertices are not welded)")
-      ->capture_default_str()
+               "indices (meshes whose vertices are not welded)" +
+                   state(p.coordinate_keys))
       ->group(group);
   app.add_flag("--pair-weld", p.weld,
-               "pairs: merge bit-identical vertex positions before pairing (geometry unchanged)")
-      ->capture_default_str()
+               "pairs: merge bit-identical vertex positions before pairing (geometry unchanged)" +
+                   state(p.weld))
       ->group(group);
   app.add_flag("--pair-augment,!--no-pair-augment", p.augment,
-               "pairs: re-pair along augmenting paths of length 3 after the greedy scan")
-      ->capture_default_str()
+               "pairs: re-pair along augmenting paths of length 3 after the greedy scan" +
+                   state(p.augment))
       ->group(group);
   app.add_option("--pair-prescan", p.prescan_threshold,
                  "pairs: keep the input order when at least this fraction of the triangles pairs "

@@ -1,7 +1,7 @@
 // `slimrt bench SCENE... [--config NAME...] [--repeat K] [--memory-budget MB] [--json FILE]
 //                [--plot FILE] [--strict] [build options: --threads N, --collapse ...,
 //                build_flags.h]`
-// Every configuration beside Embree 3 on the same rays in this process (../shared/BENCHMARK.md);
+// Every configuration beside Embree 3 on the same rays in this process (docs/benchmark.md);
 // the work is done by bench/bench_runner, the output by bench/bench_{markdown,json,plot}. Prints
 // the markdown table on stdout, progress and ERROR lines on stderr. Exit code 0, or 1 with --strict
 // when an ERROR was reported (a lossless configuration under 99.9% hit agreement, a build failure,
@@ -23,7 +23,7 @@
 namespace slim::cli {
 
 int cmd_bench(int argc, char** argv) {
-  CLI::App app{"Benchmark every configuration beside Embree on the same rays (BENCHMARK.md).",
+  CLI::App app{"Benchmark every configuration beside Embree on the same rays (docs/benchmark.md).",
                "slimrt bench"};
   bench::BenchOptions opt;
   std::string json_path, plot_path;
@@ -33,7 +33,8 @@ int cmd_bench(int argc, char** argv) {
          "mesh files (.obj .ply .gltf .glb, optionally .xz) or terrain:N, torus:N, canyon:N")
       ->required();
   app.add_option("--config", opt.configs,
-                 "configurations (BENCHMARK.md names, repeatable or comma-separated); default: "
+                 "configurations (registry names or Embree anchors, repeatable or "
+                 "comma-separated); default: "
                  "every Embree anchor and every slimrt configuration; embree-tri always runs")
       ->delimiter(',');
   add_build_options(app, opt.tuning);  // --threads: builds and rays
@@ -48,7 +49,7 @@ int cmd_bench(int argc, char** argv) {
                  "0 = half of MemAvailable")
       ->check(CLI::Range(0.0, 1e9))
       ->capture_default_str();
-  app.add_option("--json", json_path, "write the figures as JSON (BENCHMARK.md schema)");
+  app.add_option("--json", json_path, "write the figures as JSON (docs/benchmark.md schema)");
   app.add_option("--plot", plot_path,
                  "draw bytes/triangle vs diffuse MRays/s into a PNG with gnuplot");
   app.add_flag("--strict", strict, "exit with 1 if any ERROR was reported");

@@ -2,7 +2,7 @@
 //                [--config NAME] [--bounces N] [--up x|y|z] [--eye X,Y,Z]
 //                [--look-at X,Y,Z] [--fov DEG] [--mpi-tile N] [--mpi-root render|coordinate]
 //                [--quiet] [build options: --threads N, --collapse ..., build_flags.h]`
-// Loads a mesh file or procedural scene, builds it in one configuration (BENCHMARK.md names),
+// Loads a mesh file or procedural scene, builds it in one configuration (registry names),
 // renders it from the user's camera (slim::view_camera: by default the model's corners fill the
 // image, seen from the front-right and above; glTF is Y up by its specification, other inputs Z
 // up) and writes the image; prints build time, render time and MRays/s on stdout. Loading,

@@ -449,7 +449,7 @@ int cmd_verify(int argc, char** argv) {
       ->check(CLI::Range(uint64_t(1), uint64_t(1) << 40))
       ->capture_default_str();
   app.add_option("--bound-scale", bound_scale,
-                 "multiplies every lossy format's specification bound e (below 1: a test of the "
+                 "multiplies every lossy format's promised bound e (below 1: a test of the "
                  "check itself, which a correct lossy scene then fails)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
@@ -633,7 +633,7 @@ int cmd_verify(int argc, char** argv) {
     }
     // Against the own reference (or the input for formats without decoded triangles): rounding
     // only (plus e / |cos theta| for a lossy format without decoded triangles). Against the
-    // input, lossy formats: the specification bound e / |cos theta| (header comment), always.
+    // input, lossy formats: the promised bound e / |cos theta| (header comment), always.
     const bool bound_is_hard = lossy && !row.own_reference;
     // A lossy hit beyond e / |cos| of the input crossing, excused where the geometry allows it
     // (header comment); the distances to the input surface are exact (InputSurface::within).
@@ -777,7 +777,7 @@ int cmd_verify(int argc, char** argv) {
 
   std::printf(
       "| config | rays | leaks (intersect) | leaks (occluded) | far | near | max |t - t_ref| "
-      "| reference | lossy: spec bound e | lossy: beyond e/cos, excused (max dev.) | status |\n");
+      "| reference | lossy: promised e | lossy: beyond e/cos, excused (max dev.) | status |\n");
   std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: | ---: | --- |\n");
   for (const Row& r : table) {
     if (r.status == "n/a" || r.status == "BUILD ERROR") {

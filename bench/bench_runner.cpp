@@ -129,11 +129,11 @@ std::vector<Hit> primary_hits(const Tracer& tracer, tbb::task_arena& arena, cons
   return hits;
 }
 
-// A slim::Scene seen through Scene::intersect(ray, counters), for trace_path.
+// A slim::Scene seen through intersect_counted (slimrt/analysis.h), for trace_path.
 struct CountingTracer {
   const Scene* scene;
   TraversalCounters* counters;
-  Hit intersect(const Ray& r) const { return scene->intersect(r, *counters); }
+  Hit intersect(const Ray& r) const { return intersect_counted(*scene, r, *counters); }
 };
 
 // Box and primitive tests per ray: all workload-1 rays, and the paths of every 16th pixel.
@@ -144,7 +144,7 @@ void count_traversal(const Scene& scene, tbb::task_arena& arena, const Workload&
     TraversalCounters& b = c2[size_t(tile)];
     CountingTracer counting{&scene, &b};
     w.for_tile(tile, [&](int x, int y) {
-      scene.intersect(w.primary(x, y), a);
+      intersect_counted(scene, w.primary(x, y), a);
       if (x % kW2CountStride == 0 && y % kW2CountStride == 0) {
         Rng rng(pixel_seed(x, y, 0));
         trace_path(counting, w.primary(x, y), rng, w.max_bounces, w.offset);
@@ -304,7 +304,7 @@ struct SceneRun {
       arena.execute([&] { slot.embree = std::make_unique<EmbreeScene>(meshes, row.config); });
       return slot.embree->build_seconds();
     }
-    BuildOptions bo = BuildOptions::from_config(row.config);
+    BuildOptions bo = BuildOptions::from_config(row.config, opt.tuning);
     bo.threads = report.machine.threads;
     const auto t0 = Clock::now();
     arena.execute([&] { slot.slim = std::make_unique<Scene>(Scene::build(meshes, bo)); });

@@ -37,13 +37,16 @@ struct BenchOptions {
   std::vector<std::string> scenes;   // mesh files or terrain:N, torus:N, canyon:N
   std::vector<std::string> configs;  // empty: default_configs(); embree-tri is always measured
   int threads = 0;                   // 0 = all cores
-  int repeat = 3;                    // timed rounds (each builds and traces every config)
-  int width = 1024, height = 1024;   // BENCHMARK.md camera
-  int max_bounces = 8;               // workload 2
-  int psnr_size = 256;               // lossy configurations: normals render, size x size
-  uint64_t memory_budget = 0;        // bytes of built scenes kept between rounds; 0: half of
-                                     // MemAvailable (default_memory_budget())
-  bool progress = true;              // progress lines on stderr
+  // The build options besides the format (BuildOptions::from_config(name, tuning)); its threads
+  // are replaced by `threads`.
+  BuildOptions tuning;
+  int repeat = 3;                   // timed rounds (each builds and traces every config)
+  int width = 1024, height = 1024;  // BENCHMARK.md camera
+  int max_bounces = 8;              // workload 2
+  int psnr_size = 256;              // lossy configurations: normals render, size x size
+  uint64_t memory_budget = 0;       // bytes of built scenes kept between rounds; 0: half of
+                                    // MemAvailable (default_memory_budget())
+  bool progress = true;             // progress lines on stderr
 };
 
 // BENCHMARK.md hit agreement: both miss, or both hit with t equal within 1e-5 relative.

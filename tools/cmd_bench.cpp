@@ -1,6 +1,7 @@
-// `slimrt bench SCENE... [--config NAME...] [--threads N] [--repeat K] [--memory-budget MB]
-//                [--json FILE] [--plot FILE] [--strict]`
-// Every configuration beside Embree 3 on the same rays in this process (../shared/BENCHMARK.md);
+// `slimrt bench SCENE... [--config NAME...] [--repeat K] [--memory-budget MB] [--json FILE]
+//                [--plot FILE] [--strict] [build options: --threads N, --collapse ...,
+//                build_flags.h]`
+// Every configuration beside Embree 3 on the same rays in this process (docs/benchmark.md);
 // the work is done by bench/bench_runner, the output by bench/bench_{markdown,json,plot}. Prints
 // the markdown table on stdout, progress and ERROR lines on stderr. Exit code 0, or 1 with --strict
 // when an ERROR was reported (a lossless configuration under 99.9% hit agreement, a build failure,
@@ -14,6 +15,7 @@
 #include "bench_markdown.h"
 #include "bench_plot.h"
 #include "bench_runner.h"
+#include "build_flags.h"
 #include "commands.h"
 #include "slimrt/analysis.h"
 #include "slimrt/output.h"
@@ -21,7 +23,7 @@
 namespace slim::cli {
 
 int cmd_bench(int argc, char** argv) {
-  CLI::App app{"Benchmark every configuration beside Embree on the same rays (BENCHMARK.md).",
+  CLI::App app{"Benchmark every configuration beside Embree on the same rays (docs/benchmark.md).",
                "slimrt bench"};
   bench::BenchOptions opt;
   std::string json_path, plot_path;
@@ -31,12 +33,11 @@ int cmd_bench(int argc, char** argv) {
          "mesh files (.obj .ply .gltf .glb, optionally .xz) or terrain:N, torus:N, canyon:N")
       ->required();
   app.add_option("--config", opt.configs,
-                 "configurations (BENCHMARK.md names, repeatable or comma-separated); default: "
+                 "configurations (registry names or Embree anchors, repeatable or "
+                 "comma-separated); default: "
                  "every Embree anchor and every slimrt configuration; embree-tri always runs")
       ->delimiter(',');
-  app.add_option("--threads", opt.threads, "threads for builds and rays, 0 = all cores")
-      ->check(CLI::Range(0, 4096))
-      ->capture_default_str();
+  add_build_options(app, opt.tuning);  // --threads: builds and rays
   app.add_option("--repeat", opt.repeat,
                  "interleaved timed rounds (each builds, then traces every configuration once; "
                  "medians and ranges over the rounds)")
@@ -48,7 +49,7 @@ int cmd_bench(int argc, char** argv) {
                  "0 = half of MemAvailable")
       ->check(CLI::Range(0.0, 1e9))
       ->capture_default_str();
-  app.add_option("--json", json_path, "write the figures as JSON (BENCHMARK.md schema)");
+  app.add_option("--json", json_path, "write the figures as JSON (docs/benchmark.md schema)");
   app.add_option("--plot", plot_path,
                  "draw bytes/triangle vs diffuse MRays/s into a PNG with gnuplot");
   app.add_flag("--strict", strict, "exit with 1 if any ERROR was reported");
@@ -65,6 +66,9 @@ int cmd_bench(int argc, char** argv) {
                   "render " +
                   sc + "` (MRays/s)");
   for (const std::string& c : opt.configs) bench::check_config_name(c);  // before any work
+  opt.threads = opt.tuning.threads;
+  for (const std::string& c : opt.configs)  // a tuning a configuration cannot take: error now
+    if (find_config(c)) build_options(c, opt.tuning);
   opt.memory_budget = uint64_t(budget_mb * 1e6);
   if (!json_path.empty()) check_output_path(json_path);
   if (!plot_path.empty()) check_output_path(plot_path);

@@ -1,4 +1,5 @@
-// slimrt build SCENE --config CONFIG -o FILE.slim [--threads N] [--memory-budget MIB]
+// slimrt build SCENE --config CONFIG -o FILE.slim [--memory-budget MIB] [build options: --threads
+// N, ...]
 //              [--chunk-triangles N] [--chunked] [--spill-dir D]: builds a scene and writes it as a
 // scene file (Scene::save), which info and render then take in place of SCENE. An input whose
 // in-memory build would exceed the budget is built chunk by chunk (Scene::build_chunked).
@@ -9,6 +10,7 @@
 
 #include <unistd.h>
 
+#include "build_flags.h"
 #include "commands.h"
 #include "mesh/chunk_sources.h"
 #include "mesh/procedural.h"
@@ -77,15 +79,13 @@ int save_and_report(const std::string& scene_name, const Scene& scene, const std
 int cmd_build(int argc, char** argv) {
   CLI::App app{"slimrt build: build a scene and write it as a scene file (.slim)"};
   std::string scene_name, config = "bvh8-tri4v", output;
-  int threads = 0;
+  BuildOptions tuning;
   bool quiet = false;
   app.add_option("scene", scene_name, "mesh file or procedural scene")->required();
   app.add_option("--config,--accel", config, "the configuration (see the README)")
       ->capture_default_str();
   app.add_option("-o,--output", output, "the scene file to write (FILE.slim)")->required();
-  app.add_option("--threads", threads, "build threads, 0 = all cores")
-      ->check(CLI::Range(0, 4096))
-      ->capture_default_str();
+  add_build_options(app, tuning);
   app.add_flag("-q,--quiet", quiet, "no build progress on the terminal");
   ChunkedBuildOptions chunking;
   uint64_t budget_mib = 0;
@@ -109,8 +109,7 @@ int cmd_build(int argc, char** argv) {
   }
   if (!is_scene_file(output)) throw Error("-o " + output + ": expected a FILE.slim name");
   if (is_scene_file(scene_name)) throw Error(scene_name + ": already a scene file");
-  BuildOptions opt = BuildOptions::from_config(config);  // throws on an unknown name
-  opt.threads = threads;
+  BuildOptions opt = build_options(config, tuning);  // throws on an unknown name
   check_output_path(output);
   chunking.memory_budget = budget_mib << 20;
   if (!chunking.spill_dir.empty() && !std::filesystem::is_directory(chunking.spill_dir))

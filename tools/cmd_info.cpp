@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "build_flags.h"
 #include "commands.h"
 #include "io/face_stream.h"
 #include "mesh/chunk_sources.h"
@@ -75,7 +76,7 @@ nlohmann::json scene_report(const Scene& scene, bool json, bool& valid) {
 // The chunks of `src`, each loaded (and built with `accel` if given) one at a time; `out` already
 // holds the source's own figures.
 int list_chunks(const detail::ChunkSource& src, uint64_t max_triangles, const std::string& accel,
-                bool json, nlohmann::json out) {
+                const BuildOptions& tuning, bool json, nlohmann::json out) {
   uint64_t max_chunk_tris = 0, scene_bytes = 0;
   const auto t0 = std::chrono::steady_clock::now();
   for (size_t i = 0; i < src.size(); ++i) {
@@ -85,7 +86,7 @@ int list_chunks(const detail::ChunkSource& src, uint64_t max_triangles, const st
         {"faces", ci.faces}, {"triangles", ci.triangles}, {"bounds", box_json(ci.bounds)}};
     detail::Chunk chunk = src.load(i);
     if (!accel.empty()) {
-      const Scene scene = Scene::build(chunk.mesh, BuildOptions::from_config(accel));
+      const Scene scene = Scene::build(chunk.mesh, build_options(accel, tuning));
       c["bytes_scene"] = scene.memory().total();
       scene_bytes += scene.memory().total();
     }
@@ -121,7 +122,7 @@ int list_chunks(const detail::ChunkSource& src, uint64_t max_triangles, const st
 // Chunks generated on demand (mesh/chunk_sources.h): procedural tiles or a subdivided mesh.
 int info_generated_chunks(const detail::ChunkSource& src, const std::string& scene_name,
                           uint64_t max_triangles, double setup_s, const std::string& accel,
-                          bool json) {
+                          const BuildOptions& tuning, bool json) {
   nlohmann::json out;
   out["scene"] = scene_name;
   out["source"] = "generated";
@@ -142,18 +143,20 @@ int info_generated_chunks(const detail::ChunkSource& src, const std::string& sce
     std::printf("set-up           %.2f s (chunk table and exact bounds)\n", setup_s);
     std::printf("peak RSS         %llu B after set-up\n", (unsigned long long)peak_rss_bytes());
   }
-  return list_chunks(src, max_triangles, accel, json, std::move(out));
+  return list_chunks(src, max_triangles, accel, tuning, json, std::move(out));
 }
 
 int info_chunks(const std::string& scene_name, uint64_t max_triangles, const std::string& dir,
-                uint64_t budget_mib, const std::string& accel, bool json, bool spill) {
+                uint64_t budget_mib, const std::string& accel, const BuildOptions& tuning,
+                bool json, bool spill) {
   if (!spill) {
     const auto t0 = std::chrono::steady_clock::now();
     auto generated = detail::open_generated_chunks(scene_name, max_triangles);
     const double setup_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (generated)
-      return info_generated_chunks(*generated, scene_name, max_triangles, setup_s, accel, json);
+      return info_generated_chunks(*generated, scene_name, max_triangles, setup_s, accel, tuning,
+                                   json);
   }
   detail::ChunkOptions opt;
   opt.max_triangles = max_triangles;
@@ -191,7 +194,7 @@ int info_chunks(const std::string& scene_name, uint64_t max_triangles, const std
                 format_bytes(st.stream_bytes).c_str(), format_bytes(st.spilled_bytes).c_str());
     std::printf("peak RSS         %llu B after partitioning\n", (unsigned long long)rss_partition);
   }
-  return list_chunks(set, max_triangles, accel, json, std::move(out));
+  return list_chunks(set, max_triangles, accel, tuning, json, std::move(out));
 }
 
 }  // namespace
@@ -200,7 +203,7 @@ int cmd_info(int argc, char** argv) {
   CLI::App app{"slimrt info: statistics of a scene (a mesh file or terrain:N/torus:N/canyon:N)"};
   std::string scene_name, accel;
   bool json = false, pairs = false, costa = false, grids = false, clusters = false;
-  double cluster_error = BuildOptions().cluster_error;
+  BuildOptions tuning;  // --accel, --chunk-accel, --clusters
   app.add_option("scene", scene_name, "mesh file, procedural scene or scene file (.slim)")
       ->required();
   app.add_flag("--json", json, "print one JSON object");
@@ -216,10 +219,7 @@ int cmd_info(int argc, char** argv) {
   app.add_flag("--grids", grids, "grid conversion and lossy grid error statistics");
   // The compressed triangle clusters' figures.
   app.add_flag("--clusters", clusters, "compressed triangle clusters (cluster, cluster-lossless)");
-  app.add_option("--cluster-error", cluster_error,
-                 "--clusters: the lossy error bound, a fraction of the box diagonal")
-      ->needs("--clusters");
-  // Chunked, streamed input (issue 27): the mesh is never loaded whole.
+  // Chunked, streamed input: the mesh is never loaded whole.
   uint64_t chunks = 0, budget_mib = 256;
   std::string spill_dir, chunk_accel;
   app.add_option("--chunks", chunks,
@@ -240,13 +240,14 @@ int cmd_info(int argc, char** argv) {
                "--chunks: stream and spill a procedural scene too (by default its tiles are "
                "generated on demand)")
       ->needs("--chunks");
+  add_build_options(app, tuning);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
   if (chunks > 0)
-    return info_chunks(scene_name, chunks, spill_dir, budget_mib, chunk_accel, json, spill);
+    return info_chunks(scene_name, chunks, spill_dir, budget_mib, chunk_accel, tuning, json, spill);
 
   if (is_scene_file(scene_name)) {
     // A scene file: its figures (the input mesh is not in it, so no mesh statistics).
@@ -307,7 +308,7 @@ int cmd_info(int argc, char** argv) {
   }
 
   if (!accel.empty()) {
-    BuildOptions opt = BuildOptions::from_config(accel);
+    BuildOptions opt = build_options(accel, tuning);
     Scene scene = Scene::build(mesh, opt);
     bool valid = false;
     out["accel"] = scene_report(scene, json, valid);
@@ -321,8 +322,7 @@ int cmd_info(int argc, char** argv) {
   if (grids) info_grids(mesh, json, out);
   if (clusters) {
     for (const char* config : {"cluster", "cluster-lossless"}) {
-      BuildOptions opt = BuildOptions::from_config(config);
-      opt.cluster_error = cluster_error;
+      BuildOptions opt = build_options(config, tuning);
       Scene scene = Scene::build(mesh, opt);
       const MemoryStats m = scene.memory();
       nlohmann::json c;

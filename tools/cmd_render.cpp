@@ -1,8 +1,8 @@
 // `slimrt render SCENE -o OUT.png|OUT.exr [--shade diffuse|sun|normals|kind] [--spp N] [--res WxH]
-//                [--config NAME] [--threads N] [--bounces N] [--up x|y|z] [--eye X,Y,Z]
+//                [--config NAME] [--bounces N] [--up x|y|z] [--eye X,Y,Z]
 //                [--look-at X,Y,Z] [--fov DEG] [--mpi-tile N] [--mpi-root render|coordinate]
-//                [--quiet]`
-// Loads a mesh file or procedural scene, builds it in one configuration (BENCHMARK.md names),
+//                [--quiet] [build options: --threads N, --collapse ..., build_flags.h]`
+// Loads a mesh file or procedural scene, builds it in one configuration (registry names),
 // renders it from the user's camera (slim::view_camera: by default the model's corners fill the
 // image, seen from the front-right and above; glTF is Y up by its specification, other inputs Z
 // up) and writes the image; prints build time, render time and MRays/s on stdout. Loading,
@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "build_flags.h"
 #include "commands.h"
 #include "mpi_render.h"
 #include "progress.h"
@@ -91,7 +92,8 @@ int render_command(int argc, char** argv, const RenderRanks& ranks) {
   std::string up, eye, look_at, mpi_root = "render";
   float fov = 40.0f;
   bool quiet = false;
-  int spp = 1, threads = 0, bounces = 8, mpi_tile = 64;
+  int spp = 1, bounces = 8, mpi_tile = 64;
+  BuildOptions tuning;
   app.add_option("scene", scene_name,
                  "mesh file (.obj .ply .gltf .glb, optionally .xz) or terrain:N, torus:N, canyon:N")
       ->required();
@@ -127,9 +129,7 @@ int render_command(int argc, char** argv, const RenderRanks& ranks) {
   app.add_option("--config", config,
                  "the format (bvh8-tri4v, clbvh-compact, lossy-grid, ...; see the README)")
       ->capture_default_str();
-  app.add_option("--threads", threads, "threads for build and render, 0 = all cores")
-      ->check(CLI::Range(0, 4096))
-      ->capture_default_str();
+  add_build_options(app, tuning);  // --threads: build and render
   app.add_option("--bounces", bounces, "diffuse bounces after the primary hit")
       ->check(CLI::Range(0, 1024))
       ->capture_default_str();
@@ -187,7 +187,7 @@ int render_command(int argc, char** argv, const RenderRanks& ranks) {
   }
   ropt.spp = spp;
   ropt.max_bounces = bounces;
-  ropt.threads = threads;
+  ropt.threads = tuning.threads;
   ropt.shade = shade == "normals" ? Shade::Normals
                : shade == "kind"  ? Shade::Kind
                : shade == "sun"   ? Shade::Sun
@@ -209,8 +209,7 @@ int render_command(int argc, char** argv, const RenderRanks& ranks) {
   view.has_eye = !eye.empty() && parse_point(eye, view.eye);
   view.has_look_at = !look_at.empty() && parse_point(look_at, view.look_at);
 
-  BuildOptions bopt = BuildOptions::from_config(config);  // throws on an unknown name
-  bopt.threads = threads;
+  BuildOptions bopt = build_options(config, tuning);  // throws on an unknown name
 
   auto t0 = std::chrono::steady_clock::now();
   PolyMesh mesh;

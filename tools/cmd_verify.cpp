@@ -1,4 +1,4 @@
-// `slimrt verify SCENE [--config NAME...] [--rays N] [--threads N] [--seed S]`
+// `slimrt verify SCENE [--config NAME...] [--rays N] [--seed S] [build options: --threads N, ...]`
 //
 // Watertightness and hit-distance checks of every slimrt configuration on a closed mesh (the idea
 // of Embree's `verify` suite): rays start strictly inside the mesh and go
@@ -13,7 +13,7 @@
 // Tolerances, in scene units along the ray (t * |dir|):
 //   lossless formats: 1e-5 * (distance to the reference hit) + 1e-6 * (box diagonal) (rounding:
 //     two formats may hit the two triangles of a shared edge, whose t differ in the last bits);
-//   lossy formats (lossy-grid*, costa-*V*): that plus e / max(|cos theta|, 0.05), where e bounds
+//   lossy formats (Scene::is_lossy()): that plus e / max(|cos theta|, 0.05), where e bounds
 //     the distance of every decoded vertex from its input vertex and theta is the angle between
 //     the ray and the input surface normal at t_ref. Each decoded triangle is the convex hull of
 //     decoded vertices within e of the input ones (the formats keep the input's fan diagonals),
@@ -21,16 +21,8 @@
 //     the crossing moves by at most e / |cos theta| along the ray; below |cos theta| = 0.05
 //     (grazing by less than 3 degrees) the bound is held at 20 e. e is what the format's
 //     specification promises, computed from the input mesh alone (never from the scene's own
-//     statistics; spec_error_bound() below):
-//       costa-*V*: half a quantization step per axis, |step| / 2 with step = (box size) / 65535
-//         (Costa et al., Listing 4: 16 bits per component in the scene box; codes round to
-//         nearest);
-//       cluster: BuildOptions::cluster_error (1e-5) x the box diagonal (one scene-wide lattice);
-//       lossy-grid*: 0.06 * 8 * L, L the largest distance between two vertices of one input face
-//         (a vertex is its sub-grid's bilinear patch plus a displacement d quantized to within
-//         0.057 |d| by encoding 1 and 0.055 |d| by encoding 2, and |d| is at most the distance to
-//         the farthest corner of its 5x5 sub-grid, 8 cell edges);
-//     plus a few float roundings of the largest coordinate. A lossy hit beyond e / |cos theta| of
+//     statistics): its registry row's ConfigInfo::promised_error (slimrt/scene.h), which includes
+//     a few float roundings of the largest coordinate. A lossy hit beyond e / |cos theta| of
 //     the input crossing FAILS the configuration unless the geometry excuses it: its point lies
 //     within e of the input surface (double-precision distance to the input's fan triangles) and,
 //     if it is farther than t_ref, the ray runs along the input surface in between (grazing: the
@@ -69,6 +61,7 @@
 #include <utility>
 #include <vector>
 
+#include "build_flags.h"
 #include "commands.h"
 #include "slimrt/analysis.h"
 #include "slimrt/output.h"
@@ -250,50 +243,6 @@ struct RaySource {
   }
 };
 
-// Float rounding of a decoded coordinate: a few ulps of the largest coordinate magnitude.
-double coordinate_rounding(const Box3f& box) {
-  const double m = std::max(double(reduce_max(abs(box.lo))), double(reduce_max(abs(box.hi))));
-  return 8.0 * std::ldexp(m, -24);
-}
-
-// The largest distance between two vertices of one face (finite vertices).
-double max_face_diameter(const PolyMesh& m) {
-  double L = 0;
-  uint64_t c = 0;
-  for (uint32_t n : m.face_sizes) {
-    for (uint32_t i = 0; i < n; ++i)
-      for (uint32_t j = i + 1; j < n; ++j) {
-        const Vec3f a = m.positions[m.face_indices[c + i]], b = m.positions[m.face_indices[c + j]];
-        if (is_finite(a) && is_finite(b)) L = std::max(L, double(length(a - b)));
-      }
-    c += n;
-  }
-  return L;
-}
-
-// The vertex error bound (scene units) a lossy format's specification promises on `mesh` (see
-// the header comment); -1 for a lossy configuration this command knows no bound for.
-double spec_error_bound(const std::string& name, const PolyMesh& mesh) {
-  const Box3f box = mesh.bounds();
-  const BuildOptions o = BuildOptions::from_config(name);
-  if (!describe(o).lossy) return 0;
-  switch (o.leaf) {
-    case Leaf::Costa: {
-      double h2 = 0;
-      for (int a = 0; a < 3; ++a) h2 += std::pow(0.5 * double(box.size()[a]) / 65535.0, 2);
-      return std::sqrt(h2) + coordinate_rounding(box);
-    }
-    case Leaf::LossyGrids:
-    case Leaf::SharedLossyGrids:
-      return 0.06 * 8.0 * max_face_diameter(mesh) + coordinate_rounding(box);
-    case Leaf::Clusters:
-      // One scene-wide lattice whose step puts every vertex within cluster_error x the diagonal.
-      return o.cluster_error * double(length(box.size())) + coordinate_rounding(box);
-    default:
-      return -1;
-  }
-}
-
 // The input's fan triangles in double, for exact point-to-surface distances, indexed by a uniform
 // grid of cells so that the question "does a triangle lie within r of p" visits only the
 // triangles whose boxes come within r of p: the answer is the brute force's (every triangle whose
@@ -471,7 +420,7 @@ int cmd_verify(int argc, char** argv) {
   std::string scene_name;
   std::vector<std::string> configs;
   uint64_t rays = 1000000;
-  int threads = 0;
+  BuildOptions tuning;
   uint64_t seed = 1;
   bool allow_open = false;
   int64_t explain = -1;
@@ -489,9 +438,7 @@ int cmd_verify(int argc, char** argv) {
                  "edge midpoints)")
       ->check(CLI::Range(uint64_t(3), uint64_t(1) << 40))
       ->capture_default_str();
-  app.add_option("--threads", threads, "threads, 0 = all cores")
-      ->check(CLI::Range(0, 4096))
-      ->capture_default_str();
+  add_build_options(app, tuning);  // the configurations checked; the reference keeps its own
   app.add_option("--seed", seed, "seed of the rays and inside points")->capture_default_str();
   app.add_flag("--allow-open", allow_open, "run even if the mesh has boundary/non-manifold edges");
   app.add_option("--explain", explain,
@@ -502,7 +449,7 @@ int cmd_verify(int argc, char** argv) {
       ->check(CLI::Range(uint64_t(1), uint64_t(1) << 40))
       ->capture_default_str();
   app.add_option("--bound-scale", bound_scale,
-                 "multiplies every lossy format's specification bound e (below 1: a test of the "
+                 "multiplies every lossy format's promised bound e (below 1: a test of the "
                  "check itself, which a correct lossy scene then fails)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
@@ -529,7 +476,8 @@ int cmd_verify(int argc, char** argv) {
                 "with `slimrt info " +
                 scene_name + "` (validate: every invariant of the scene)");
   if (configs.empty()) configs = all_config_names();
-  for (const std::string& c : configs) BuildOptions::from_config(c);  // unknown names: error now
+  for (const std::string& c : configs) build_options(c, tuning);  // unknown names: error now
+  const int threads = tuning.threads;
 
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
   const auto t_load = std::chrono::steady_clock::now();
@@ -605,8 +553,7 @@ int cmd_verify(int argc, char** argv) {
     row.config = name;
     std::fprintf(stderr, "verify %s: %s ...", scene_name.c_str(), name.c_str());
     std::fflush(stderr);
-    BuildOptions opt = BuildOptions::from_config(name);
-    opt.threads = threads;
+    const BuildOptions opt = build_options(name, tuning);
     Scene s;
     const auto t_build = std::chrono::steady_clock::now();
     try {
@@ -634,11 +581,12 @@ int cmd_verify(int argc, char** argv) {
     }
     const bool lossy = s.is_lossy();
     if (lossy) {
-      row.error_bound = spec_error_bound(name, mesh);
-      if (row.error_bound > 0) row.error_bound *= bound_scale;
-      if (row.error_bound < 0) {
+      // The bound the registry row promises (ConfigInfo::promised_error).
+      try {
+        row.error_bound = describe(opt).promised_error({&mesh}) * bound_scale;
+      } catch (const Error& err) {
         row.failed = true;
-        row.note = "lossy, but verify knows no specification bound for it (spec_error_bound)";
+        row.note = std::string("lossy, but its registry row promises no bound: ") + err.what();
         row.error_bound = 0;
       }
     }
@@ -685,7 +633,7 @@ int cmd_verify(int argc, char** argv) {
     }
     // Against the own reference (or the input for formats without decoded triangles): rounding
     // only (plus e / |cos theta| for a lossy format without decoded triangles). Against the
-    // input, lossy formats: the specification bound e / |cos theta| (header comment), always.
+    // input, lossy formats: the promised bound e / |cos theta| (header comment), always.
     const bool bound_is_hard = lossy && !row.own_reference;
     // A lossy hit beyond e / |cos| of the input crossing, excused where the geometry allows it
     // (header comment); the distances to the input surface are exact (InputSurface::within).
@@ -829,7 +777,7 @@ int cmd_verify(int argc, char** argv) {
 
   std::printf(
       "| config | rays | leaks (intersect) | leaks (occluded) | far | near | max |t - t_ref| "
-      "| reference | lossy: spec bound e | lossy: beyond e/cos, excused (max dev.) | status |\n");
+      "| reference | lossy: promised e | lossy: beyond e/cos, excused (max dev.) | status |\n");
   std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: | ---: | --- |\n");
   for (const Row& r : table) {
     if (r.status == "n/a" || r.status == "BUILD ERROR") {

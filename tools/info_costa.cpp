@@ -1,5 +1,6 @@
-// slimrt info --costa: sizes of the Costa quantized n-gon mesh (fast-mesh-compression-gpu-rt.txt,
-// Tables 1 and 3): regular and triangulated sizes, gzip -9, and every combination of T, P, F, V.
+// slimrt info --costa: sizes of the Costa quantized n-gon mesh (Costa et al., fast mesh
+// compression for GPU ray tracing, Tables 1 and 3): regular and triangulated sizes, gzip -9, and
+// every combination of T, P, F, V.
 #include <cstdio>
 #include <string>
 

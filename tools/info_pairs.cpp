@@ -1,5 +1,5 @@
 // `slimrt info --pairs SCENE`: triangle pairing statistics (A. Aman, S. Fenney, "Fast Triangle
-// Pairing for Ray Tracing", ../shared/papers/fast-triangle-pairing.txt): share of triangles paired
+// Pairing for Ray Tracing"): share of triangles paired
 // by the edge-box heuristic against the in-order window-2 baseline, and the pairing time. With
 // --json the figures are top-level keys of the output object (`triangles`, `paired_fraction`,
 // `window2_paired_fraction`, `pairing_s`, ...) plus a "pairing" object with the details.

@@ -25,6 +25,9 @@ void usage() {
                "  bench SCENE... [--config NAME...] [--threads N] [--repeat K] [--json FILE] "
                "[--plot FILE]\n"
                "  build SCENE --config NAME -o FILE.slim [--threads N]\n"
+               "  verify SCENE [--config NAME...] [--rays N]\n"
+               "every command that builds also takes the build options (--threads, --collapse, "
+               "--sah-bins, ...: slimrt COMMAND --help)\n"
                "SCENE is a mesh file (.obj .ply .gltf .glb, optionally .xz) or terrain:N, "
                "torus:N, canyon:N, or (info, render, bench, verify) a scene file FILE.slim\n");
 }

@@ -1,8 +1,8 @@
 // slimrt analysis: the measurement and paper-reproduction hooks that the CLI, the benchmark and
 // the tests use beside the user API of slimrt/slimrt.h: how a mesh becomes grids and what the
 // lossy grids lose (grids.h), the Costa store sizes (costa.h), the pairing figures (pairing.h),
-// the benchmark camera, path tracer, RNG and PSNR (render.h), and the decoded triangles of the
-// formats that intersect their own geometry.
+// the benchmark camera, path tracer, RNG and PSNR (render.h), the decoded triangles of the
+// formats that intersect their own geometry, and a traversal that counts its work.
 #pragma once
 
 #include <optional>
@@ -17,6 +17,10 @@
 #include "slimrt/slimrt.h"
 
 namespace slim {
+
+// Scene::intersect that also counts the traversal's work (node visits, box and primitive tests)
+// into `counters`: slower, for statistics, not for timing. Thread-safe for distinct counters.
+Hit intersect_counted(const Scene& scene, const Ray& ray, TraversalCounters& counters);
 
 // The triangles the format of `opt` intersects when it has its own geometry
 // (describe(opt).own_geometry: lossy grids, costa), decoded exactly as its leaves decode them:

@@ -152,10 +152,10 @@ SLIM_INLINE uint64_t pixel_seed(int x, int y, int sample) {
   return (uint64_t(uint32_t(y)) << 32 | uint32_t(x)) * 0x9E3779B97F4A7C15ULL + uint64_t(sample);
 }
 
-// Diffuse: BENCHMARK.md workload 2 (sky light only, the sky's zenith at RenderOptions::up). Sun: a
-// low sun from the camera's left (25 degrees above the horizon of RenderOptions::up) with a shadow
-// ray, plus one diffuse bounce under the sky: the shading that shows relief. Normals, Kind: debug
-// shadings.
+// Diffuse: the benchmark's workload 2 (docs/benchmark.md) (sky light only, the sky's zenith at
+// RenderOptions::up). Sun: a low sun from the camera's left (25 degrees above the horizon of
+// RenderOptions::up) with a shadow ray, plus one diffuse bounce under the sky: the shading that
+// shows relief. Normals, Kind: debug shadings.
 enum class Shade { Diffuse, Normals, Kind, Sun };
 
 struct RenderOptions {

@@ -22,6 +22,7 @@
 #include "slimrt/error.h"
 #include "slimrt/math.h"
 #include "slimrt/mesh.h"
+#include "slimrt/progress.h"
 #include "slimrt/ray.h"
 
 namespace slim {
@@ -101,22 +102,6 @@ enum class GridLeftovers : uint8_t {
   Triangles,  // triangle leaves in a second BVH
 };
 
-// Progress of Scene::build, passed to BuildOptions::progress. A build runs a few phases in
-// order: "prepare" (the format's own work before the BVH: triangulation, pairing, grids, clusters,
-// quantization), "bvh2" (the binary SAH BVH) and "collapse" (the 8-wide BVH and the leaf data);
-// the grid formats with triangle leftovers add "bvh2 leftovers" and "collapse leftovers". Within
-// a phase `done` only grows, from 0 to `total` (its last report has done == total); units are the
-// phase's own (primitives placed in leaves, primitives encoded, steps of the preparation).
-struct BuildProgress {
-  std::string phase;
-  uint64_t done = 0, total = 0;
-  double fraction() const { return total ? double(done) / double(total) : 1.0; }
-};
-// Called a few hundred times per phase at most (about every percent), never per primitive, from
-// any of the build's threads but never concurrently (the calls are serialized). Returning false
-// cancels the build: Scene::build then throws slim::Cancelled (error.h) and keeps nothing.
-using BuildProgressFn = std::function<bool(const BuildProgress&)>;
-
 struct BuildOptions {
   Nodes nodes = Nodes::Bvh8;
   Leaf leaf = Leaf::Triangles;
@@ -147,6 +132,11 @@ struct BuildOptions {
   // The options of a registry row ("bvh8-tri4v", "clbvh-compact", "lossy-grid", "costa-PFV",
   // ...). Throws slim::Error for an unknown name, listing the known ones.
   static BuildOptions from_config(const std::string& name);
+  // A registry row's format with the tuning of `tuning`: nodes, leaf, grid_encoding, costa and
+  // pairing from the row; every other field (pairing_options, collapse, grid_parts,
+  // grid_leftovers, sah_bins, max_leaf_size, threads, cluster_error, lattice_box, progress) from
+  // `tuning`. Throws slim::Error for an unknown name.
+  static BuildOptions from_config(const std::string& name, const BuildOptions& tuning);
   // The name of the registry row with these nodes, leaf and encoding, or a descriptive name
   // ("qbvh8-pairs") for a combination that has no row.
   std::string config_name() const;
@@ -167,6 +157,13 @@ struct ConfigInfo {
   bool own_geometry = false;
   std::string error_bound;  // what Scene::error_bound() reports for it ("0" when lossless)
   std::string summary;      // one line for tables and --help
+  // What the format's specification promises on `meshes` built with `options`, from the input
+  // alone (never from a built scene): a bound, in scene units, on the distance between every
+  // decoded vertex and its input vertex, so Scene::error_bound() <= promised_error(meshes) for a
+  // scene built from them; 0 for a lossless format. Each decoded triangle is the hull of decoded
+  // vertices within that bound of the input ones, so every hit lies within it of the input
+  // surface. Throws slim::Error for a null or malformed mesh (check_mesh).
+  double promised_error(const std::vector<const PolyMesh*>& meshes) const;
 };
 // Every configuration, triangles first (costa: its 16 letter combinations last).
 const std::vector<ConfigInfo>& configs();
@@ -206,8 +203,8 @@ struct SceneStats {
   std::vector<std::pair<std::string, double>> details;
 };
 
-// Scene::build_chunked: an input larger than memory, built chunk by chunk (DESIGN.md "Out-of-core
-// builds"). The input is streamed (PLY, OBJ, procedural scenes; never loaded whole), cut into
+// Scene::build_chunked: an input larger than memory, built chunk by chunk (README.md "Inputs larger
+// than memory"). The input is streamed (PLY, OBJ, procedural scenes; never loaded whole), cut into
 // spatial chunks, each chunk built on its own with the same BuildOptions on one lattice
 // (BuildOptions::lattice_box = the whole input's box), and a top-level BVH joins the chunk scenes.
 struct ChunkedBuildOptions {
@@ -265,8 +262,6 @@ class Scene {
   Hit intersect(const Ray& ray) const;
   // Any hit in [ray.tnear, ray.tfar]. Thread-safe.
   bool occluded(const Ray& ray) const;
-  // intersect() that also counts traversal work (slower; for statistics, not for timing).
-  Hit intersect(const Ray& ray, TraversalCounters& counters) const;
 
   MemoryStats memory() const;
   const SceneStats& stats() const;
@@ -311,6 +306,7 @@ class Scene {
  private:
   friend std::optional<DecodedTriangles> decoded_triangles(const Scene& scene,
                                                            const std::vector<const PolyMesh*>&);
+  friend Hit intersect_counted(const Scene& scene, const Ray& ray, TraversalCounters& counters);
   std::unique_ptr<Impl> impl_;
 };
 

@@ -1,9 +1,10 @@
-// The registry of configurations (DESIGN.md "One registry of configurations"): one row per named
+// The registry of configurations (ConfigInfo in slimrt/scene.h): one row per named
 // configuration with the properties of its format, and the builder of each leaf format. Every
 // other part of slimrt (the CLI, the benchmark, the tests, the fuzz targets) asks a row or a built
 // scene for a format's properties; nothing re-derives them from the name.
 #include "api/registry.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <optional>
@@ -223,6 +224,17 @@ BuildOptions BuildOptions::from_config(const std::string& name) {
   return config_info(name).options;
 }
 
+BuildOptions BuildOptions::from_config(const std::string& name, const BuildOptions& tuning) {
+  const BuildOptions& row = config_info(name).options;
+  BuildOptions o = tuning;
+  o.nodes = row.nodes;
+  o.leaf = row.leaf;
+  o.grid_encoding = row.grid_encoding;
+  o.costa = row.costa;
+  o.pairing = row.pairing;
+  return o;
+}
+
 std::string BuildOptions::config_name() const {
   for (const ConfigInfo& c : configs())
     if (same_format(c.options, *this)) return c.name;
@@ -294,6 +306,75 @@ ConfigInfo describe(const BuildOptions& opt) {
   c.summary = "a combination without a registry row";
   describe_format(c);
   return c;
+}
+
+double ConfigInfo::promised_error(const std::vector<const PolyMesh*>& meshes) const {
+  Box3f bounds;  // the finite positions of every mesh
+  for (const PolyMesh* m : meshes) {
+    if (!m) throw Error("promised_error: null mesh");
+    check_mesh(*m);
+    const Box3f b = m->bounds();
+    if (!b.empty()) bounds.extend(b);
+  }
+  if (!lossy) return 0;
+  // The box the format quantizes in: BuildOptions::lattice_box when given, else the meshes'
+  // (the formats take the box of the vertices they use, which lies inside this one).
+  const Box3f box = options.lattice_box.empty() ? bounds : options.lattice_box;
+  if (box.empty()) return 0;
+  // Float rounding of a decoded coordinate: a few ulps of the largest coordinate magnitude.
+  const double largest = std::max(double(reduce_max(abs(box.lo))), double(reduce_max(abs(box.hi))));
+  const double rounding = 8.0 * std::ldexp(largest, -24);
+  double ext = 0, d2 = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double e = double(box.hi[a]) - double(box.lo[a]);
+    ext = std::max(ext, e);
+    d2 += e * e;
+  }
+  switch (options.leaf) {
+    case Leaf::Costa: {
+      // Costa et al., Listing 4: 16 bits per component in the box, codes rounded to nearest:
+      // half a step per axis.
+      double h2 = 0;
+      for (int a = 0; a < 3; ++a) {
+        const double h = 0.5 * (double(box.hi[a]) - double(box.lo[a])) / 65535.0;
+        h2 += h * h;
+      }
+      return std::sqrt(h2) + rounding;
+    }
+    case Leaf::Clusters: {
+      // One lattice whose step is the largest power of two within cluster_error x the diagonal
+      // (rounding moves a vertex by step * sqrt(3) / 2), doubled until the box's largest extent
+      // fits in 2^24 - 1 steps (prim/cluster.cpp, quantize).
+      const double bound = options.cluster_error * std::sqrt(d2);
+      double step =
+          bound > 0 ? std::exp2(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) : 1.0;
+      while (ext / step > double((1u << 24) - 2)) step *= 2;
+      return std::max(bound, step * std::sqrt(3.0) / 2.0) + rounding;
+    }
+    case Leaf::LossyGrids:
+    case Leaf::SharedLossyGrids: {
+      // A vertex is its sub-grid's bilinear patch plus a displacement d quantized to within
+      // 0.057 |d| (encoding 1) or 0.055 |d| (encoding 2), and |d| is at most the distance to the
+      // farthest corner of its 5x5 sub-grid, 8 cell edges: 0.06 x 8 x L, L the largest distance
+      // between two vertices of one input face.
+      double L = 0;
+      for (const PolyMesh* m : meshes) {
+        uint64_t c = 0;
+        for (uint32_t n : m->face_sizes) {
+          for (uint32_t i = 0; i < n; ++i)
+            for (uint32_t j = i + 1; j < n; ++j) {
+              const Vec3f a = m->positions[m->face_indices[c + i]];
+              const Vec3f b = m->positions[m->face_indices[c + j]];
+              if (is_finite(a) && is_finite(b)) L = std::max(L, double(length(a - b)));
+            }
+          c += n;
+        }
+      }
+      return 0.06 * 8.0 * L + rounding;
+    }
+    default:
+      throw Error("promised_error: lossy format " + name + " states no bound");
+  }
 }
 
 std::vector<std::string> all_config_names() {

@@ -165,12 +165,13 @@ bool Scene::occluded(const Ray& ray) const {
   return impl_->occluded(tr);
 }
 
-Hit Scene::intersect(const Ray& ray, TraversalCounters& counters) const {
+Hit intersect_counted(const Scene& scene, const Ray& ray, TraversalCounters& counters) {
   Hit hit;
   counters.rays++;
   TravRay tr;
-  if (!impl_ || !make_trav_ray(ray, impl_->ray_setup, tr)) return hit;
-  impl_->intersect_counted(tr, hit, counters);
+  const Scene::Impl* impl = scene.impl_.get();
+  if (!impl || !make_trav_ray(ray, impl->ray_setup, tr)) return hit;
+  impl->intersect_counted(tr, hit, counters);
   return hit;
 }
 

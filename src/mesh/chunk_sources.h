@@ -1,6 +1,6 @@
-// Chunk sources that generate their chunks on demand (issue 27 items 2 and 3): nothing is spilled
-// to disk and nothing is kept but a table of the chunks. The other source, ChunkSet
-// (mesh/chunks.h), streams any face stream and spills it.
+// Chunk sources that generate their chunks on demand: nothing is spilled to disk and nothing is
+// kept but a table of the chunks. The other source, ChunkSet (mesh/chunks.h), streams any face
+// stream and spills it.
 //
 // Procedural tiles (open_procedural_chunks): terrain:N, canyon:N, torus:N with N up to 65534.
 // A chunk is a rectangle of the quad grid (mesh/procedural.h ProceduralGrid): the grid is cut

@@ -1,5 +1,5 @@
-// Spatial chunking of a face stream within a memory budget (issue 27 item 2, DESIGN.md
-// "Out-of-core builds"): the layer under the per-chunk builds and the top-level BVH.
+// Spatial chunking of a face stream within a memory budget (README.md "Inputs larger than
+// memory"): the layer under the per-chunk builds and the top-level BVH.
 //
 // Three passes over the stream (FaceStream::rewind between them):
 //  1. bounds of the face centroids;

@@ -369,3 +369,55 @@ def test_build_progress_and_cancel():
         s.memory()
     with pytest.raises(TypeError, match="callable"):
         slimrt.RaycastingScene(progress=3)
+
+
+def test_add_triangles_references_the_callers_arrays():
+    """float32 / uint32 / int32 C-contiguous input is referenced, not copied: the scene holds a
+    reference to the very arrays (refcount), memory() counts them as referenced, and the geometry
+    the scene builds is the arrays' content at build time (a copy made at add_triangles would not
+    see a later change)."""
+    import sys
+    v, t = unit_box()
+    rays = np.array([[0.5, 0.5, 3, 0, 0, -1]], np.float32)
+    for tri in (t, t.astype(np.int32)):
+        s = slimrt.RaycastingScene("bvh8-tri4v")
+        rv, rt = sys.getrefcount(v), sys.getrefcount(tri)
+        s.add_triangles(v, tri)
+        assert sys.getrefcount(v) == rv + 1 and sys.getrefcount(tri) == rt + 1
+        m = s.memory()
+        assert m["input_meshes"] == 0
+        assert m["input_referenced"] == v.nbytes + tri.nbytes
+        del s
+        assert sys.getrefcount(v) == rv and sys.getrefcount(tri) == rt
+
+    # The scene reads the arrays when it builds: moving the box up by 1 before the first query
+    # moves the hit.
+    v2 = v.copy()
+    s = slimrt.RaycastingScene("bvh8-tri4v")
+    s.add_triangles(v2, t)
+    v2[:, 2] += 1.0
+    assert s.cast_rays(rays)["t_hit"][0] == 1.0
+    # A view of a bigger C-contiguous array is referenced as well.
+    big = np.zeros((20, 3), np.float32)
+    big[4:12] = v
+    s = slimrt.RaycastingScene("bvh8-tri4v")
+    s.add_triangles(big[4:12], t)
+    assert s.memory()["input_referenced"] == 8 * 12 + t.nbytes
+    assert s.cast_rays(rays)["t_hit"][0] == 2.0
+
+    # Other dtypes and layouts are copied once (owned), and a later change does not reach them.
+    for vv, tt in ((v.astype(np.float64), t), (v, t.astype(np.int64)),
+                   (np.asfortranarray(v), t), (v, np.zeros((12, 6), np.uint32)[:, ::2])):
+        if tt.base is not None and tt.base.shape == (12, 6):
+            tt[:] = t
+        vv = vv.copy(order="K")
+        s = slimrt.RaycastingScene("bvh8-tri4v")
+        rv = sys.getrefcount(vv)
+        s.add_triangles(vv, tt)
+        m = s.memory()
+        assert m["input_meshes"] > 0
+        assert m["input_meshes"] + m["input_referenced"] == v.nbytes + t.nbytes
+        if vv.dtype != np.float32 or not vv.flags.c_contiguous:
+            assert sys.getrefcount(vv) == rv  # not kept: converted
+            vv[:, 2] += 1.0
+        assert s.cast_rays(rays)["t_hit"][0] == 2.0

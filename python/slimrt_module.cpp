@@ -145,6 +145,13 @@ inline bool load_ray(const float* p, slim::Ray& r) {
            std::isnan(p[4]) || std::isnan(p[5]));
 }
 
+// slimrt.Mesh: a mesh file loaded once (polygons kept), to add to any number of scenes without
+// loading or copying it again.
+struct LoadedMesh {
+  std::shared_ptr<const slim::PolyMesh> mesh;
+  std::string path;
+};
+
 class RaycastingScene {
  public:
   RaycastingScene(const std::string& config, int threads, py::object progress)
@@ -245,8 +252,17 @@ class RaycastingScene {
     Geometry g;
     {
       py::gil_scoped_release release;
-      g.mesh = std::make_unique<slim::PolyMesh>(slim::load(path));
+      g.mesh = std::make_shared<const slim::PolyMesh>(slim::load(path));
     }
+    g.mesh_owned = true;
+    return add(std::move(g));
+  }
+
+  // A mesh loaded once (slimrt.Mesh), shared with the scene rather than copied.
+  uint32_t add_loaded_mesh(const LoadedMesh& mesh) {
+    check_not_in_own_callback();
+    Geometry g;
+    g.mesh = mesh.mesh;
     return add(std::move(g));
   }
 
@@ -412,6 +428,8 @@ class RaycastingScene {
     d["triangles"] = s.triangles;
     d["skipped_faces"] = s.skipped_faces;
     d["primitives"] = s.primitives;
+    d["lossy"] = scene->is_lossy();
+    d["error_bound"] = scene->error_bound();
     py::dict details;
     for (const auto& [k, v] : s.details) details[py::str(k)] = v;
     d["details"] = details;
@@ -442,8 +460,9 @@ class RaycastingScene {
   // they were converted). Python objects are only touched with the GIL; the raw pointers are
   // what the build reads without it.
   struct Geometry {
-    std::unique_ptr<slim::PolyMesh> mesh;  // add_mesh
-    py::array vertices, triangles;         // add_triangles: float32 [N, 3], (u)int32 [M, 3]
+    std::shared_ptr<const slim::PolyMesh> mesh;  // add_mesh
+    bool mesh_owned = false;        // loaded by add_mesh(path), not shared with a slimrt.Mesh
+    py::array vertices, triangles;  // add_triangles: float32 [N, 3], (u)int32 [M, 3]
     bool vertices_owned = false, triangles_owned = false;
     const float* positions = nullptr;
     const uint32_t* indices = nullptr;
@@ -593,11 +612,12 @@ class RaycastingScene {
     uint64_t owned = 0, referenced = 0;
     for (const Geometry& g : geometries_) {
       if (const slim::PolyMesh* m = g.mesh.get()) {
-        owned += m->positions.size() * sizeof(slim::Vec3f) +
-                 (m->face_sizes.size() + m->face_indices.size() + m->normal_indices.size() +
-                  m->uv_indices.size() + m->face_object.size()) *
-                     sizeof(uint32_t) +
-                 m->normals.size() * sizeof(slim::Vec3f) + m->uvs.size() * sizeof(slim::Vec2f);
+        (g.mesh_owned ? owned : referenced) +=
+            m->positions.size() * sizeof(slim::Vec3f) +
+            (m->face_sizes.size() + m->face_indices.size() + m->normal_indices.size() +
+             m->uv_indices.size() + m->face_object.size()) *
+                sizeof(uint32_t) +
+            m->normals.size() * sizeof(slim::Vec3f) + m->uvs.size() * sizeof(slim::Vec2f);
         continue;
       }
       (g.vertices_owned ? owned : referenced) += uint64_t(g.vertices.nbytes());
@@ -635,18 +655,21 @@ py::array_t<float> rays_pinhole(const double K[9], const double E[16], int width
   for (int j = 0; j < 3; ++j) o[j] = -(R[0][j] * t[0] + R[1][j] * t[1] + R[2][j] * t[2]);
   py::array_t<float> out({py::ssize_t(height), py::ssize_t(width), py::ssize_t(6)});
   float* p = out.mutable_data();
-  for (int y = 0; y < height; ++y)
-    for (int x = 0; x < width; ++x) {
-      // K^-1 of an upper triangular K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]].
-      double v = (y + 0.5 - cy) / fy;
-      double u = (x + 0.5 - cx - s * v) / fx;
-      double d[3] = {u, v, 1.0};
-      for (int j = 0; j < 3; ++j) {
-        p[j] = float(o[j]);
-        p[3 + j] = float(R[0][j] * d[0] + R[1][j] * d[1] + R[2][j] * d[2]);
+  {
+    py::gil_scoped_release release;  // big images take a while; only `p` is written
+    for (int y = 0; y < height; ++y)
+      for (int x = 0; x < width; ++x) {
+        // K^-1 of an upper triangular K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]].
+        double v = (y + 0.5 - cy) / fy;
+        double u = (x + 0.5 - cx - s * v) / fx;
+        double d[3] = {u, v, 1.0};
+        for (int j = 0; j < 3; ++j) {
+          p[j] = float(o[j]);
+          p[3 + j] = float(R[0][j] * d[0] + R[1][j] * d[1] + R[2][j] * d[2]);
+        }
+        p += 6;
       }
-      p += 6;
-    }
+  }
   return out;
 }
 
@@ -776,6 +799,31 @@ PYBIND11_MODULE(slimrt, m) {
         "face [M] uint32): polygons are fanned from their first corner, face[i] is the polygon "
         "of triangle i.");
 
+  py::class_<LoadedMesh>(m, "Mesh",
+                         "A mesh file (.obj .ply .gltf .glb, optionally .xz) or procedural scene "
+                         "loaded once, polygons kept, to add to scenes with add_mesh(mesh) "
+                         "without loading or copying it again.")
+      .def(py::init([](const std::string& path) {
+             LoadedMesh lm;
+             lm.path = path;
+             py::gil_scoped_release release;
+             lm.mesh = std::make_shared<const slim::PolyMesh>(slim::load(path));
+             return lm;
+           }),
+           py::arg("path"))
+      .def_readonly("path", &LoadedMesh::path)
+      .def_property_readonly("vertex_count",
+                             [](const LoadedMesh& m) { return m.mesh->positions.size(); })
+      .def_property_readonly("face_count",
+                             [](const LoadedMesh& m) { return m.mesh->face_sizes.size(); })
+      .def_property_readonly(
+          "triangle_count", [](const LoadedMesh& m) { return m.mesh->fan_triangle_count(); },
+          "Triangles after fan triangulation.")
+      .def("__repr__", [](const LoadedMesh& m) {
+        return "slimrt.Mesh(" + py::repr(py::str(m.path)).cast<std::string>() + ", " +
+               std::to_string(m.mesh->face_sizes.size()) + " faces)";
+      });
+
   py::class_<RaycastingScene>(m, "RaycastingScene",
                               "A scene of triangle meshes to cast rays against (Open3D's "
                               "RaycastingScene names and conventions). config is a slimrt "
@@ -800,6 +848,9 @@ PYBIND11_MODULE(slimrt, m) {
            "Adds a mesh file (.obj .ply .gltf .glb, optionally .xz) or a procedural scene; "
            "polygons are kept (primitive_ids are the file's face indices). Returns its geometry "
            "id.")
+      .def("add_mesh", &RaycastingScene::add_loaded_mesh, py::arg("mesh"),
+           "Adds a slimrt.Mesh, shared with it (not copied; memory() counts it in "
+           "input_referenced). Returns its geometry id.")
       .def("cast_rays", &RaycastingScene::cast_rays, py::arg("rays"), py::arg("nthreads") = 0,
            "Closest hits of rays [..., 6] (ox, oy, oz, dx, dy, dz; t in units of the direction's "
            "length). Returns a dict: t_hit [...] (inf on a miss), geometry_ids and primitive_ids "
@@ -819,7 +870,9 @@ PYBIND11_MODULE(slimrt, m) {
            "input_meshes: the input the scene owns to rebuild when geometry is added (mesh "
            "files, converted arrays); input_referenced: the caller's arrays it references "
            "(add_triangles without a copy).")
-      .def("stats", &RaycastingScene::stats, "Build statistics (builds the scene if needed).")
+      .def("stats", &RaycastingScene::stats,
+           "Build statistics (builds the scene if needed); error_bound: the largest distance "
+           "between a decoded and an input vertex (0 for lossless formats).")
       .def("save", &RaycastingScene::save, py::arg("path"),
            "Writes the scene (built now if needed) as a slimrt scene file (.slim), atomically.")
       .def_static("open", &RaycastingScene::open, py::arg("path"),

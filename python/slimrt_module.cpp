@@ -1,7 +1,9 @@
 // The Python module `slimrt`: RaycastingScene with the names and conventions of Open3D's
 // open3d.t.geometry.RaycastingScene (add_triangles, add_mesh, cast_rays, test_occlusions,
 // count_intersections, create_rays_pinhole), over any slimrt configuration, plus memory() and
-// stats(). Only the public API (slimrt/slimrt.h) is used.
+// stats(). Only the public API (slimrt/slimrt.h) is used. Open3D code runs unchanged:
+// RaycastingScene(nthreads), add_triangles(mesh) of an Open3D mesh, open3d.core.Tensor inputs,
+// and answers (slimrt.Array, numpy arrays) that have Tensor's numpy().
 //
 // Arrays: rays are read in place when they are float32 and C-contiguous (any other float dtype
 // or layout is converted once); vertices and triangles are referenced, not copied, when they are
@@ -9,7 +11,9 @@
 // reads them when it builds (other dtypes and layouts are converted once into arrays it owns). Bad
 // arrays raise TypeError (dtype) or ValueError (shape, NaN, index range) naming what was expected.
 // The scene is built on the first query after geometry was added (as Open3D does); building and
-// tracing run with the GIL released, rays in parallel with TBB.
+// tracing run with the GIL released, rays in parallel with TBB. Python threads may query one
+// scene at once and add geometry while others query (a query keeps the scene it started with).
+#include <pybind11/eval.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -51,12 +55,14 @@ std::string shape_str(const py::array& a) {
 
 std::string dtype_str(const py::array& a) { return py::str(a.dtype()).cast<std::string>(); }
 
-// Open3D tensors and other array-likes: anything numpy can view; open3d.core.Tensor via .numpy().
+// Open3D tensors and other array-likes: anything numpy can view; objects with a numpy() method
+// (open3d.core.Tensor, whose numpy.asarray would be an array of objects) through it.
 py::array as_array(py::handle obj) {
-  if (!py::isinstance<py::array>(obj) && py::hasattr(obj, "numpy") &&
-      !py::hasattr(obj, "__array__"))
-    obj = obj.attr("numpy")();
-  return py::module_::import("numpy").attr("asarray")(obj).cast<py::array>();
+  py::object o = py::reinterpret_borrow<py::object>(obj);
+  if (!py::isinstance<py::array>(o) && py::hasattr(o, "numpy") &&
+      PyCallable_Check(o.attr("numpy").ptr()))
+    o = o.attr("numpy")();
+  return py::module_::import("numpy").attr("asarray")(o).cast<py::array>();
 }
 
 // A float32 C-contiguous view of `obj` (no copy when it already is one). Float dtypes other than
@@ -93,6 +99,12 @@ Rays get_rays(py::handle obj) {
   r.data = r.array.data();
   return r;
 }
+
+// slimrt.Array: the numpy arrays slimrt returns, with Open3D Tensor's numpy() (returning the plain
+// numpy array, no copy), so that Open3D code such as ans["t_hit"].numpy() runs unchanged.
+py::handle array_type;  // set once by the module, kept for the interpreter's lifetime
+
+py::object result(const py::array& a) { return a.attr("view")(array_type); }
 
 template <class T>
 py::array_t<T> output(const std::vector<py::ssize_t>& shape, std::vector<py::ssize_t> tail = {}) {
@@ -314,15 +326,15 @@ class RaycastingScene {
     }
     bad.raise_if_any(rays);
     py::dict out;
-    out["t_hit"] = t_hit;
-    out["geometry_ids"] = geom;
-    out["primitive_ids"] = prim;
-    out["primitive_uvs"] = uvs;
-    out["primitive_normals"] = normals;
+    out["t_hit"] = result(t_hit);
+    out["geometry_ids"] = result(geom);
+    out["primitive_ids"] = result(prim);
+    out["primitive_uvs"] = result(uvs);
+    out["primitive_normals"] = result(normals);
     return out;
   }
 
-  py::array test_occlusions(py::handle rays_obj, float tnear, float tfar, int nthreads) {
+  py::object test_occlusions(py::handle rays_obj, float tnear, float tfar, int nthreads) {
     if (std::isnan(tnear) || std::isnan(tfar))
       throw py::value_error("test_occlusions: expected numbers for tnear and tfar, got NaN");
     Rays rays = get_rays(rays_obj);
@@ -346,14 +358,14 @@ class RaycastingScene {
       });
     }
     bad.raise_if_any(rays);
-    return out;
+    return result(out);
   }
 
   // slimrt has no all-hits query: each ray is traced again and again, each time starting just
   // past the last hit (tnear = the next float after its t), so every distinct hit distance counts
   // once: a ray through a shared edge or vertex counts one crossing, coincident triangles count
   // once. At most max_hits hits are counted per ray.
-  py::array count_intersections(py::handle rays_obj, int nthreads, uint32_t max_hits) {
+  py::object count_intersections(py::handle rays_obj, int nthreads, uint32_t max_hits) {
     Rays rays = get_rays(rays_obj);
     auto out = output<int32_t>(rays.shape);
     int32_t* po = out.mutable_data();
@@ -385,7 +397,7 @@ class RaycastingScene {
       });
     }
     bad.raise_if_any(rays);
-    return out;
+    return result(out);
   }
 
   py::dict memory() {
@@ -773,6 +785,18 @@ PYBIND11_MODULE(slimrt, m) {
   py::register_exception<slim::NotApplicable>(m, "NotApplicable", error.ptr());
   m.attr("INVALID_ID") = kInvalid;
   m.attr("__version__") = SLIMRT_VERSION;
+  py::exec(R"(
+import numpy as _np
+class Array(_np.ndarray):
+    """A numpy array (what slimrt returns) with numpy(), as Open3D's Tensor has: the plain
+    numpy.ndarray view of the same memory."""
+    __slots__ = ()
+    def numpy(self):
+        return self.view(_np.ndarray)
+Array.__module__ = "slimrt"
+)",
+           m.attr("__dict__"));
+  array_type = py::object(m.attr("Array")).release();
   m.def("configs", &slim::all_config_names,
         "Every configuration name (the formats of the README).");
   m.def(
@@ -828,12 +852,57 @@ PYBIND11_MODULE(slimrt, m) {
                               "A scene of triangle meshes to cast rays against (Open3D's "
                               "RaycastingScene names and conventions). config is a slimrt "
                               "configuration (slimrt.configs()); threads = 0 uses all cores.")
-      .def(py::init<const std::string&, int, py::object>(), py::arg("config") = "clbvh-compact",
-           py::arg("threads") = 0, py::arg("progress") = py::none(),
+      .def(py::init([](py::object config, int threads, py::object progress,
+                       std::optional<int> nthreads) {
+             // Open3D's RaycastingScene(nthreads=0): an int in the place of the config, or the
+             // nthreads keyword.
+             std::string name = "clbvh-compact";
+             if (PyLong_Check(config.ptr()) && !PyBool_Check(config.ptr())) {
+               if (nthreads) throw py::type_error("RaycastingScene: nthreads given twice");
+               nthreads = config.cast<int>();
+             } else if (!config.is_none()) {
+               if (!py::isinstance<py::str>(config))
+                 throw py::type_error(
+                     "config: expected a configuration name (slimrt.configs()) or, as "
+                     "Open3D's RaycastingScene(nthreads), a number of threads");
+               name = config.cast<std::string>();
+             }
+             if (nthreads) {
+               if (threads != 0 && threads != *nthreads)
+                 throw py::value_error("RaycastingScene: threads and nthreads disagree");
+               threads = *nthreads;
+             }
+             return std::make_unique<RaycastingScene>(name, threads, std::move(progress));
+           }),
+           py::arg("config") = "clbvh-compact", py::arg("threads") = 0,
+           py::arg("progress") = py::none(), py::arg("nthreads") = py::none(),
+           "RaycastingScene(config='clbvh-compact', threads=0, progress=None); Open3D's "
+           "RaycastingScene(nthreads=0) and RaycastingScene(4) work too (nthreads is threads). "
            "progress: optional callable progress(phase, done, total) called during the build "
            "(phases 'prepare', 'bvh2', 'collapse'; done grows to total in each); returning "
            "False cancels the build, which raises slimrt.Cancelled.")
       .def_property_readonly_static("INVALID_ID", [](py::object) { return kInvalid; })
+      .def(
+          "add_triangles",
+          [](RaycastingScene& self, py::object mesh) {
+            // Open3D's add_triangles(mesh): an open3d.t.geometry.TriangleMesh (vertex
+            // "positions", triangle "indices") or a legacy open3d.geometry.TriangleMesh
+            // (vertices, triangles).
+            if (py::hasattr(mesh, "vertex") && py::hasattr(mesh, "triangle"))
+              return self.add_triangles(mesh.attr("vertex")["positions"],
+                                        mesh.attr("triangle")["indices"]);
+            if (py::hasattr(mesh, "vertices") && py::hasattr(mesh, "triangles"))
+              return self.add_triangles(mesh.attr("vertices"), mesh.attr("triangles"));
+            throw py::type_error(
+                "add_triangles(mesh): expected an open3d.t.geometry.TriangleMesh or an "
+                "open3d.geometry.TriangleMesh, or add_triangles(vertex_positions, "
+                "triangle_indices)");
+          },
+          py::arg("mesh"),
+          "Adds an Open3D triangle mesh (open3d.t.geometry.TriangleMesh: vertex['positions'], "
+          "triangle['indices']; or legacy open3d.geometry.TriangleMesh: vertices, triangles), "
+          "converted as add_triangles(vertex_positions, triangle_indices) converts arrays. "
+          "Returns its geometry id.")
       .def("add_triangles", &RaycastingScene::add_triangles, py::arg("vertex_positions"),
            py::arg("triangle_indices"),
            "Adds a triangle mesh: vertices [N,3] float32, triangles [M,3] uint32. Returns its "
@@ -887,14 +956,20 @@ PYBIND11_MODULE(slimrt, m) {
           [](py::handle K, py::handle E, int width_px, int height_px) {
             auto k = doubles(K, 9, "intrinsic_matrix", "[3, 3]");
             auto e = doubles(E, 16, "extrinsic_matrix", "[4, 4]");
-            return rays_pinhole(k.data(), e.data(), width_px, height_px);
+            return result(rays_pinhole(k.data(), e.data(), width_px, height_px));
           },
           py::arg("intrinsic_matrix"), py::arg("extrinsic_matrix"), py::arg("width_px"),
           py::arg("height_px"),
           "Rays [height_px, width_px, 6] of a pinhole camera: intrinsic K (3x3), world-to-camera "
           "extrinsic (4x4); directions R^T K^-1 (x + 0.5, y + 0.5, 1), not normalized.")
-      .def_static("create_rays_pinhole", &rays_pinhole_fov, py::arg("fov_deg"), py::arg("center"),
-                  py::arg("eye"), py::arg("up"), py::arg("width_px"), py::arg("height_px"),
-                  "Rays [height_px, width_px, 6] of a pinhole camera at eye looking at center, "
-                  "horizontal field of view fov_deg (Open3D's convention).");
+      .def_static(
+          "create_rays_pinhole",
+          [](double fov_deg, py::handle center, py::handle eye, py::handle up, int width_px,
+             int height_px) {
+            return result(rays_pinhole_fov(fov_deg, center, eye, up, width_px, height_px));
+          },
+          py::arg("fov_deg"), py::arg("center"), py::arg("eye"), py::arg("up"), py::arg("width_px"),
+          py::arg("height_px"),
+          "Rays [height_px, width_px, 6] of a pinhole camera at eye looking at center, "
+          "horizontal field of view fov_deg (Open3D's convention).");
 }

@@ -751,12 +751,14 @@ py::tuple load_triangles(const std::string& path) {
   }
   const uint64_t nt = m.fan_triangle_count();
   py::array_t<float> v({py::ssize_t(m.positions.size()), py::ssize_t(3)});
-  if (!m.positions.empty())
-    std::memcpy(v.mutable_data(), m.positions.data(), m.positions.size() * sizeof(slim::Vec3f));
   py::array_t<uint32_t> t({py::ssize_t(nt), py::ssize_t(3)});
   py::array_t<uint32_t> face({py::ssize_t(nt)});
+  float* pv = v.mutable_data();
   uint32_t* pt = t.mutable_data();
   uint32_t* pf = face.mutable_data();
+  py::gil_scoped_release release;  // only the raw buffers are written from here on
+  if (!m.positions.empty())
+    std::memcpy(pv, m.positions.data(), m.positions.size() * sizeof(slim::Vec3f));
   size_t corner = 0, k = 0;
   for (size_t f = 0; f < m.face_sizes.size(); ++f) {
     const uint32_t n = m.face_sizes[f];
@@ -768,6 +770,7 @@ py::tuple load_triangles(const std::string& path) {
     }
     corner += n;
   }
+  py::gil_scoped_acquire gil;
   return py::make_tuple(v, t, face);
 }
 

@@ -1,13 +1,19 @@
 // The Python module `slimrt`: RaycastingScene with the names and conventions of Open3D's
 // open3d.t.geometry.RaycastingScene (add_triangles, add_mesh, cast_rays, test_occlusions,
 // count_intersections, create_rays_pinhole), over any slimrt configuration, plus memory() and
-// stats(). Only the public API (slimrt/slimrt.h) is used.
+// stats(). Only the public API (slimrt/slimrt.h) is used. Open3D code runs unchanged:
+// RaycastingScene(nthreads), add_triangles(mesh) of an Open3D mesh, open3d.core.Tensor inputs,
+// and answers (slimrt.Array, numpy arrays) that have Tensor's numpy().
 //
 // Arrays: rays are read in place when they are float32 and C-contiguous (any other float dtype
-// or layout is converted once); vertices and triangles are copied once into the scene's input
-// mesh. Bad arrays raise TypeError (dtype) or ValueError (shape, NaN, index range) naming what
-// was expected. The scene is built on the first query after geometry was added (as Open3D does);
-// building and tracing run with the GIL released, rays in parallel with TBB.
+// or layout is converted once); vertices and triangles are referenced, not copied, when they are
+// float32 and uint32 (or non-negative int32) C-contiguous arrays: the scene keeps them alive and
+// reads them when it builds (other dtypes and layouts are converted once into arrays it owns). Bad
+// arrays raise TypeError (dtype) or ValueError (shape, NaN, index range) naming what was expected.
+// The scene is built on the first query after geometry was added (as Open3D does); building and
+// tracing run with the GIL released, rays in parallel with TBB. Python threads may query one
+// scene at once and add geometry while others query (a query keeps the scene it started with).
+#include <pybind11/eval.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -23,7 +29,9 @@
 #include <mutex>
 #include <optional>
 #include <sstream>
+#include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "slimrt/slimrt.h"
@@ -47,12 +55,14 @@ std::string shape_str(const py::array& a) {
 
 std::string dtype_str(const py::array& a) { return py::str(a.dtype()).cast<std::string>(); }
 
-// Open3D tensors and other array-likes: anything numpy can view; open3d.core.Tensor via .numpy().
+// Open3D tensors and other array-likes: anything numpy can view; objects with a numpy() method
+// (open3d.core.Tensor, whose numpy.asarray would be an array of objects) through it.
 py::array as_array(py::handle obj) {
-  if (!py::isinstance<py::array>(obj) && py::hasattr(obj, "numpy") &&
-      !py::hasattr(obj, "__array__"))
-    obj = obj.attr("numpy")();
-  return py::module_::import("numpy").attr("asarray")(obj).cast<py::array>();
+  py::object o = py::reinterpret_borrow<py::object>(obj);
+  if (!py::isinstance<py::array>(o) && py::hasattr(o, "numpy") &&
+      PyCallable_Check(o.attr("numpy").ptr()))
+    o = o.attr("numpy")();
+  return py::module_::import("numpy").attr("asarray")(o).cast<py::array>();
 }
 
 // A float32 C-contiguous view of `obj` (no copy when it already is one). Float dtypes other than
@@ -89,6 +99,12 @@ Rays get_rays(py::handle obj) {
   r.data = r.array.data();
   return r;
 }
+
+// slimrt.Array: the numpy arrays slimrt returns, with Open3D Tensor's numpy() (returning the plain
+// numpy array, no copy), so that Open3D code such as ans["t_hit"].numpy() runs unchanged.
+py::handle array_type;  // set once by the module, kept for the interpreter's lifetime
+
+py::object result(const py::array& a) { return a.attr("view")(array_type); }
 
 template <class T>
 py::array_t<T> output(const std::vector<py::ssize_t>& shape, std::vector<py::ssize_t> tail = {}) {
@@ -141,6 +157,13 @@ inline bool load_ray(const float* p, slim::Ray& r) {
            std::isnan(p[4]) || std::isnan(p[5]));
 }
 
+// slimrt.Mesh: a mesh file loaded once (polygons kept), to add to any number of scenes without
+// loading or copying it again.
+struct LoadedMesh {
+  std::shared_ptr<const slim::PolyMesh> mesh;
+  std::string path;
+};
+
 class RaycastingScene {
  public:
   RaycastingScene(const std::string& config, int threads, py::object progress)
@@ -158,12 +181,20 @@ class RaycastingScene {
     options_.threads = threads;
   }
 
+  // Vertices and triangles are referenced, not copied, when they are float32 and uint32 (or
+  // int32) C-contiguous arrays: the scene keeps the arrays alive and reads them when it builds.
+  // Any other dtype or layout is converted once into an array the scene owns.
   uint32_t add_triangles(py::handle vertices_obj, py::handle triangles_obj) {
-    auto v = float_array(vertices_obj, "vertices", "of shape [N, 3]");
+    check_not_in_own_callback();
+    Geometry g;
+    py::array v = as_array(vertices_obj);
+    if (v.dtype().kind() != 'f')
+      throw py::type_error("vertices: expected a float32 array of shape [N, 3], got dtype " +
+                           dtype_str(v));
     if (v.ndim() != 2 || v.shape(1) != 3)
       throw py::value_error("vertices: expected shape [N, 3], got shape " + shape_str(v));
     py::array t = as_array(triangles_obj);
-    char kind = t.dtype().kind();
+    const char kind = t.dtype().kind();
     if (kind != 'u' && kind != 'i')
       throw py::type_error("triangles: expected a uint32 array of shape [M, 3], got dtype " +
                            dtype_str(t));
@@ -173,50 +204,78 @@ class RaycastingScene {
     if (nv > size_t(kInvalid))
       throw py::value_error("vertices: at most 2^32 - 1 vertices, got " + std::to_string(nv));
 
-    slim::PolyMesh mesh;
-    mesh.name = "geometry " + std::to_string(meshes_.size());
-    mesh.positions.resize(nv);
-    static_assert(sizeof(slim::Vec3f) == 3 * sizeof(float));
-    if (nv)
-      std::memcpy(static_cast<void*>(mesh.positions.data()), v.data(), nv * sizeof(slim::Vec3f));
-    for (size_t i = 0; i < nv; ++i) {
-      const slim::Vec3f& p = mesh.positions[i];
-      if (!(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z)))
-        throw py::value_error("vertices: expected finite coordinates, vertex " + std::to_string(i) +
-                              " is [" + std::to_string(p.x) + ", " + std::to_string(p.y) + ", " +
-                              std::to_string(p.z) + "]");
+    if (py::isinstance<py::array_t<float, py::array::c_style>>(v)) {
+      g.vertices = v;
+    } else {
+      g.vertices = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(v);
+      g.vertices_owned = true;
     }
-    // Indices: any integer dtype, each checked against the vertex count.
-    auto idx = py::array_t<int64_t, py::array::c_style | py::array::forcecast>::ensure(t);
-    if (kind == 'u' && t.dtype().itemsize() == 8) {
-      // uint64 above 2^63 would turn negative as int64: check in the original type.
-      auto u = py::array_t<uint64_t, py::array::c_style>::ensure(t);
-      for (size_t i = 0; i < nt * 3; ++i)
-        if (u.data()[i] >= nv)
-          throw py::value_error("triangles: expected indices in [0, " + std::to_string(nv) +
-                                "), triangle " + std::to_string(i / 3) + " has " +
-                                std::to_string(u.data()[i]));
+    g.positions = static_cast<const float*>(g.vertices.data());
+    g.vertex_count = nv;
+
+    // Indices: uint32 and int32 C-contiguous arrays as they are (int32 checked non-negative,
+    // then read as uint32: the same bits), other integer dtypes converted to uint32 after the
+    // range check in their own type.
+    const bool as_is = (py::isinstance<py::array_t<uint32_t, py::array::c_style>>(t) ||
+                        py::isinstance<py::array_t<int32_t, py::array::c_style>>(t));
+    std::string bad;
+    if (as_is) {
+      g.triangles = t;
+      const void* p = t.data();
+      const bool is_signed = kind == 'i';
+      py::gil_scoped_release release;
+      bad = is_signed ? first_bad_index(static_cast<const int32_t*>(p), nt * 3, nv)
+                      : first_bad_index(static_cast<const uint32_t*>(p), nt * 3, nv);
+    } else if (kind == 'u') {
+      auto u = py::array_t<uint64_t, py::array::c_style | py::array::forcecast>::ensure(t);
+      py::gil_scoped_release release;
+      bad = first_bad_index(u.data(), nt * 3, nv);
+    } else {
+      auto s = py::array_t<int64_t, py::array::c_style | py::array::forcecast>::ensure(t);
+      py::gil_scoped_release release;
+      bad = first_bad_index(s.data(), nt * 3, nv);
     }
-    mesh.face_indices.resize(nt * 3);
-    const int64_t* src = idx.data();
-    for (size_t i = 0; i < nt * 3; ++i) {
-      int64_t k = src[i];
-      if (k < 0 || uint64_t(k) >= nv)
-        throw py::value_error("triangles: expected indices in [0, " + std::to_string(nv) +
-                              "), triangle " + std::to_string(i / 3) + " has " + std::to_string(k));
-      mesh.face_indices[i] = uint32_t(k);
+    if (!bad.empty()) throw py::value_error(bad);
+    if (!as_is) {
+      g.triangles = py::array_t<uint32_t, py::array::c_style | py::array::forcecast>::ensure(t);
+      g.triangles_owned = true;
     }
-    mesh.face_sizes.assign(nt, 3);
-    return add(std::move(mesh));
+    g.indices = static_cast<const uint32_t*>(g.triangles.data());
+    g.triangle_count = nt;
+
+    {
+      py::gil_scoped_release release;
+      const float* p = g.positions;
+      for (size_t i = 0; i < nv; ++i)
+        if (!(std::isfinite(p[3 * i]) && std::isfinite(p[3 * i + 1]) &&
+              std::isfinite(p[3 * i + 2]))) {
+          bad = "vertices: expected finite coordinates, vertex " + std::to_string(i) + " is [" +
+                std::to_string(p[3 * i]) + ", " + std::to_string(p[3 * i + 1]) + ", " +
+                std::to_string(p[3 * i + 2]) + "]";
+          break;
+        }
+    }
+    if (!bad.empty()) throw py::value_error(bad);
+    return add(std::move(g));
   }
 
   uint32_t add_mesh(const std::string& path) {
-    slim::PolyMesh mesh;
+    check_not_in_own_callback();
+    Geometry g;
     {
       py::gil_scoped_release release;
-      mesh = slim::load(path);
+      g.mesh = std::make_shared<const slim::PolyMesh>(slim::load(path));
     }
-    return add(std::move(mesh));
+    g.mesh_owned = true;
+    return add(std::move(g));
+  }
+
+  // A mesh loaded once (slimrt.Mesh), shared with the scene rather than copied.
+  uint32_t add_loaded_mesh(const LoadedMesh& mesh) {
+    check_not_in_own_callback();
+    Geometry g;
+    g.mesh = mesh.mesh;
+    return add(std::move(g));
   }
 
   py::dict cast_rays(py::handle rays_obj, int nthreads) {
@@ -235,7 +294,8 @@ class RaycastingScene {
     const int nt = threads(nthreads);
     {
       py::gil_scoped_release release;
-      const slim::Scene& scene = built();
+      const std::shared_ptr<const slim::Scene> kept = built();
+      const slim::Scene& scene = *kept;
       parallel(rays.count, nt, [&](size_t b, size_t e) {
         for (size_t i = b; i < e; ++i) {
           slim::Ray r;
@@ -266,15 +326,15 @@ class RaycastingScene {
     }
     bad.raise_if_any(rays);
     py::dict out;
-    out["t_hit"] = t_hit;
-    out["geometry_ids"] = geom;
-    out["primitive_ids"] = prim;
-    out["primitive_uvs"] = uvs;
-    out["primitive_normals"] = normals;
+    out["t_hit"] = result(t_hit);
+    out["geometry_ids"] = result(geom);
+    out["primitive_ids"] = result(prim);
+    out["primitive_uvs"] = result(uvs);
+    out["primitive_normals"] = result(normals);
     return out;
   }
 
-  py::array test_occlusions(py::handle rays_obj, float tnear, float tfar, int nthreads) {
+  py::object test_occlusions(py::handle rays_obj, float tnear, float tfar, int nthreads) {
     if (std::isnan(tnear) || std::isnan(tfar))
       throw py::value_error("test_occlusions: expected numbers for tnear and tfar, got NaN");
     Rays rays = get_rays(rays_obj);
@@ -284,7 +344,8 @@ class RaycastingScene {
     const int nt = threads(nthreads);
     {
       py::gil_scoped_release release;
-      const slim::Scene& scene = built();
+      const std::shared_ptr<const slim::Scene> kept = built();
+      const slim::Scene& scene = *kept;
       parallel(rays.count, nt, [&](size_t b, size_t e) {
         for (size_t i = b; i < e; ++i) {
           slim::Ray r;
@@ -297,14 +358,14 @@ class RaycastingScene {
       });
     }
     bad.raise_if_any(rays);
-    return out;
+    return result(out);
   }
 
   // slimrt has no all-hits query: each ray is traced again and again, each time starting just
   // past the last hit (tnear = the next float after its t), so every distinct hit distance counts
   // once: a ray through a shared edge or vertex counts one crossing, coincident triangles count
   // once. At most max_hits hits are counted per ray.
-  py::array count_intersections(py::handle rays_obj, int nthreads, uint32_t max_hits) {
+  py::object count_intersections(py::handle rays_obj, int nthreads, uint32_t max_hits) {
     Rays rays = get_rays(rays_obj);
     auto out = output<int32_t>(rays.shape);
     int32_t* po = out.mutable_data();
@@ -314,7 +375,8 @@ class RaycastingScene {
     const int nt = threads(nthreads);
     {
       py::gil_scoped_release release;
-      const slim::Scene& scene = built();
+      const std::shared_ptr<const slim::Scene> kept = built();
+      const slim::Scene& scene = *kept;
       parallel(rays.count, nt, [&](size_t b, size_t e) {
         for (size_t i = b; i < e; ++i) {
           slim::Ray r;
@@ -335,19 +397,19 @@ class RaycastingScene {
       });
     }
     bad.raise_if_any(rays);
-    return out;
+    return result(out);
   }
 
   py::dict memory() {
     py::dict d;
-    if (meshes_.empty() && !opened()) {
+    if (geometries_.empty() && !opened()) {
       for (const char* k : {"geometry", "bvh", "other", "total", "triangles"}) d[k] = 0;
       d["bytes_per_triangle"] = 0.0;
     } else {
       slim::MemoryStats m;
       {
         py::gil_scoped_release release;
-        m = built().memory();
+        m = built()->memory();
       }
       d["geometry"] = m.geometry_bytes;
       d["bvh"] = m.bvh_bytes;
@@ -356,25 +418,30 @@ class RaycastingScene {
       d["triangles"] = m.triangles;
       d["bytes_per_triangle"] = m.bytes_per_triangle();
     }
-    d["input_meshes"] = input_bytes();
+    const auto [owned, referenced] = input_bytes();
+    d["input_meshes"] = owned;
+    d["input_referenced"] = referenced;
     return d;
   }
 
   py::dict stats() {
     py::dict d;
     d["config"] = options_.config_name();
-    d["geometries"] = meshes_.size();
-    if (meshes_.empty() && !opened()) return d;
+    d["geometries"] = geometries_.size();
+    if (geometries_.empty() && !opened()) return d;
+    std::shared_ptr<const slim::Scene> scene;
     {
       py::gil_scoped_release release;
-      built();
+      scene = built();
     }
-    const slim::SceneStats& s = scene_->stats();
+    const slim::SceneStats& s = scene->stats();
     d["build_seconds"] = s.build_seconds;
     d["input_faces"] = s.input_faces;
     d["triangles"] = s.triangles;
     d["skipped_faces"] = s.skipped_faces;
     d["primitives"] = s.primitives;
+    d["lossy"] = scene->is_lossy();
+    d["error_bound"] = scene->error_bound();
     py::dict details;
     for (const auto& [k, v] : s.details) details[py::str(k)] = v;
     d["details"] = details;
@@ -382,13 +449,13 @@ class RaycastingScene {
   }
 
   std::string config() const { return options_.config_name(); }
-  size_t geometry_count() const { return meshes_.size(); }
+  size_t geometry_count() const { return geometries_.size(); }
 
   // Scene files (slim::Scene::save / open): the built scene, written atomically; a scene opened
   // from a file traces straight from its mapping and takes no more geometry.
   void save(const std::string& path) {
     py::gil_scoped_release release;
-    built().save(path);
+    built()->save(path);
   }
   static std::unique_ptr<RaycastingScene> open(const std::string& path, bool verify_checksums) {
     slim::OpenOptions o;
@@ -401,23 +468,74 @@ class RaycastingScene {
   }
 
  private:
+  // One geometry: a mesh file (owned) or the arrays of add_triangles (referenced, or owned when
+  // they were converted). Python objects are only touched with the GIL; the raw pointers are
+  // what the build reads without it.
+  struct Geometry {
+    std::shared_ptr<const slim::PolyMesh> mesh;  // add_mesh
+    bool mesh_owned = false;        // loaded by add_mesh(path), not shared with a slimrt.Mesh
+    py::array vertices, triangles;  // add_triangles: float32 [N, 3], (u)int32 [M, 3]
+    bool vertices_owned = false, triangles_owned = false;
+    const float* positions = nullptr;
+    const uint32_t* indices = nullptr;
+    size_t vertex_count = 0, triangle_count = 0;
+  };
+
   // A scene opened from a file: its options as saved (any combination, with or without a
   // registry name), all cores.
-  explicit RaycastingScene(slim::Scene opened) : options_(opened.options()), progress_(py::none()) {
+  explicit RaycastingScene(slim::Scene opened)
+      : options_(opened.options()), progress_(py::none()), opened_(true) {
     options_.threads = 0;
-    scene_.emplace(std::move(opened));
+    scene_ = std::make_shared<const slim::Scene>(std::move(opened));
   }
-  bool opened() const { return scene_ && !scene_->file().empty(); }
+  bool opened() const { return opened_; }
 
-  uint32_t add(slim::PolyMesh&& mesh) {
+  // The first index outside [0, nv) as an error message, or "".
+  template <class T>
+  static std::string first_bad_index(const T* p, size_t n, size_t nv) {
+    for (size_t i = 0; i < n; ++i)
+      if (p[i] < 0 || uint64_t(p[i]) >= nv) {
+        std::ostringstream s;
+        s << "triangles: expected indices in [0, " << nv << "), triangle " << i / 3 << " has "
+          << +p[i];
+        return s.str();
+      }
+    return {};
+  }
+
+  // The scene whose progress callable the current thread is running (nullptr outside one).
+  static inline thread_local const RaycastingScene* in_callback_of_ = nullptr;
+  // A query or add from inside this scene's own progress callable would wait for the build that
+  // is calling it: refused.
+  void check_not_in_own_callback() const {
+    if (in_callback_of_ == this)
+      throw std::runtime_error(
+          "slimrt.RaycastingScene: its progress callable cannot use the scene it is building "
+          "(the scene is not built until the callable returns)");
+  }
+
+  // mutex_ is never waited for while holding the GIL: the thread that holds it may need the GIL
+  // (a progress callable) before it lets go.
+  std::unique_lock<std::mutex> lock_without_gil() {
+    std::unique_lock<std::mutex> lock(mutex_, std::defer_lock);
+    if (PyGILState_Check()) {
+      py::gil_scoped_release release;
+      lock.lock();
+    } else {
+      lock.lock();
+    }
+    return lock;
+  }
+
+  uint32_t add(Geometry&& g) {
     if (opened())
       throw py::value_error("this scene was opened from a scene file: it takes no more geometry");
-    if (meshes_.size() >= size_t(kInvalid))
+    auto lock = lock_without_gil();
+    if (geometries_.size() >= size_t(kInvalid))
       throw py::value_error("at most 2^32 - 1 geometries in a scene");
-    std::lock_guard<std::mutex> lock(mutex_);
-    meshes_.push_back(std::move(mesh));
-    scene_.reset();  // rebuilt on the next query
-    return uint32_t(meshes_.size() - 1);
+    geometries_.push_back(std::move(g));
+    scene_.reset();  // rebuilt on the next query; queries running now keep the old one
+    return uint32_t(geometries_.size() - 1);
   }
 
   int threads(int nthreads) const {
@@ -427,61 +545,106 @@ class RaycastingScene {
     return nthreads > 0 ? nthreads : threads_;
   }
 
-  // The scene, built now if geometry was added since the last build. Called without the GIL.
-  // With a progress callable, it is called with the GIL taken (and only then); it returning False,
-  // raising, or a signal (Ctrl-C) cancels the build.
-  const slim::Scene& built() {
-    std::lock_guard<std::mutex> lock(mutex_);
+  // The scene, built now if geometry was added since the last build; shared, so that a query
+  // keeps it while another thread adds geometry. Called without the GIL; touches no Python
+  // object except the progress callable, which it calls with the GIL taken (and only then),
+  // isolated from the build's other TBB tasks. The callable returning False, raising, or a
+  // signal (Ctrl-C) cancels the build.
+  std::shared_ptr<const slim::Scene> built() {
+    check_not_in_own_callback();
+    auto lock = lock_without_gil();
     if (!scene_) {
       slim::BuildOptions opt = options_;
       std::unique_ptr<py::error_already_set> raised;
       if (!progress_.is_none())
         opt.progress = [this, &raised](const slim::BuildProgress& p) {
-          py::gil_scoped_acquire gil;
-          try {
-            if (PyErr_CheckSignals() != 0) throw py::error_already_set();
-            py::object r = progress_(p.phase, p.done, p.total);
-            if (r.is_none()) return true;
-            const int truth = PyObject_IsTrue(r.ptr());
-            if (truth < 0) throw py::error_already_set();
-            return truth != 0;
-          } catch (py::error_already_set& e) {
-            raised = std::make_unique<py::error_already_set>(std::move(e));
-            return false;
-          }
+          bool go_on = false;
+          tbb::this_task_arena::isolate([&] {
+            py::gil_scoped_acquire gil;
+            const RaycastingScene* outer = in_callback_of_;
+            in_callback_of_ = this;
+            try {
+              if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+              py::object r = progress_(p.phase, p.done, p.total);
+              int truth = 1;
+              if (!r.is_none()) {
+                truth = PyObject_IsTrue(r.ptr());
+                if (truth < 0) throw py::error_already_set();
+              }
+              go_on = truth != 0;
+            } catch (py::error_already_set& e) {
+              raised = std::make_unique<py::error_already_set>(std::move(e));
+              go_on = false;
+            }
+            in_callback_of_ = outer;
+          });
+          return go_on;
         };
-      try {
-        if (meshes_.empty()) {
-          slim::PolyMesh empty;
-          scene_.emplace(slim::Scene::build(empty, opt));
-        } else {
-          scene_.emplace(slim::Scene::build(meshes_, opt));
+      // The arrays of add_triangles become meshes for the time of the build only.
+      std::vector<slim::PolyMesh> views;
+      std::vector<const slim::PolyMesh*> meshes;
+      views.reserve(geometries_.size());
+      for (size_t i = 0; i < geometries_.size(); ++i) {
+        const Geometry& g = geometries_[i];
+        if (g.mesh) {
+          meshes.push_back(g.mesh.get());
+          continue;
         }
+        slim::PolyMesh& m = views.emplace_back();
+        m.name = "geometry " + std::to_string(i);
+        m.positions.resize(g.vertex_count);
+        static_assert(sizeof(slim::Vec3f) == 3 * sizeof(float));
+        if (g.vertex_count)
+          std::memcpy(static_cast<void*>(m.positions.data()), g.positions,
+                      g.vertex_count * sizeof(slim::Vec3f));
+        m.face_indices.assign(g.indices, g.indices + 3 * g.triangle_count);
+        m.face_sizes.assign(g.triangle_count, 3);
+        meshes.push_back(&m);
+      }
+      slim::PolyMesh empty;
+      if (meshes.empty()) meshes.push_back(&empty);
+      try {
+        scene_ = std::make_shared<const slim::Scene>(slim::Scene::build(meshes, opt));
       } catch (const slim::Cancelled&) {
-        if (raised) throw std::move(*raised);  // the callable's own exception
+        if (raised) {
+          py::gil_scoped_acquire gil;  // the exception object is Python's
+          py::error_already_set e = std::move(*raised);
+          raised.reset();
+          throw e;
+        }
         throw;
       }
     }
-    return *scene_;
+    return scene_;
   }
 
-  uint64_t input_bytes() const {
-    uint64_t b = 0;
-    for (const slim::PolyMesh& m : meshes_)
-      b += m.positions.size() * sizeof(slim::Vec3f) +
-           (m.face_sizes.size() + m.face_indices.size() + m.normal_indices.size() +
-            m.uv_indices.size() + m.face_object.size()) *
-               sizeof(uint32_t) +
-           m.normals.size() * sizeof(slim::Vec3f) + m.uvs.size() * sizeof(slim::Vec2f);
-    return b;
+  // Bytes of input the scene keeps: owned (mesh files, converted arrays) and referenced (the
+  // caller's arrays, kept alive).
+  std::pair<uint64_t, uint64_t> input_bytes() const {
+    uint64_t owned = 0, referenced = 0;
+    for (const Geometry& g : geometries_) {
+      if (const slim::PolyMesh* m = g.mesh.get()) {
+        (g.mesh_owned ? owned : referenced) +=
+            m->positions.size() * sizeof(slim::Vec3f) +
+            (m->face_sizes.size() + m->face_indices.size() + m->normal_indices.size() +
+             m->uv_indices.size() + m->face_object.size()) *
+                sizeof(uint32_t) +
+            m->normals.size() * sizeof(slim::Vec3f) + m->uvs.size() * sizeof(slim::Vec2f);
+        continue;
+      }
+      (g.vertices_owned ? owned : referenced) += uint64_t(g.vertices.nbytes());
+      (g.triangles_owned ? owned : referenced) += uint64_t(g.triangles.nbytes());
+    }
+    return {owned, referenced};
   }
 
   slim::BuildOptions options_;
   int threads_ = 0;
   py::object progress_;  // None or progress(phase, done, total)
-  std::vector<slim::PolyMesh> meshes_;
-  std::optional<slim::Scene> scene_;
-  std::mutex mutex_;
+  bool opened_ = false;  // opened from a scene file
+  std::mutex mutex_;     // guards geometries_ and scene_ (with the GIL for geometries_)
+  std::vector<Geometry> geometries_;
+  std::shared_ptr<const slim::Scene> scene_;
 };
 
 // Open3D's create_rays_pinhole from intrinsic K (3x3) and the world-to-camera extrinsic (4x4):
@@ -504,18 +667,21 @@ py::array_t<float> rays_pinhole(const double K[9], const double E[16], int width
   for (int j = 0; j < 3; ++j) o[j] = -(R[0][j] * t[0] + R[1][j] * t[1] + R[2][j] * t[2]);
   py::array_t<float> out({py::ssize_t(height), py::ssize_t(width), py::ssize_t(6)});
   float* p = out.mutable_data();
-  for (int y = 0; y < height; ++y)
-    for (int x = 0; x < width; ++x) {
-      // K^-1 of an upper triangular K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]].
-      double v = (y + 0.5 - cy) / fy;
-      double u = (x + 0.5 - cx - s * v) / fx;
-      double d[3] = {u, v, 1.0};
-      for (int j = 0; j < 3; ++j) {
-        p[j] = float(o[j]);
-        p[3 + j] = float(R[0][j] * d[0] + R[1][j] * d[1] + R[2][j] * d[2]);
+  {
+    py::gil_scoped_release release;  // big images take a while; only `p` is written
+    for (int y = 0; y < height; ++y)
+      for (int x = 0; x < width; ++x) {
+        // K^-1 of an upper triangular K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]].
+        double v = (y + 0.5 - cy) / fy;
+        double u = (x + 0.5 - cx - s * v) / fx;
+        double d[3] = {u, v, 1.0};
+        for (int j = 0; j < 3; ++j) {
+          p[j] = float(o[j]);
+          p[3 + j] = float(R[0][j] * d[0] + R[1][j] * d[1] + R[2][j] * d[2]);
+        }
+        p += 6;
       }
-      p += 6;
-    }
+  }
   return out;
 }
 
@@ -585,12 +751,14 @@ py::tuple load_triangles(const std::string& path) {
   }
   const uint64_t nt = m.fan_triangle_count();
   py::array_t<float> v({py::ssize_t(m.positions.size()), py::ssize_t(3)});
-  if (!m.positions.empty())
-    std::memcpy(v.mutable_data(), m.positions.data(), m.positions.size() * sizeof(slim::Vec3f));
   py::array_t<uint32_t> t({py::ssize_t(nt), py::ssize_t(3)});
   py::array_t<uint32_t> face({py::ssize_t(nt)});
+  float* pv = v.mutable_data();
   uint32_t* pt = t.mutable_data();
   uint32_t* pf = face.mutable_data();
+  py::gil_scoped_release release;  // only the raw buffers are written from here on
+  if (!m.positions.empty())
+    std::memcpy(pv, m.positions.data(), m.positions.size() * sizeof(slim::Vec3f));
   size_t corner = 0, k = 0;
   for (size_t f = 0; f < m.face_sizes.size(); ++f) {
     const uint32_t n = m.face_sizes[f];
@@ -602,6 +770,7 @@ py::tuple load_triangles(const std::string& path) {
     }
     corner += n;
   }
+  py::gil_scoped_acquire gil;
   return py::make_tuple(v, t, face);
 }
 
@@ -619,6 +788,18 @@ PYBIND11_MODULE(slimrt, m) {
   py::register_exception<slim::NotApplicable>(m, "NotApplicable", error.ptr());
   m.attr("INVALID_ID") = kInvalid;
   m.attr("__version__") = SLIMRT_VERSION;
+  py::exec(R"(
+import numpy as _np
+class Array(_np.ndarray):
+    """A numpy array (what slimrt returns) with numpy(), as Open3D's Tensor has: the plain
+    numpy.ndarray view of the same memory."""
+    __slots__ = ()
+    def numpy(self):
+        return self.view(_np.ndarray)
+Array.__module__ = "slimrt"
+)",
+           m.attr("__dict__"));
+  array_type = py::object(m.attr("Array")).release();
   m.def("configs", &slim::all_config_names,
         "Every configuration name (the formats of the README).");
   m.def(
@@ -645,24 +826,103 @@ PYBIND11_MODULE(slimrt, m) {
         "face [M] uint32): polygons are fanned from their first corner, face[i] is the polygon "
         "of triangle i.");
 
+  py::class_<LoadedMesh>(m, "Mesh",
+                         "A mesh file (.obj .ply .gltf .glb, optionally .xz) or procedural scene "
+                         "loaded once, polygons kept, to add to scenes with add_mesh(mesh) "
+                         "without loading or copying it again.")
+      .def(py::init([](const std::string& path) {
+             LoadedMesh lm;
+             lm.path = path;
+             py::gil_scoped_release release;
+             lm.mesh = std::make_shared<const slim::PolyMesh>(slim::load(path));
+             return lm;
+           }),
+           py::arg("path"))
+      .def_readonly("path", &LoadedMesh::path)
+      .def_property_readonly("vertex_count",
+                             [](const LoadedMesh& m) { return m.mesh->positions.size(); })
+      .def_property_readonly("face_count",
+                             [](const LoadedMesh& m) { return m.mesh->face_sizes.size(); })
+      .def_property_readonly(
+          "triangle_count", [](const LoadedMesh& m) { return m.mesh->fan_triangle_count(); },
+          "Triangles after fan triangulation.")
+      .def("__repr__", [](const LoadedMesh& m) {
+        return "slimrt.Mesh(" + py::repr(py::str(m.path)).cast<std::string>() + ", " +
+               std::to_string(m.mesh->face_sizes.size()) + " faces)";
+      });
+
   py::class_<RaycastingScene>(m, "RaycastingScene",
                               "A scene of triangle meshes to cast rays against (Open3D's "
                               "RaycastingScene names and conventions). config is a slimrt "
                               "configuration (slimrt.configs()); threads = 0 uses all cores.")
-      .def(py::init<const std::string&, int, py::object>(), py::arg("config") = "clbvh-compact",
-           py::arg("threads") = 0, py::arg("progress") = py::none(),
+      .def(py::init([](py::object config, int threads, py::object progress,
+                       std::optional<int> nthreads) {
+             // Open3D's RaycastingScene(nthreads=0): an int in the place of the config, or the
+             // nthreads keyword.
+             std::string name = "clbvh-compact";
+             if (PyLong_Check(config.ptr()) && !PyBool_Check(config.ptr())) {
+               if (nthreads) throw py::type_error("RaycastingScene: nthreads given twice");
+               nthreads = config.cast<int>();
+             } else if (!config.is_none()) {
+               if (!py::isinstance<py::str>(config))
+                 throw py::type_error(
+                     "config: expected a configuration name (slimrt.configs()) or, as "
+                     "Open3D's RaycastingScene(nthreads), a number of threads");
+               name = config.cast<std::string>();
+             }
+             if (nthreads) {
+               if (threads != 0 && threads != *nthreads)
+                 throw py::value_error("RaycastingScene: threads and nthreads disagree");
+               threads = *nthreads;
+             }
+             return std::make_unique<RaycastingScene>(name, threads, std::move(progress));
+           }),
+           py::arg("config") = "clbvh-compact", py::arg("threads") = 0,
+           py::arg("progress") = py::none(), py::arg("nthreads") = py::none(),
+           "RaycastingScene(config='clbvh-compact', threads=0, progress=None); Open3D's "
+           "RaycastingScene(nthreads=0) and RaycastingScene(4) work too (nthreads is threads). "
            "progress: optional callable progress(phase, done, total) called during the build "
            "(phases 'prepare', 'bvh2', 'collapse'; done grows to total in each); returning "
            "False cancels the build, which raises slimrt.Cancelled.")
       .def_property_readonly_static("INVALID_ID", [](py::object) { return kInvalid; })
+      .def(
+          "add_triangles",
+          [](RaycastingScene& self, py::object mesh) {
+            // Open3D's add_triangles(mesh): an open3d.t.geometry.TriangleMesh (vertex
+            // "positions", triangle "indices") or a legacy open3d.geometry.TriangleMesh
+            // (vertices, triangles).
+            if (py::hasattr(mesh, "vertex") && py::hasattr(mesh, "triangle"))
+              return self.add_triangles(mesh.attr("vertex")["positions"],
+                                        mesh.attr("triangle")["indices"]);
+            if (py::hasattr(mesh, "vertices") && py::hasattr(mesh, "triangles"))
+              return self.add_triangles(mesh.attr("vertices"), mesh.attr("triangles"));
+            throw py::type_error(
+                "add_triangles(mesh): expected an open3d.t.geometry.TriangleMesh or an "
+                "open3d.geometry.TriangleMesh, or add_triangles(vertex_positions, "
+                "triangle_indices)");
+          },
+          py::arg("mesh"),
+          "Adds an Open3D triangle mesh (open3d.t.geometry.TriangleMesh: vertex['positions'], "
+          "triangle['indices']; or legacy open3d.geometry.TriangleMesh: vertices, triangles), "
+          "converted as add_triangles(vertex_positions, triangle_indices) converts arrays. "
+          "Returns its geometry id.")
       .def("add_triangles", &RaycastingScene::add_triangles, py::arg("vertex_positions"),
            py::arg("triangle_indices"),
            "Adds a triangle mesh: vertices [N,3] float32, triangles [M,3] uint32. Returns its "
-           "geometry id.")
+           "geometry id. Float32 vertices and uint32 (or non-negative int32) triangles in "
+           "C-contiguous arrays are not copied: the scene keeps references to the arrays and "
+           "reads them when it builds (on the next query, and again after more geometry is "
+           "added), so they must not change while the scene is in use. Any other dtype "
+           "(float64, int64, ...) or layout (strided, Fortran order) is copied once, converted "
+           "to float32 / uint32; memory() counts such copies in input_meshes and the referenced "
+           "arrays in input_referenced.")
       .def("add_mesh", &RaycastingScene::add_mesh, py::arg("path"),
            "Adds a mesh file (.obj .ply .gltf .glb, optionally .xz) or a procedural scene; "
            "polygons are kept (primitive_ids are the file's face indices). Returns its geometry "
            "id.")
+      .def("add_mesh", &RaycastingScene::add_loaded_mesh, py::arg("mesh"),
+           "Adds a slimrt.Mesh, shared with it (not copied; memory() counts it in "
+           "input_referenced). Returns its geometry id.")
       .def("cast_rays", &RaycastingScene::cast_rays, py::arg("rays"), py::arg("nthreads") = 0,
            "Closest hits of rays [..., 6] (ox, oy, oz, dx, dy, dz; t in units of the direction's "
            "length). Returns a dict: t_hit [...] (inf on a miss), geometry_ids and primitive_ids "
@@ -679,8 +939,12 @@ PYBIND11_MODULE(slimrt, m) {
            "coincident triangles) count once; at most max_hits per ray.")
       .def("memory", &RaycastingScene::memory,
            "Bytes the scene keeps, by part (geometry, bvh, other, total) and per triangle; "
-           "input_meshes is the copy of the input kept to rebuild when geometry is added.")
-      .def("stats", &RaycastingScene::stats, "Build statistics (builds the scene if needed).")
+           "input_meshes: the input the scene owns to rebuild when geometry is added (mesh "
+           "files, converted arrays); input_referenced: the caller's arrays it references "
+           "(add_triangles without a copy).")
+      .def("stats", &RaycastingScene::stats,
+           "Build statistics (builds the scene if needed); error_bound: the largest distance "
+           "between a decoded and an input vertex (0 for lossless formats).")
       .def("save", &RaycastingScene::save, py::arg("path"),
            "Writes the scene (built now if needed) as a slimrt scene file (.slim), atomically.")
       .def_static("open", &RaycastingScene::open, py::arg("path"),
@@ -695,14 +959,20 @@ PYBIND11_MODULE(slimrt, m) {
           [](py::handle K, py::handle E, int width_px, int height_px) {
             auto k = doubles(K, 9, "intrinsic_matrix", "[3, 3]");
             auto e = doubles(E, 16, "extrinsic_matrix", "[4, 4]");
-            return rays_pinhole(k.data(), e.data(), width_px, height_px);
+            return result(rays_pinhole(k.data(), e.data(), width_px, height_px));
           },
           py::arg("intrinsic_matrix"), py::arg("extrinsic_matrix"), py::arg("width_px"),
           py::arg("height_px"),
           "Rays [height_px, width_px, 6] of a pinhole camera: intrinsic K (3x3), world-to-camera "
           "extrinsic (4x4); directions R^T K^-1 (x + 0.5, y + 0.5, 1), not normalized.")
-      .def_static("create_rays_pinhole", &rays_pinhole_fov, py::arg("fov_deg"), py::arg("center"),
-                  py::arg("eye"), py::arg("up"), py::arg("width_px"), py::arg("height_px"),
-                  "Rays [height_px, width_px, 6] of a pinhole camera at eye looking at center, "
-                  "horizontal field of view fov_deg (Open3D's convention).");
+      .def_static(
+          "create_rays_pinhole",
+          [](double fov_deg, py::handle center, py::handle eye, py::handle up, int width_px,
+             int height_px) {
+            return result(rays_pinhole_fov(fov_deg, center, eye, up, width_px, height_px));
+          },
+          py::arg("fov_deg"), py::arg("center"), py::arg("eye"), py::arg("up"), py::arg("width_px"),
+          py::arg("height_px"),
+          "Rays [height_px, width_px, 6] of a pinhole camera at eye looking at center, "
+          "horizontal field of view fov_deg (Open3D's convention).");
 }

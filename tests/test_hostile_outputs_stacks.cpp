@@ -1,16 +1,28 @@
 // Hostile inputs, continued: non-finite coordinates after glTF node transforms, outputs onto
 // symlinks, devices and FIFOs, the CLI's report of discarded input, and stacks of coincident
 // triangles.
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <sys/sysmacros.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
+#include <chrono>
+#include <filesystem>
+#include <fstream>
 #include <string>
+#include <vector>
 
 #include "io/gltf.h"
+#include "slimrt/output.h"
 #include "slimrt/slimrt.h"
 #include "temp_dir.h"
 #include "test_util.h"
 
+namespace fs = std::filesystem;
 using slim::test::error_of;
+using slim::test::TempDir;
 
 namespace {
 
@@ -68,6 +80,109 @@ TEST(HostileOutputsStacks, GltfTransformThatOverflowsFloatIsAnError) {
               std::string::npos)
         << msg;
   }
+}
+
+// ---- outputs onto links, devices and pipes ----
+
+std::string contents(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+// The link stays a link; its target (relative, in another folder, or not yet existing) gets the
+// bytes, and no temporary file is left in either folder.
+TEST(HostileOutputsStacks, OutputThroughASymlinkWritesItsTarget) {
+  TempDir d{"slim_outputs"};
+  fs::create_directories(d.path("real"));
+  fs::create_directories(d.path("links"));
+  write_file_atomically(d.path("real/a.bin"), "old contents");
+  fs::create_symlink("../real/a.bin", d.path("links/a.bin"));
+  fs::create_symlink("../real/b.bin", d.path("links/b.bin"));  // dangling: created on write
+  fs::create_symlink("a.bin", d.path("links/chain.bin"));      // a link to a link
+  write_file_atomically(d.path("links/a.bin"), "new");
+  write_file_atomically(d.path("links/b.bin"), "bee");
+  EXPECT_TRUE(fs::is_symlink(d.path("links/a.bin")));
+  EXPECT_TRUE(fs::is_symlink(d.path("links/b.bin")));
+  EXPECT_EQ(contents(d.path("real/a.bin")), "new");
+  EXPECT_EQ(contents(d.path("real/b.bin")), "bee");
+  check_output_path(d.path("links/chain.bin"));
+  write_file_atomically(d.path("links/chain.bin"), "chained");
+  EXPECT_TRUE(fs::is_symlink(d.path("links/chain.bin")));
+  EXPECT_EQ(contents(d.path("real/a.bin")), "chained");
+  size_t real_files = 0, links = 0;
+  for (const auto& e : fs::directory_iterator(d.path("real"))) real_files += e.exists();
+  for (const auto& e : fs::directory_iterator(d.path("links"))) links += e.is_symlink();
+  EXPECT_EQ(real_files, 2u);  // a.bin, b.bin: no temporary left
+  EXPECT_EQ(links, 3u);
+  // A link into a missing folder names that folder.
+  fs::create_symlink("../nowhere/c.bin", d.path("links/c.bin"));
+  EXPECT_NE(error_of([&] { check_output_path(d.path("links/c.bin")); }).find("does not exist"),
+            std::string::npos);
+  // A loop of links is an error, not a hang.
+  fs::create_symlink("loop2", d.path("links/loop1"));
+  fs::create_symlink("loop1", d.path("links/loop2"));
+  EXPECT_NE(error_of([&] {
+              write_file_atomically(d.path("links/loop1"), "x");
+            }).find("levels of symbolic links"),
+            std::string::npos);
+}
+
+// A character device is written in place, not replaced by a regular file.
+TEST(HostileOutputsStacks, OutputOntoACharacterDeviceWritesIt) {
+  TempDir d{"slim_outputs"};
+  // As root: a null device node of our own (major 1, minor 3), so a failure replaces it and not
+  // /dev/null. Otherwise /dev/null itself (no temporary file can be created in /dev then).
+  std::string dev = "/dev/null";
+  if (::geteuid() == 0 && ::mknod(d.path("null").c_str(), S_IFCHR | 0666, makedev(1, 3)) == 0)
+    dev = d.path("null");
+  EXPECT_EQ(error_of([&] { check_output_path(dev); }), "");
+  EXPECT_EQ(error_of([&] { write_file_atomically(dev, std::string(100000, 'x')); }), "");
+  struct stat st {};
+  ASSERT_EQ(::stat(dev.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISCHR(st.st_mode)) << dev << " is no longer a character device";
+  if (dev != "/dev/null") EXPECT_EQ(d.entries(), 1u);
+}
+
+// A named pipe with a reader gets the bytes; without one the write is an error at once.
+TEST(HostileOutputsStacks, OutputOntoANamedPipe) {
+  TempDir d{"slim_outputs"};
+  const std::string fifo = d.path("pipe");
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0666), 0);
+  EXPECT_EQ(error_of([&] { check_output_path(fifo); }), "");  // the reader may start later
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string msg = error_of([&] { write_file_atomically(fifo, "hello"); });
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(5));
+  EXPECT_NE(msg.find("pipe: named pipe has no reader"), std::string::npos) << msg;
+  struct stat st {};
+  ASSERT_EQ(::stat(fifo.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISFIFO(st.st_mode));
+  EXPECT_EQ(d.entries(), 1u);
+  // With a reader (non-blocking, so that opening it does not wait for the writer).
+  const int reader = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK);
+  ASSERT_GE(reader, 0);
+  EXPECT_EQ(error_of([&] { write_file_atomically(fifo, "hello"); }), "");
+  char buf[16] = {};
+  EXPECT_EQ(::read(reader, buf, sizeof buf), 5);
+  EXPECT_EQ(std::string(buf), "hello");
+  ::close(reader);
+  ASSERT_EQ(::stat(fifo.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISFIFO(st.st_mode));
+  EXPECT_EQ(d.entries(), 1u);
+}
+
+// The CLI's image goes to the link's target and the link stays.
+TEST(HostileOutputsStacks, CliRendersThroughASymlink) {
+  TempDir d{"slim_outputs"};
+  fs::create_directories(d.path("real"));
+  fs::create_symlink(d.path("real/img.png"), d.path("img.png"));
+  const std::string cmd = std::string(SLIM_CLI_PATH) + " render terrain:8 --res 16x16 --spp 1 -o " +
+                          d.path("img.png") + " >/dev/null 2>&1";
+  const int status = std::system(cmd.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  EXPECT_TRUE(fs::is_symlink(d.path("img.png")));
+  EXPECT_TRUE(fs::is_regular_file(d.path("real/img.png")));
+  EXPECT_GT(fs::file_size(d.path("real/img.png")), 0u);
 }
 
 }  // namespace

@@ -185,4 +185,58 @@ TEST(HostileOutputsStacks, CliRendersThroughASymlink) {
   EXPECT_GT(fs::file_size(d.path("real/img.png")), 0u);
 }
 
+// ---- stacks of coincident triangles ----
+
+// `n` triangles on (0,0,0) (1,0,0) (0,1,0): the same vertices in the three rotations, and the
+// same positions through another vertex index; `mirrored` adds one facing the other way.
+PolyMesh coincident_stack(uint32_t n, bool mirrored) {
+  PolyMesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 1, 0}};
+  const uint32_t faces[4][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 1, 3}};
+  for (uint32_t i = 0; i < n; ++i) {
+    m.face_sizes.push_back(3);
+    m.face_indices.insert(m.face_indices.end(), faces[i % 4], faces[i % 4] + 3);
+  }
+  if (mirrored) {
+    m.face_sizes.push_back(3);
+    m.face_indices.insert(m.face_indices.end(), {0, 2, 1});
+  }
+  return m;
+}
+
+double detail_of(const Scene& s, const std::string& name) {
+  for (const auto& [k, v] : s.stats().details)
+    if (k == name) return v;
+  return -1;
+}
+
+// The triangle formats keep one triangle of each group of exact duplicates (the one of the
+// lowest face index), so a ray through a stack of 10^5 tests a few triangles instead of all,
+// and its hit is the first face of the stack at the same t. A triangle facing the other way is
+// no duplicate.
+TEST(HostileOutputsStacks, CoincidentTrianglesAreTracedInBoundedTime) {
+  const uint32_t n = 100000;
+  const PolyMesh stack = coincident_stack(n, false), mirrored = coincident_stack(n, true);
+  for (const char* config : {"bvh8-tri4v", "bvh8-tri4i", "qbvh8-tri4v", "clbvh-compact", "grid"}) {
+    SCOPED_TRACE(config);
+    const BuildOptions opt = BuildOptions::from_config(config);
+    const Scene s = Scene::build(stack, opt);
+    EXPECT_EQ(detail_of(s, "duplicate_triangles"), double(n - 1));
+    std::string why;
+    EXPECT_TRUE(s.validate(&why)) << why;
+    TraversalCounters c;
+    Ray ray;
+    ray.org = {0.25f, 0.25f, 1.0f};
+    ray.dir = {0, 0, -1};
+    const Hit h = s.intersect(ray, c);
+    ASSERT_TRUE(h.valid());
+    EXPECT_EQ(h.t, 1.0f);
+    EXPECT_EQ(h.primID, 0u);
+    EXPECT_LE(c.prim_tests, 8u);
+    const Scene sm = Scene::build(mirrored, opt);
+    EXPECT_EQ(detail_of(sm, "duplicate_triangles"), double(n - 1));
+    EXPECT_TRUE(sm.validate(&why)) << why;
+  }
+}
+
 }  // namespace

@@ -239,4 +239,24 @@ TEST(HostileOutputsStacks, CoincidentTrianglesAreTracedInBoundedTime) {
   }
 }
 
+// The CLI's summary line says that input was left out.
+TEST(HostileOutputsStacks, CliSummaryShowsDroppedDuplicates) {
+  TempDir d{"slim_outputs"};
+  std::string obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 5 5 5\nv 6 5 5\nv 5 6 5\nf 4 5 6\n";
+  for (int i = 0; i < 1000; ++i) obj += "f 1 2 3\n";
+  const std::string path = d.write("stack.obj", obj);
+  for (const char* cmd : {"render", "build"}) {
+    const std::string out = d.path(std::string(cmd) == "render" ? "s.png" : "s.slim");
+    const std::string line = d.path("stdout.txt");
+    const std::string run = std::string(SLIM_CLI_PATH) + " " + cmd + " " + path +
+                            " --config bvh8-tri4v -o " + out + " >" + line + " 2>&1";
+    const int status = std::system(run.c_str());
+    ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 0) << cmd;
+    const std::string text = contents(line);
+    EXPECT_NE(text.find("1001 triangles | left out: 999 duplicate triangles"), std::string::npos)
+        << cmd << ": " << text;
+  }
+}
+
 }  // namespace

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include "commands.h"
+#include "discarded.h"
 #include "mesh/chunk_sources.h"
 #include "mesh/procedural.h"
 #include "progress.h"
@@ -63,12 +64,12 @@ int save_and_report(const std::string& scene_name, const Scene& scene, const std
   for (const auto& [k, v] : scene.stats().details)
     if (k == "chunks") chunks = std::to_string(uint64_t(v)) + " chunks, ";
   std::printf(
-      "%s: %s, %s%llu triangles | %sbuild %.3f s | save %.3f s | scene %s (%.2f B/triangle) | "
+      "%s: %s, %s%llu triangles%s | %sbuild %.3f s | save %.3f s | scene %s (%.2f B/triangle) | "
       "file %s, %s\n",
       scene_name.c_str(), scene.options().config_name().c_str(), chunks.c_str(),
-      (unsigned long long)m.triangles, load, scene.stats().build_seconds, save_s,
-      format_bytes(m.total()).c_str(), m.bytes_per_triangle(), output.c_str(),
-      format_bytes(std::filesystem::file_size(output)).c_str());
+      (unsigned long long)m.triangles, discarded_note(scene.stats()).c_str(), load,
+      scene.stats().build_seconds, save_s, format_bytes(m.total()).c_str(), m.bytes_per_triangle(),
+      output.c_str(), format_bytes(std::filesystem::file_size(output)).c_str());
   return 0;
 }
 

@@ -164,11 +164,11 @@ def cases(out, big):
     p = write(out, "folder_buffer.gltf", gltf('"buffers":[{"byteLength":4,"uri":"folder.bin"}]'))
     add("glTF buffer that is a folder", ["info", p], 1, "not a regular file")
 
-    # 7. degenerate stacks: 10^5 coincident triangles traced by 16384 rays (each of them tested
-    # every triangle of the stack before duplicates were dropped: about 30 s of CPU)
+    # 7. degenerate stacks: 10^5 coincident triangles traced by 65536 rays (each of them tested
+    # every triangle of the stack before duplicates were dropped: about 40 s of CPU)
     p = write(out, "stack_1e5.obj", tri + "f 1 2 3\n" * 10 ** 5)
-    add("10^5 coincident triangles (render 128x128)",
-        ["render", p, "--res", "128x128", "--bounces", "0", "-o",
+    add("10^5 coincident triangles (render 256x256)",
+        ["render", p, "--res", "256x256", "--bounces", "0", "-o",
          os.path.join(out, "stack_1e5.png")], 0, "left out: 99999 duplicate triangles")
     if big:
         p = write(out, "stack_1m.obj", tri + "f 1 2 3\n" * n)

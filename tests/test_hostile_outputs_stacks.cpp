@@ -185,6 +185,27 @@ TEST(HostileOutputsStacks, CliRendersThroughASymlink) {
   EXPECT_GT(fs::file_size(d.path("real/img.png")), 0u);
 }
 
+// slimrt build onto a link to a character device: the device is written, the link stays, and
+// the summary does not fail on the device's size.
+TEST(HostileOutputsStacks, CliBuildsOntoALinkToADevice) {
+  TempDir d{"slim_outputs"};
+  std::string dev = "/dev/null";
+  if (::geteuid() == 0 && ::mknod(d.path("null").c_str(), S_IFCHR | 0666, makedev(1, 3)) == 0)
+    dev = d.path("null");
+  fs::create_symlink(dev, d.path("out.slim"));
+  const std::string line = d.path("stdout.txt");
+  const std::string cmd = std::string(SLIM_CLI_PATH) + " build terrain:8 -o " + d.path("out.slim") +
+                          " >" + line + " 2>&1";
+  const int status = std::system(cmd.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << contents(line);
+  EXPECT_NE(contents(line).find("not a regular file"), std::string::npos) << contents(line);
+  EXPECT_TRUE(fs::is_symlink(d.path("out.slim")));
+  struct stat st {};
+  ASSERT_EQ(::stat(dev.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISCHR(st.st_mode));
+}
+
 // ---- stacks of coincident triangles ----
 
 // `n` triangles on (0,0,0) (1,0,0) (0,1,0): the same vertices in the three rotations, and the

@@ -8,7 +8,9 @@ piece of the expected message. A case passes when the exit code matches, the mes
 piece, the process was not killed by a signal and no partial output was left behind. The files
 are generated on each run (about 20 MB, nothing is checked in). --big adds the slow cases (a
 million coincident triangles). --table prints input class, exit code, first line of the message,
-seconds and peak memory (ru_maxrss of the child) as markdown. Run by ctest (HostileCorpus).
+seconds and peak memory (ru_maxrss of the child) as markdown. Each case runs with a CPU-time
+limit (--cpu-limit, 10 s of all threads' CPU) and a wall-clock limit (--wall-limit, 120 s), so a
+hang fails its case instead of stalling the run. Run by ctest (HostileCorpus), so by ./test.sh.
 """
 import argparse
 import base64
@@ -18,6 +20,7 @@ import signal
 import struct
 import subprocess
 import sys
+import threading
 import time
 
 
@@ -161,17 +164,25 @@ def cases(out, big):
     p = write(out, "folder_buffer.gltf", gltf('"buffers":[{"byteLength":4,"uri":"folder.bin"}]'))
     add("glTF buffer that is a folder", ["info", p], 1, "not a regular file")
 
-    # 7. degenerate stacks (slow: --big)
+    # 7. degenerate stacks: 10^5 coincident triangles traced by 65536 rays (each of them tested
+    # every triangle of the stack before duplicates were dropped: about 40 s of CPU)
+    p = write(out, "stack_1e5.obj", tri + "f 1 2 3\n" * 10 ** 5)
+    add("10^5 coincident triangles (render 256x256)",
+        ["render", p, "--res", "256x256", "--bounces", "0", "-o",
+         os.path.join(out, "stack_1e5.png")], 0, "left out: 99999 duplicate triangles")
     if big:
         p = write(out, "stack_1m.obj", tri + "f 1 2 3\n" * n)
         add("10^6 coincident triangles (render 16x16)",
             ["render", p, "--res", "16x16", "--bounces", "0", "-o",
-             os.path.join(out, "stack.png")], 0, "")
+             os.path.join(out, "stack.png")], 0, "left out: 999999 duplicate triangles")
     return c
 
 
-def run(cli, case):
+def run(cli, case, cpu_limit, wall_limit):
     def limits():
+        # A hang that computes is stopped by SIGXCPU (CPU time of all threads), one that waits by
+        # the wall-clock timer below: either fails the case instead of stalling the test run.
+        resource.setrlimit(resource.RLIMIT_CPU, (cpu_limit, cpu_limit + 1))
         if case["fsize"]:
             resource.setrlimit(resource.RLIMIT_FSIZE, (case["fsize"], case["fsize"]))
         if case["vmem"]:
@@ -179,14 +190,23 @@ def run(cli, case):
 
     t0 = time.monotonic()
     proc = subprocess.Popen([cli] + case["args"], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, preexec_fn=limits)
+                            stderr=subprocess.STDOUT, preexec_fn=limits,
+                            start_new_session=True)
+    # The whole process group: a child holding the output pipe would keep read() waiting.
+    timer = threading.Timer(wall_limit, lambda: os.killpg(proc.pid, signal.SIGKILL))
+    timer.start()
     err = proc.stdout.read().decode(errors="replace")
     _, status, usage = os.wait4(proc.pid, 0)
+    timer.cancel()
     proc.returncode = os.waitstatus_to_exitcode(status)
     seconds = time.monotonic() - t0
     code = proc.returncode
     problems = []
-    if code < 0:
+    if code == -signal.SIGXCPU:
+        problems.append("more than %d s of CPU time (SIGXCPU)" % cpu_limit)
+    elif code == -signal.SIGKILL and seconds >= wall_limit:
+        problems.append("still running after %d s (killed)" % wall_limit)
+    elif code < 0:
         problems.append("killed by signal %s" % signal.Signals(-code).name)
     elif code != case["code"]:
         problems.append("exit code %d, expected %d" % (code, case["code"]))
@@ -210,19 +230,31 @@ def main():
     ap.add_argument("--out", required=True)
     ap.add_argument("--big", action="store_true")
     ap.add_argument("--table", action="store_true")
+    ap.add_argument("--cpu-limit", type=int, default=10,
+                    help="CPU seconds per case (all threads); more fails the case (default 10)")
+    ap.add_argument("--wall-limit", type=int, default=120,
+                    help="wall-clock seconds per case before it is killed (default 120)")
     # Sanitizer builds reserve terabytes of shadow address space at start-up: an address-space
     # limit kills them before main(), so those cases are skipped (and said so).
     ap.add_argument("--no-address-limit", action="store_true")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     failed = 0
+    # The limits themselves: a busy loop must end by SIGXCPU, a sleep by the timer.
+    probe = dict(klass="limit probe", args=[], code=0, msg="", fsize=None, absent=None, vmem=None)
+    for script, limits, expect in (("while :; do :; done", (1, 30), "SIGXCPU"),
+                                   ("sleep 30", (10, 1), "killed")):
+        r = run("/bin/sh", dict(probe, args=["-c", script]), *limits)
+        if not any(expect in p for p in r["problems"]) or r["seconds"] > 15:
+            print("FAIL the per-case limit did not stop '%s': %s" % (script, r["problems"]))
+            failed += 1
     rows = []
     for case in cases(a.out, a.big):
         if a.no_address_limit and case.get("vmem"):
             print("skip %s: a sanitizer build cannot run under an address-space limit" %
                   case["klass"])
             continue
-        r = run(a.cli, case)
+        r = run(a.cli, case, a.cpu_limit, a.wall_limit)
         rows.append((case, r))
         if r["problems"]:
             failed += 1

@@ -370,7 +370,7 @@ TEST(IoPly, AsciiWithNormalsUvsAndSkippedProperties) {
       "element edge 1\nproperty int vertex1\nproperty int vertex2\n"
       "end_header\n"
       "0 0 0 255 0 0 1 0 0\n1 0 0 255 0 0 1 1 0\n1 1 0 255 0 0 1 1 1\n"
-      "0 1 0 255 0 0 1 0 1\n+2.5 -1e2 nan 7 0 0 1 0.5 0.5\n"
+      "0 1 0 255 0 0 1 0 1\n+2.5 -1e2 -0 7 0 0 1 0.5 0.5\n"
       "9 4 0 1 2 3\n9 3 1 4 2\n"
       "0 1\n";
   PolyMesh m = slim::load(d.write("a.ply", ply));
@@ -380,14 +380,13 @@ TEST(IoPly, AsciiWithNormalsUvsAndSkippedProperties) {
   EXPECT_EQ(m.positions[4].x, 2.5f);
   EXPECT_EQ(m.positions[4].y, -100.0f);
   EXPECT_EQ(m.uvs[0].x, 0.0f);
-  EXPECT_TRUE(std::isnan(m.positions[4].z));
+  EXPECT_EQ(m.positions[4].z, 0.0f);
   ASSERT_EQ(m.normals.size(), 5u);
   EXPECT_TRUE(m.normal_indices.empty());
   EXPECT_EQ(m.normals[2], slim::Vec3f(0, 0, 1));
   ASSERT_EQ(m.uvs.size(), 5u);
   EXPECT_EQ(m.uvs[2].x, 1.0f);
   EXPECT_EQ(m.uvs[4].y, 0.5f);
-  EXPECT_EQ(slim::summarize(m).nonfinite_vertices, 1u);
 }
 
 // Overflow (1e999) is an error naming the line; underflow (1e-999) reads as 0.
@@ -640,17 +639,26 @@ TEST(IoPly, IndexOutOfRangeNegativeAndShortLists) {
   expect_load_error(d.write("ab.ply", ascii + "3 0 1\n\n\n"), {":14:", "file ends inside"});
 }
 
-TEST(IoPly, NonFinitePositionsLoad) {
+// NaN and inf (binary or text) are refused naming the byte or line, like OBJ's "nan" and "inf":
+// their faces would otherwise be dropped later without a word.
+TEST(IoPly, NonFiniteValuesAreRefused) {
   TempDir d{"slimrt_io"};
-  auto v = kSquare;
-  v[1] = {std::numeric_limits<double>::quiet_NaN(), 0, 0};
-  v[3] = {0, -std::numeric_limits<double>::infinity(), 0};
-  PolyMesh m = slim::load(d.write("nan.ply", binary_ply({}, v, kSquareFaces)));
-  slim::MeshSummary s = slim::summarize(m);
-  EXPECT_EQ(s.nonfinite_vertices, 2u);
-  EXPECT_EQ(s.faces, 3u);
-  EXPECT_EQ(s.bounds.lo, slim::Vec3f(0, 0, 0));
-  EXPECT_EQ(s.bounds.hi, slim::Vec3f(1, 1, 1));
+  for (double bad :
+       {std::numeric_limits<double>::quiet_NaN(), -std::numeric_limits<double>::infinity()}) {
+    auto v = kSquare;
+    v[1] = {0, bad, 0};
+    expect_load_error(d.write("nan.ply", binary_ply({}, v, kSquareFaces)),
+                      {"nan.ply: byte ", "vertex property 'y'", "expected a finite number"});
+  }
+  const std::string head =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 1\n"
+      "property list uchar int vertex_indices\nend_header\n";
+  for (const char* bad : {"nan", "inf", "-inf", "NaN", "infinity"}) {
+    expect_load_error(d.write("t.ply", head + "0 0 0\n1 0 0\n0 " + bad + " 0\n3 0 1 2\n"),
+                      {"t.ply:12: ", "vertex property 'y'", "'" + std::string(bad) + "'",
+                       "expected a finite number"});
+  }
 }
 
 TEST(IoPly, NoFaceElementLoadsWithZeroFaces) {

@@ -12,6 +12,7 @@
 
 #include "build_flags.h"
 #include "commands.h"
+#include "discarded.h"
 #include "mesh/chunk_sources.h"
 #include "mesh/procedural.h"
 #include "progress.h"
@@ -64,13 +65,17 @@ int save_and_report(const std::string& scene_name, const Scene& scene, const std
   std::string chunks;
   for (const auto& [k, v] : scene.stats().details)
     if (k == "chunks") chunks = std::to_string(uint64_t(v)) + " chunks, ";
+  // A device or a named pipe (slimrt/output.h writes them in place) has no size to report.
+  std::error_code ec;
+  const uint64_t bytes = std::filesystem::file_size(output, ec);
+  const std::string file_size = ec ? std::string("not a regular file") : format_bytes(bytes);
   std::printf(
-      "%s: %s, %s%llu triangles | %sbuild %.3f s | save %.3f s | scene %s (%.2f B/triangle) | "
+      "%s: %s, %s%llu triangles%s | %sbuild %.3f s | save %.3f s | scene %s (%.2f B/triangle) | "
       "file %s, %s\n",
       scene_name.c_str(), scene.options().config_name().c_str(), chunks.c_str(),
-      (unsigned long long)m.triangles, load, scene.stats().build_seconds, save_s,
-      format_bytes(m.total()).c_str(), m.bytes_per_triangle(), output.c_str(),
-      format_bytes(std::filesystem::file_size(output)).c_str());
+      (unsigned long long)m.triangles, discarded_note(scene.stats()).c_str(), load,
+      scene.stats().build_seconds, save_s, format_bytes(m.total()).c_str(), m.bytes_per_triangle(),
+      output.c_str(), file_size.c_str());
   return 0;
 }
 

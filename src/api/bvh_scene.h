@@ -30,6 +30,12 @@ struct Fingerprint {
     sum_sq += k * k;
     xor_all ^= k * 0x9E3779B97F4A7C15ULL;
   }
+  void remove(uint64_t k) {  // undoes add(k)
+    count--;
+    sum -= k;
+    sum_sq -= k * k;
+    xor_all ^= k * 0x9E3779B97F4A7C15ULL;
+  }
   void merge(const Fingerprint& o) {
     count += o.count;
     sum += o.sum;
@@ -232,11 +238,22 @@ class BvhScene : public Scene::Impl {
                                                  2 * uint64_t(prim_count));
     }
     cfg.progress = progress.get();
+    // Formats that keep one primitive per id (the triangle formats) let the builder drop exact
+    // duplicates from stacks of coincident primitives (Bvh2BuildConfig::duplicate_key).
+    constexpr bool kDropsDuplicates = requires(const Source& s) {
+      { Leaf::duplicate_key(s, 0u) } -> std::same_as<uint64_t>;
+      { Leaf::same_surface(s, 0u, 0u) } -> std::same_as<bool>;
+    };
+    if constexpr (kDropsDuplicates) {
+      cfg.duplicate_key = [&](uint32_t i) { return Leaf::duplicate_key(src, i); };
+      cfg.same_primitive = [&](uint32_t a, uint32_t b) { return Leaf::same_surface(src, a, b); };
+    }
     Bvh2 b2 = build_bvh2(prim_count, fill, cfg);
     if (hooks.reshape) hooks.reshape(b2);
     if (progress) progress->finish();
     expected = Fingerprint{};
     for (const Fingerprint& f : keys) expected.merge(f);
+    for (uint32_t id : b2.dropped) expected.remove(Leaf::source_key(src, id));
     double bvh2_s = secs(t0);
     t0 = clock::now();
     LeafEncoder enc;
@@ -270,6 +287,8 @@ class BvhScene : public Scene::Impl {
     auto& d = stats.details;
     d.emplace_back("bvh2_build_s", bvh2_s);
     d.emplace_back("collapse_s", collapse_s);
+    if constexpr (kDropsDuplicates)
+      d.emplace_back("duplicate_triangles", double(b2.dropped.size()));
     d.emplace_back("bvh2_depth", double(b2.depth));
     d.emplace_back("bvh8_depth", double(s.depth));
     d.emplace_back("node8_count", double(s.node8));

@@ -617,6 +617,11 @@ template <class Leaf>
 void finish_scene(GridScene<Leaf>& s, const Prepared& p, const std::vector<const PolyMesh*>& meshes,
                   const BuildOptions& opt) {
   s.tris = build_leftover_triangles(p.gs, meshes, opt);
+  double duplicates = 0;  // exact duplicates among the leftover triangles, dropped by their BVH
+  if (s.tris)
+    for (const auto& [k, v] : s.tris->stats.details)
+      if (k == "duplicate_triangles") duplicates = v;
+  s.stats.details.emplace_back("duplicate_triangles", duplicates);
   if (s.tris) {
     s.mem.bvh_bytes += s.tris->mem.bvh_bytes;
     s.mem.geometry_bytes += s.tris->mem.geometry_bytes;

@@ -20,6 +20,7 @@
 #include <cmath>
 #include <cstring>
 #include <memory>
+#include <mutex>
 #include <stdexcept>
 
 namespace slim {
@@ -186,6 +187,7 @@ class Builder {
                       });
     refs_ = LargeArray<Ref>();
     out_.depth = max_depth_.load();
+    std::sort(out_.dropped.begin(), out_.dropped.end());  // the same order on every run
   }
 
  private:
@@ -399,9 +401,62 @@ class Builder {
     return true;
   }
 
+  // Whether refs [begin, end) may hold duplicates to drop: more than a leaf takes, all with one
+  // centroid (no split can separate them), not yet checked above (`checked`).
+  bool drops_duplicates(uint32_t begin, uint32_t end, const Range& range, bool checked) const {
+    if (checked || !cfg_.duplicate_key || !cfg_.same_primitive) return false;
+    if (end - begin <= cfg_.max_leaf_size) return false;
+    const Box3f cbox = range.cb.box3();
+    return !(reduce_max(cbox.hi - cbox.lo) > 0.0f);
+  }
+
+  // Drops exact duplicates among refs [begin, end): sorted by (duplicate_key, id), the first of
+  // each group of equal primitives (the lowest id) stays, the others move behind the kept ones
+  // and their ids go to Bvh2::dropped. Returns the new end. The range's boxes are unchanged (a
+  // duplicate has the box of the primitive kept).
+  uint32_t drop_duplicates(uint32_t begin, uint32_t end) {
+    Ref* refs = refs_.data();
+    const uint32_t n = end - begin;
+    std::vector<std::pair<uint64_t, uint32_t>> order(n);  // (key, position in refs)
+    for (uint32_t i = 0; i < n; ++i)
+      order[i] = {cfg_.duplicate_key(refs[begin + i].id()), begin + i};
+    std::sort(order.begin(), order.end(), [&](const auto& x, const auto& y) {
+      return x.first != y.first ? x.first < y.first : refs[x.second].id() < refs[y.second].id();
+    });
+    std::vector<Ref> kept, dropped;
+    kept.reserve(n);
+    for (uint32_t i = 0; i < n;) {
+      uint32_t j = i;
+      const size_t group = kept.size();  // kept refs with this key start here
+      for (; j < n && order[j].first == order[i].first; ++j) {
+        const Ref& r = refs[order[j].second];
+        bool dup = false;
+        for (size_t k = group; k < kept.size() && !dup; ++k)
+          dup = cfg_.same_primitive(kept[k].id(), r.id());
+        (dup ? dropped : kept).push_back(r);
+      }
+      i = j;
+    }
+    std::copy(kept.begin(), kept.end(), refs + begin);
+    std::copy(dropped.begin(), dropped.end(), refs + begin + kept.size());
+    if (!dropped.empty()) {
+      std::lock_guard<std::mutex> lock(dropped_mutex_);
+      for (const Ref& r : dropped) out_.dropped.push_back(r.id());
+    }
+    return begin + uint32_t(kept.size());
+  }
+
   // Large nodes: children as parallel tasks, node pairs from the shared counter.
-  void build(uint32_t node, uint32_t begin, uint32_t end, const Range& range, int depth) {
-    if (end - begin < kParallelTaskThreshold) return build_subtree(node, begin, end, range, depth);
+  void build(uint32_t node, uint32_t begin, uint32_t end, const Range& range, int depth,
+             bool checked = false) {
+    if (drops_duplicates(begin, end, range, checked)) {
+      const uint32_t kept_end = drop_duplicates(begin, end);
+      if (cfg_.progress) cfg_.progress->add(end - kept_end);
+      end = kept_end;
+      checked = true;
+    }
+    if (end - begin < kParallelTaskThreshold)
+      return build_subtree(node, begin, end, range, depth, checked);
     uint32_t mid;
     Range left, right;
     Bvh2Node& nd = out_.nodes[node];
@@ -415,20 +470,21 @@ class Builder {
     const uint32_t first = node_count_.fetch_add(2);
     nd.first = first;
     nd.count = 0;
-    tbb::parallel_invoke([&] { build(first, begin, mid, left, depth + 1); },
-                         [&] { build(first + 1, mid, end, right, depth + 1); });
+    tbb::parallel_invoke([&] { build(first, begin, mid, left, depth + 1, checked); },
+                         [&] { build(first + 1, mid, end, right, depth + 1, checked); });
   }
 
   // A subtree for one thread: built into a local array (depth first), then placed with one
   // fetch_add of the node counter instead of one per node. With a fetch_add per node the
   // counter's cache line moved between the threads all the time (perf, nefertiti, 2 threads:
   // ~9% of build()'s samples after the lock xadd). Children still follow their parent.
-  void build_subtree(uint32_t node, uint32_t begin, uint32_t end, const Range& range, int depth) {
+  void build_subtree(uint32_t node, uint32_t begin, uint32_t end, const Range& range, int depth,
+                     bool checked) {
     std::vector<Bvh2Node> local;
     local.reserve(2 * size_t(end - begin) - 1);
     local.emplace_back();
     int max_depth = depth;
-    build_local(local, 0, begin, end, range, depth, max_depth);
+    build_local(local, 0, begin, end, range, depth, max_depth, checked);
     const uint32_t extra = uint32_t(local.size() - 1);
     const uint32_t base = extra ? node_count_.fetch_add(extra) : 0;  // local k >= 1 -> base + k - 1
     for (size_t k = 0; k < local.size(); ++k) {
@@ -440,8 +496,13 @@ class Builder {
     if (cfg_.progress) cfg_.progress->add(end - begin);
   }
 
+  // Progress: build_subtree counts the whole range, dropped duplicates included.
   void build_local(std::vector<Bvh2Node>& local, uint32_t li, uint32_t begin, uint32_t end,
-                   const Range& range, int depth, int& max_depth) {
+                   const Range& range, int depth, int& max_depth, bool checked) {
+    if (drops_duplicates(begin, end, range, checked)) {
+      end = drop_duplicates(begin, end);
+      checked = true;
+    }
     uint32_t mid;
     Range left, right;
     const Box3f box = range.box.box3();
@@ -454,8 +515,8 @@ class Builder {
     local.emplace_back();  // within the reserved 2n - 1: no reallocation
     local.emplace_back();
     local[li] = {box, first, 0};
-    build_local(local, first, begin, mid, left, depth + 1, max_depth);
-    build_local(local, first + 1, mid, end, right, depth + 1, max_depth);
+    build_local(local, first, begin, mid, left, depth + 1, max_depth, checked);
+    build_local(local, first + 1, mid, end, right, depth + 1, max_depth, checked);
   }
 
   uint32_t count_;
@@ -468,6 +529,7 @@ class Builder {
   // Each on its own cache line: the tasks read the fields above all the time, and a node
   // allocation (fetch_add) by one thread would evict them from the other's cache (perf on
   // nefertiti, 2 threads: the load after the lock xadd held 13% of build()'s samples).
+  std::mutex dropped_mutex_;  // Bvh2::dropped
   alignas(64) std::atomic<uint32_t> node_count_{0};
   alignas(64) std::atomic<int> max_depth_{0};  // the class size rounds up to its line
 };

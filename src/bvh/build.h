@@ -38,12 +38,22 @@ struct Bvh2BuildConfig {
   // primitives are placed in leaves (one add per chunk of references or per subtree, never per
   // primitive); throws slim::Cancelled out of build_bvh2 when the build is cancelled.
   PhaseProgress* progress = nullptr;
+  // Optional, both or neither: exact duplicates among the primitives (the same surface twice, so
+  // a hit on one is a hit on the other). duplicate_key(id) is equal for duplicates;
+  // same_primitive(a, b) says whether b duplicates a. Where the references of a node larger than
+  // a leaf all share one centroid (nothing left to split them by: a stack of coincident
+  // triangles would otherwise become a deep subtree that every ray through it walks to the
+  // bottom), the builder keeps the lowest id of each group of duplicates and leaves the others
+  // out of every leaf (Bvh2::dropped). Duplicates elsewhere stay.
+  std::function<uint64_t(uint32_t id)> duplicate_key;
+  std::function<bool(uint32_t a, uint32_t b)> same_primitive;
 };
 
 struct Bvh2 {
   LargeArray<Bvh2Node> nodes;     // nodes[0] is the root (if any primitive)
-  LargeArray<uint32_t> prim_ids;  // primitive ids in leaf order
+  LargeArray<uint32_t> prim_ids;  // primitive ids in leaf order (dropped ones outside every leaf)
   int depth = 0;
+  std::vector<uint32_t> dropped;  // ids left out as duplicates (Bvh2BuildConfig::duplicate_key)
 };
 
 // Writes the references of primitives begin..end-1 to out[0 .. end - begin). Called in parallel

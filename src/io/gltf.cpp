@@ -17,12 +17,14 @@
 #include <bit>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string_view>
 #include <vector>
 
+#include "io/float_range.h"
 #include "slimrt/error.h"
 #include "slimrt/output.h"
 
@@ -285,6 +287,7 @@ class Flattener {
   struct Instance {
     int mesh;
     Mat4 world;
+    int node = -1;  // -1: a mesh drawn without nodes (identity transform)
   };
 
   static bool is_surface(int mode) { return mode >= 4 && mode <= 6; }
@@ -383,7 +386,7 @@ class Flattener {
       for (size_t n = 0; n < m_.nodes.size(); ++n)
         if (!is_child[n]) roots.push_back(int(n));
     } else {
-      for (size_t i = 0; i < m_.meshes.size(); ++i) instances_.push_back({int(i), Mat4{}});
+      for (size_t i = 0; i < m_.meshes.size(); ++i) instances_.push_back({int(i), Mat4{}, -1});
       return;
     }
     // Explicit stack: a 100000-deep chain of nodes must not overflow the call stack.
@@ -403,7 +406,7 @@ class Flattener {
         if (size_t(node.mesh) >= m_.meshes.size())
           fail(where, "mesh index " + std::to_string(node.mesh) + " out of range (" +
                           std::to_string(m_.meshes.size()) + " meshes)");
-        instances_.push_back({node.mesh, world});
+        instances_.push_back({node.mesh, world, n});
       } else if (node.mesh < -1) {
         fail(where, "negative mesh index");
       }
@@ -651,11 +654,29 @@ class Flattener {
     const uint64_t base = out_.positions.size();
     if (base + nv > UINT32_MAX) fail(where, "the flattened scene exceeds 2^32-1 vertices");
     const Mat4& w = in.world;
+    // A non-finite coordinate, in the accessor or after the node's world transform (a finite
+    // vertex times a huge matrix overflows float), would make its faces be dropped later without
+    // a word: refused here, naming the node, the vertex and the value.
     for (size_t i = 0; i < nv; ++i) {
       const double x = pos[3 * i], y = pos[3 * i + 1], z = pos[3 * i + 2];
-      out_.positions.push_back({float(w(0, 0) * x + w(0, 1) * y + w(0, 2) * z + w(0, 3)),
-                                float(w(1, 0) * x + w(1, 1) * y + w(1, 2) * z + w(1, 3)),
-                                float(w(2, 0) * x + w(2, 1) * y + w(2, 2) * z + w(2, 3))});
+      const double t[3] = {w(0, 0) * x + w(0, 1) * y + w(0, 2) * z + w(0, 3),
+                           w(1, 0) * x + w(1, 1) * y + w(1, 2) * z + w(1, 3),
+                           w(2, 0) * x + w(2, 1) * y + w(2, 2) * z + w(2, 3)};
+      for (int k = 0; k < 6; ++k) {
+        // k < 3: the accessor's value; k >= 3: the transformed one.
+        const double v = k < 3 ? double(pos[3 * i + k]) : t[k - 3];
+        if (rounds_to_finite_float(v)) continue;
+        char value[64];
+        std::snprintf(value, sizeof value, "%.9g", v);
+        fail(where + ".POSITION",
+             "vertex " + std::to_string(i) + " coordinate " + "xyz"[k % 3] + " is " + value +
+                 (k < 3 ? " in the accessor"
+                  : in.node >= 0
+                      ? " after the world transform of nodes[" + std::to_string(in.node) + "]"
+                      : "") +
+                 "; expected a finite number of magnitude at most 3.4e38");
+      }
+      out_.positions.push_back({float(t[0]), float(t[1]), float(t[2])});
     }
     // Normals go through the cofactor matrix (det * inverse transpose), sign-corrected.
     const double cof[3][3] = {

@@ -376,10 +376,15 @@ class BinaryBody {
 
  private:
   const uint8_t* at() const { return reinterpret_cast<const uint8_t*>(w_.cur); }
-  // A finite double beyond the float range (1e300) would become inf and its faces be dropped
-  // later without a word: refused here.
+  // A non-finite value (NaN, inf) or a finite double beyond the float range (1e300, which would
+  // become inf) would make its faces be dropped later without a word: refused here, like OBJ's
+  // "inf" and "nan".
   float to_float(double d, const Prop& p) const {
-    if (std::isfinite(d) && !rounds_to_finite_float(d))
+    if (!std::isfinite(d))
+      throw_at_byte(
+          src_, w_.offset(w_.cur),
+          "vertex property '" + p.name + "' is " + shortest(d) + "; expected a finite number");
+    if (!rounds_to_finite_float(d))
       throw_at_byte(src_, w_.offset(w_.cur),
                     "vertex property '" + p.name + "' is " + shortest(d) +
                         ", which overflows float; expected a magnitude of at most 3.4e38");
@@ -501,8 +506,14 @@ class AsciiBody {
     tok_line_ = line_;
   }
   std::string_view token() const { return {tok_, size_t(w_.cur - tok_)}; }
+  // Non-finite values ("nan", "inf") and doubles beyond the float range are refused, as in the
+  // binary reader.
   float to_float(double d, const Prop& p) const {
-    if (std::isfinite(d) && !rounds_to_finite_float(d))
+    if (!std::isfinite(d))
+      throw_at_line(
+          src_, tok_line_,
+          "vertex property '" + p.name + "' is " + quoted(token()) + "; expected a finite number");
+    if (!rounds_to_finite_float(d))
       throw_at_line(src_, tok_line_,
                     "vertex property '" + p.name + "' is " + quoted(token()) +
                         ", which overflows float; expected a magnitude of at most 3.4e38");

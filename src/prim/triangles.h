@@ -6,6 +6,8 @@
 // is needed on the hot path) with primID = kInvalidID.
 #pragma once
 
+#include <algorithm>
+#include <array>
 #include <cstdint>
 #include <cstring>
 #include <string>
@@ -100,6 +102,26 @@ struct TriangleSourceOps {
     const uint32_t* v = &s.tris[3 * t];
     return triangle_key(s.vertices[v[0]], s.vertices[v[1]], s.vertices[v[2]], s.geom_ids[t],
                         s.prim_ids[t]);
+  }
+  // Exact duplicates, which the BVH2 builder may drop (Bvh2BuildConfig::duplicate_key): the
+  // same three vertex positions (bit for bit) in any rotation, i.e. the same surface facing the
+  // same way. The key hashes the smallest of the three rotations, so duplicates share it.
+  static std::array<uint32_t, 9> rotation(const TriangleSource& s, uint32_t t, int r) {
+    std::array<uint32_t, 9> w;
+    for (int k = 0; k < 3; ++k)
+      std::memcpy(&w[3 * k], &s.vertices[s.tris[3 * t + (k + r) % 3]], 12);
+    return w;
+  }
+  static uint64_t duplicate_key(const TriangleSource& s, uint32_t t) {
+    const std::array<uint32_t, 9> w =
+        std::min({rotation(s, t, 0), rotation(s, t, 1), rotation(s, t, 2)});
+    return nh_key(w.data(), sizeof(w));
+  }
+  static bool same_surface(const TriangleSource& s, uint32_t a, uint32_t b) {
+    const std::array<uint32_t, 9> wa = rotation(s, a, 0);
+    for (int r = 0; r < 3; ++r)
+      if (rotation(s, b, r) == wa) return true;
+    return false;
   }
 };
 

@@ -296,19 +296,28 @@ SLIM_INLINE void decode_strip_packed(const ClusterHeader& h, const Layout& L, co
     s += w;
     return v;
   };
-  uint32_t t = 0;
-  for (uint32_t j = 0; j < n; ++j) {
+  // Three references from the bits x on (a child's first triangle, a restart's after its 2 bits).
+  auto restart = [&](uint64_t x, uint32_t& s) SLIM_INLINE_LAMBDA {
+    uint32_t y = uint32_t(x >> s);
+    const uint32_t v0 = ref(y, s);
+    const uint32_t v1 = ref(y, s);
+    const uint32_t v2 = ref(y, s);
+    return v0 | v1 << 8 | v2 << 16;
+  };
+  auto load = [&] {
     uint64_t x;
     std::memcpy(&x, bits + (pos >> 3), 8);
-    x >>= pos & 7;
-    uint32_t s;
-    if (j == 0 || (x & 3) == 3) {
-      s = j ? 2 : 0;
-      uint32_t y = uint32_t(x >> s);
-      const uint32_t v0 = ref(y, s);
-      const uint32_t v1 = ref(y, s);
-      const uint32_t v2 = ref(y, s);
-      t = v0 | v1 << 8 | v2 << 16;
+    return x >> (pos & 7);
+  };
+  uint32_t s = 0;
+  uint32_t t = restart(load(), s);
+  pos += s;
+  tri[0] = t;
+  for (uint32_t j = 1; j < n; ++j) {
+    const uint64_t x = load();
+    if ((x & 3) == 3) {
+      s = 2;
+      t = restart(x, s);
     } else {
       s = 4;
       uint32_t y = uint32_t(x >> 4);
@@ -360,8 +369,17 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
     return _mm256_permute4x64_epi64(_mm256_castps_si256(pair), 0xD8);
   };
   auto mask = [](uint32_t w) { return _mm256_set1_epi32(int(uint32_t((uint64_t(1) << w) - 1))); };
+  // Per-axis constants, broadcast once for the 3 corners.
+  __m256i anchors[3], masks[3];
+  __m256 origins[3];
+  for (int a = 0; a < 3; ++a) {
+    anchors[a] = _mm256_set1_epi32(int(anchor[a]));
+    masks[a] = mask(h.bits[a]);
+    origins[a] = _mm256_set1_ps(lat.origin[a]);
+  }
+  const __m256 step = _mm256_set1_ps(lat.step);
   auto store = [&](int k, int a, __m256i off) {
-    const __m256i code = _mm256_add_epi32(off, _mm256_set1_epi32(int(anchor[a])));
+    const __m256i code = _mm256_add_epi32(off, anchors[a]);
     __m256 x;
     if constexpr (kLossless) {
       const __m256i neg = _mm256_srai_epi32(code, 31);  // key's top bit: a positive float
@@ -370,8 +388,7 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
       x = _mm256_castsi256_ps(_mm256_blendv_epi8(neg_bits, pos_bits, neg));
     } else {
       // q < 2^24: the signed conversion is the scalar float(q).
-      x = _mm256_add_ps(_mm256_set1_ps(lat.origin[a]),
-                        _mm256_mul_ps(_mm256_cvtepi32_ps(code), _mm256_set1_ps(lat.step)));
+      x = _mm256_add_ps(origins[a], _mm256_mul_ps(_mm256_cvtepi32_ps(code), step));
     }
     _mm256_store_ps(d.v[k][a], x);
   };
@@ -390,7 +407,7 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
       gather64(vpos, lo, hi);
       uint32_t shift = 0;
       for (int a = 0; a < 3; ++a) {
-        store(k, a, _mm256_and_si256(low32(lo, hi, shift), mask(h.bits[a])));
+        store(k, a, _mm256_and_si256(low32(lo, hi, shift), masks[a]));
         shift += h.bits[a];
       }
       continue;
@@ -401,7 +418,7 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
       } else {
         __m256i lo, hi;
         gather64(vpos, lo, hi);
-        store(k, a, _mm256_and_si256(low32(lo, hi, 0), mask(h.bits[a])));
+        store(k, a, _mm256_and_si256(low32(lo, hi, 0), masks[a]));
       }
       vpos = _mm256_add_epi32(vpos, _mm256_set1_epi32(h.bits[a]));
     }

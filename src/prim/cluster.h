@@ -181,8 +181,8 @@ SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, bool lossles
 // Decodes the strip of child c (n triangles) into idx[corner][lane], lanes < n. get(pos, w) reads
 // w <= 32 bits at bit pos of the stream (one read per triangle: a restart's 2 + 3 x 9 bits at
 // most); *end receives the bit after the strip's last. kCheck: returns false if a reused vertex
-// lies before vertex 0 or a strip step names edge 3 (the checker's; the decoders run on checked
-// blocks only and skip these tests).
+// lies before vertex 0 or a strip step names edge 3. The checker runs this; the decoders run
+// decode_strip_packed (below: the same triangles) on checked blocks only.
 template <bool kCheck, class Get>
 SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get, uint32_t c,
                               uint32_t n, uint32_t (&idx)[3][8], uint64_t* end = nullptr) {
@@ -240,6 +240,95 @@ SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get
   return ok;
 }
 
+// The decoders' strip step as a byte shuffle: the triangle is packed in a word (corner k's vertex
+// in byte k) with the step's new vertex in byte 3, and control c = p | e << 2 (p < 3) picks the
+// new corners: corner p the new vertex, corner p + 1 the previous corner e + 1, corner p + 2 the
+// previous corner e (edge 3 reads as edge 0, as in decode_strip). Bytes 3..15 are 0x80 (zero), so
+// the table serves pshufb (AVX2 path) and the scalar shifts alike. Entries with p = 3 (a restart)
+// are unused.
+struct StepShuffle {
+  alignas(16) uint8_t b[16][16];
+  constexpr StepShuffle() : b{} {
+    for (int c = 0; c < 16; ++c) {
+      for (int i = 0; i < 16; ++i) b[c][i] = 0x80;
+      const int p = c & 3, e = (c >> 2) == 3 ? 0 : c >> 2;
+      if (p == 3) continue;
+      b[c][p] = 3;
+      b[c][(p + 1) % 3] = uint8_t((e + 1) % 3);
+      b[c][(p + 2) % 3] = uint8_t(e);
+    }
+  }
+};
+inline constexpr StepShuffle kStepShuffle{};
+
+SLIM_INLINE uint32_t step_triangle(uint32_t t4, uint32_t c) {
+#if defined(SLIM_SIMD_AVX2)
+  const __m128i sh = _mm_load_si128(reinterpret_cast<const __m128i*>(kStepShuffle.b[c]));
+  return uint32_t(_mm_cvtsi128_si32(_mm_shuffle_epi8(_mm_cvtsi32_si128(int(t4)), sh)));
+#else
+  const uint8_t* s = kStepShuffle.b[c];
+  return ((t4 >> (8 * s[0])) & 0xff) | ((t4 >> (8 * s[1])) & 0xff) << 8 |
+         ((t4 >> (8 * s[2])) & 0xff) << 16;
+#endif
+}
+
+// decode_strip for the decoders (blocks that check() accepted, read with the slack): the same
+// triangles, corner k's vertex in byte k of tri[j]. One 64-bit load per triangle (a restart takes
+// at most 2 + 3 x 9 bits of the 57 it holds); a strip step is the table's byte shuffle of the
+// previous triangle plus one reference.
+SLIM_INLINE void decode_strip_packed(const ClusterHeader& h, const Layout& L, const uint8_t* bits,
+                                     uint32_t c, uint32_t n, uint32_t (&tri)[8]) {
+  uint64_t pos = L.topo;
+  uint32_t cnt = 0;
+  if (c) {
+    const uint32_t x = read_bits(bits, L.table + uint64_t(c - 1) * (L.tb + L.vbw), L.tb + L.vbw);
+    pos += x & ((1u << L.tb) - 1);
+    cnt = x >> L.tb;
+  }
+  const uint32_t ib = h.ib, dmask = (1u << ib) - 1;
+  // One reference from the low bits of y: the vertex; y shifted past it, its width added to s.
+  auto ref = [&](uint32_t& y, uint32_t& s) SLIM_INLINE_LAMBDA {
+    const uint32_t isnew = y & 1;
+    const uint32_t v = isnew ? cnt : cnt - 1 - ((y >> 1) & dmask);
+    const uint32_t w = isnew ? 1 : 1 + ib;
+    cnt += isnew;
+    y >>= w;
+    s += w;
+    return v;
+  };
+  // Three references from the bits x on (a child's first triangle, a restart's after its 2 bits).
+  auto restart = [&](uint64_t x, uint32_t& s) SLIM_INLINE_LAMBDA {
+    uint32_t y = uint32_t(x >> s);
+    const uint32_t v0 = ref(y, s);
+    const uint32_t v1 = ref(y, s);
+    const uint32_t v2 = ref(y, s);
+    return v0 | v1 << 8 | v2 << 16;
+  };
+  auto load = [&] {
+    uint64_t x;
+    std::memcpy(&x, bits + (pos >> 3), 8);
+    return x >> (pos & 7);
+  };
+  uint32_t s = 0;
+  uint32_t t = restart(load(), s);
+  pos += s;
+  tri[0] = t;
+  for (uint32_t j = 1; j < n; ++j) {
+    const uint64_t x = load();
+    if ((x & 3) == 3) {
+      s = 2;
+      t = restart(x, s);
+    } else {
+      s = 4;
+      uint32_t y = uint32_t(x >> 4);
+      const uint32_t r = ref(y, s);
+      t = step_triangle(t | r << 24, uint32_t(x) & 15);
+    }
+    pos += s;
+    tri[j] = t;
+  }
+}
+
 // The triangles of child i decoded: v[corner][axis][lane], lanes >= n repeat the last triangle.
 struct Decoded8 {
   alignas(32) float v[3][3][8];
@@ -254,7 +343,7 @@ struct Decoded8 {
 template <bool kLossless>
 SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHeader& h,
                                       const uint8_t* bits, const Layout& L, const uint32_t* anchor,
-                                      const uint32_t (&idx)[3][8], Decoded8& d) {
+                                      const uint32_t (&tri)[8], Decoded8& d) {
   const auto* base = reinterpret_cast<const int*>(bits);
   auto field = [&](__m256i pos, uint32_t w) {
     const __m256i word = _mm256_i32gather_epi32(base, _mm256_srli_epi32(pos, 3), 1);
@@ -280,8 +369,17 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
     return _mm256_permute4x64_epi64(_mm256_castps_si256(pair), 0xD8);
   };
   auto mask = [](uint32_t w) { return _mm256_set1_epi32(int(uint32_t((uint64_t(1) << w) - 1))); };
+  // Per-axis constants, broadcast once for the 3 corners.
+  __m256i anchors[3], masks[3];
+  __m256 origins[3];
+  for (int a = 0; a < 3; ++a) {
+    anchors[a] = _mm256_set1_epi32(int(anchor[a]));
+    masks[a] = mask(h.bits[a]);
+    origins[a] = _mm256_set1_ps(lat.origin[a]);
+  }
+  const __m256 step = _mm256_set1_ps(lat.step);
   auto store = [&](int k, int a, __m256i off) {
-    const __m256i code = _mm256_add_epi32(off, _mm256_set1_epi32(int(anchor[a])));
+    const __m256i code = _mm256_add_epi32(off, anchors[a]);
     __m256 x;
     if constexpr (kLossless) {
       const __m256i neg = _mm256_srai_epi32(code, 31);  // key's top bit: a positive float
@@ -290,17 +388,18 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
       x = _mm256_castsi256_ps(_mm256_blendv_epi8(neg_bits, pos_bits, neg));
     } else {
       // q < 2^24: the signed conversion is the scalar float(q).
-      x = _mm256_add_ps(_mm256_set1_ps(lat.origin[a]),
-                        _mm256_mul_ps(_mm256_cvtepi32_ps(code), _mm256_set1_ps(lat.step)));
+      x = _mm256_add_ps(origins[a], _mm256_mul_ps(_mm256_cvtepi32_ps(code), step));
     }
     _mm256_store_ps(d.v[k][a], x);
   };
-  // Lanes >= n repeat lane n - 1 (their idx entries are not written).
+  // Lanes >= n repeat lane n - 1 (their tri entries are not written).
   const __m256i lanes =
       _mm256_min_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), _mm256_set1_epi32(d.n - 1));
+  const __m256i packed =
+      _mm256_permutevar8x32_epi32(_mm256_load_si256(reinterpret_cast<const __m256i*>(tri)), lanes);
   for (int k = 0; k < 3; ++k) {
-    const __m256i vi = _mm256_permutevar8x32_epi32(
-        _mm256_load_si256(reinterpret_cast<const __m256i*>(idx[k])), lanes);
+    const __m256i vi =
+        _mm256_and_si256(_mm256_srli_epi32(packed, 8 * k), _mm256_set1_epi32(0xff));  // corner k
     __m256i vpos = _mm256_add_epi32(_mm256_set1_epi32(int(L.verts)),
                                     _mm256_mullo_epi32(vi, _mm256_set1_epi32(int(L.vbits))));
     if (L.vbits <= 57) {
@@ -308,7 +407,7 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
       gather64(vpos, lo, hi);
       uint32_t shift = 0;
       for (int a = 0; a < 3; ++a) {
-        store(k, a, _mm256_and_si256(low32(lo, hi, shift), mask(h.bits[a])));
+        store(k, a, _mm256_and_si256(low32(lo, hi, shift), masks[a]));
         shift += h.bits[a];
       }
       continue;
@@ -319,7 +418,7 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
       } else {
         __m256i lo, hi;
         gather64(vpos, lo, hi);
-        store(k, a, _mm256_and_si256(low32(lo, hi, 0), mask(h.bits[a])));
+        store(k, a, _mm256_and_si256(low32(lo, hi, 0), masks[a]));
       }
       vpos = _mm256_add_epi32(vpos, _mm256_set1_epi32(h.bits[a]));
     }
@@ -338,20 +437,17 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, ui
   const uint32_t sizes = child_sizes(h);
   d.first = int(child_first(sizes, uint32_t(child)));
   d.n = int(child_size(sizes, uint32_t(child)));
-  alignas(32) uint32_t idx[3][8];
-  decode_strip<false>(
-      h, L, [bits](uint64_t pos, uint32_t w) { return read_bits(bits, pos, w); }, uint32_t(child),
-      uint32_t(d.n), idx);
+  alignas(32) uint32_t tri[8];
+  decode_strip_packed(h, L, bits, uint32_t(child), uint32_t(d.n), tri);
   uint32_t anchor[3];
   for (int a = 0; a < 3; ++a) anchor[a] = read_bits(bits, uint64_t(a) * L.aw, L.aw);
 #if defined(SLIM_SIMD_AVX2)
-  decode_vertices_avx2<kLossless>(lat, h, bits, L, anchor, idx, d);
+  decode_vertices_avx2<kLossless>(lat, h, bits, L, anchor, tri, d);
 #else
-  for (int l = d.n; l < 8; ++l)
-    for (int k = 0; k < 3; ++k) idx[k][l] = idx[k][d.n - 1];
+  for (int l = d.n; l < 8; ++l) tri[l] = tri[d.n - 1];
   for (int l = 0; l < 8; ++l)
     for (int k = 0; k < 3; ++k) {
-      uint64_t pos = L.verts + uint64_t(idx[k][l]) * L.vbits;
+      uint64_t pos = L.verts + uint64_t((tri[l] >> (8 * k)) & 0xff) * L.vbits;
       for (int a = 0; a < 3; ++a) {
         d.v[k][a][l] = decode_coord<kLossless>(lat, a, anchor[a] + read_bits(bits, pos, h.bits[a]));
         pos += h.bits[a];

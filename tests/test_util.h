@@ -213,15 +213,8 @@ inline double surface_distance(const std::vector<RefTri>& tris, const double p[3
   return d;
 }
 
-// Distance from p to the face (geom, prim) of `tris` (the nearest of its triangles), and to the
-// boundary of the nearest of its triangles; INFINITY when no triangle stands for the face.
-inline double face_distance(const std::vector<RefTri>& tris, uint32_t geom, uint32_t prim,
-                            const double p[3]) {
-  double d = INFINITY;
-  for (const RefTri& t : tris)
-    if (t.geom == geom && t.prim == prim) d = std::min(d, triangle_distance(t, p));
-  return d;
-}
+// Distance from p to the boundary of the nearest triangle of the face (geom, prim) of `tris`;
+// INFINITY when no triangle stands for the face.
 inline double face_boundary_distance(const std::vector<RefTri>& tris, uint32_t geom, uint32_t prim,
                                      const double p[3]) {
   double d = INFINITY;

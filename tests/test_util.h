@@ -213,8 +213,8 @@ inline double surface_distance(const std::vector<RefTri>& tris, const double p[3
   return d;
 }
 
-// Distance from p to the boundary of the nearest triangle of the face (geom, prim) of `tris`;
-// INFINITY when no triangle stands for the face.
+// The smallest distance from p to the boundary of one of the triangles of the face (geom, prim);
+// INFINITY when no triangle of `tris` stands for the face.
 inline double face_boundary_distance(const std::vector<RefTri>& tris, uint32_t geom, uint32_t prim,
                                      const double p[3]) {
   double d = INFINITY;

@@ -44,6 +44,7 @@
 #include <string>
 #include <vector>
 
+#include "slimrt/clusters.h"
 #include "slimrt/costa.h"
 #include "slimrt/grids.h"
 #include "test_util.h"
@@ -450,6 +451,109 @@ TEST(LossyAccuracy, LossyGridsWithinThePerVertexBoundOnAKnownSubgridPatch) {
       EXPECT_EQ(t.beyond, 0u) << t.first;
       EXPECT_GT(t.within, t.ref_hits * 9 / 10);
     }
+  }
+}
+
+// cluster: every decoded vertex against its INPUT vertex, with the promise of the format's
+// specification (prim/cluster.h): one scene-wide lattice with its origin at the low corner of the
+// box (the input's box, or BuildOptions::lattice_box when given) and a power-of-two step, the
+// largest with step * sqrt(3) / 2 <= cluster_error x the box diagonal; every coordinate rounds to
+// the nearest lattice point. So per axis |decoded - input| <= step / 2, |decoded - input| <=
+// cluster_error x diagonal, and (decoded - origin) / step is an integer (up to one float rounding
+// of origin + q * step). The correspondence decoded corner -> input vertex comes from the input
+// faces alone: cluster_triangles() gives the fan triangles of each face in triangulation order with
+// their corners in input order (v0, vk, vk+1).
+TEST(LossyAccuracy, ClusterVerticesFollowClusterError) {
+  std::vector<PolyMesh> meshes;
+  meshes.push_back(icosphere(4));
+  for (Vec3f& p : meshes.back().positions) p = p * 3.0f + Vec3f(10.0f, -2.0f, 0.5f);
+  meshes.push_back(random_soup(3000, 41, 0.3f));
+  for (Vec3f& p : meshes.back().positions) p = p * 12.0f + Vec3f(3.0f, -5.0f, -4.0f);
+  meshes.push_back(load("torus:32"));  // quads: two fan triangles per face
+  for (Vec3f& p : meshes.back().positions) p = p * 2.0f + Vec3f(6.0f, 4.0f, -1.0f);
+  std::vector<const PolyMesh*> ptrs;
+  Box3f input_box;
+  for (const PolyMesh& m : meshes) {
+    ptrs.push_back(&m);
+    input_box.extend(m.bounds());
+  }
+  struct Case {
+    double err;
+    Box3f lattice_box;  // empty: the input's box
+  };
+  Box3f wide = input_box;
+  wide.extend(input_box.lo - Vec3f(7.0f, 0.25f, 3.0f));
+  wide.extend(input_box.hi + Vec3f(0.5f, 9.0f, 1.0f));
+  for (const Case& c : {Case{1e-5, {}}, Case{1e-4, {}}, Case{3e-3, {}}, Case{1e-5, wide}}) {
+    const bool given = !c.lattice_box.empty();
+    const Box3f box = given ? c.lattice_box : input_box;
+    SCOPED_TRACE("cluster_error " + std::to_string(c.err) + (given ? ", lattice_box" : ""));
+    BuildOptions opt = BuildOptions::from_config("cluster");
+    opt.cluster_error = c.err;
+    opt.lattice_box = c.lattice_box;
+    const double diag = length(box.size());
+    const double e = c.err * diag;
+    const double step = std::exp2(std::floor(std::log2(2.0 * e / std::sqrt(3.0))));
+    ASSERT_LE(step * std::sqrt(3.0) / 2, e);
+    ASSERT_GT(2 * step * std::sqrt(3.0) / 2, e);
+    const double round = rounding(box);
+    const ClusterTriangles ct = cluster_triangles(ptrs, opt);
+    uint64_t expect_tris = 0;
+    for (const PolyMesh& m : meshes)
+      for (uint32_t n : m.face_sizes) expect_tris += n - 2;
+    ASSERT_EQ(ct.size(), expect_tris);
+    std::vector<std::vector<uint64_t>> offsets;
+    for (const PolyMesh& m : meshes) offsets.push_back(m.face_offsets());
+    std::map<std::pair<uint32_t, uint32_t>, uint32_t> fan_seen;  // triangles met per face
+    uint64_t over_axis = 0, over_vertex = 0, off_lattice = 0;
+    double worst_axis = 0, worst_vertex = 0;
+    std::string first;
+    for (size_t i = 0; i < ct.size(); ++i) {
+      const uint32_t g = ct.geom[i], f = ct.face[i];
+      ASSERT_LT(g, meshes.size());
+      const PolyMesh& m = meshes[g];
+      ASSERT_LT(f, m.face_count());
+      const uint32_t k = fan_seen[std::make_pair(g, f)]++;
+      ASSERT_LT(k + 2, m.face_sizes[f]) << "face " << g << "/" << f << ": too many triangles";
+      const uint32_t* idx = m.face_indices.data() + offsets[g][f];
+      const uint32_t corner[3] = {idx[0], idx[k + 1], idx[k + 2]};
+      for (int j = 0; j < 3; ++j) {
+        const Vec3f in = m.positions[corner[j]], dec = ct.vertices[3 * i + j];
+        double d2 = 0;
+        for (int a = 0; a < 3; ++a) {
+          const double d = std::fabs(double(dec[a]) - double(in[a]));
+          d2 += d * d;
+          worst_axis = std::max(worst_axis, d / (step / 2));
+          if (d > step / 2 + round && over_axis++ < 3)
+            first += " vertex " + std::to_string(g) + "/" + std::to_string(corner[j]) + " axis " +
+                     std::to_string(a) + " off by " + std::to_string(d) + " > half the step " +
+                     std::to_string(step / 2) + ";";
+          const double q = (double(dec[a]) - double(box.lo[a])) / step;
+          if (std::fabs(q - std::nearbyint(q)) > round / step && off_lattice++ < 3)
+            first += " vertex " + std::to_string(g) + "/" + std::to_string(corner[j]) + " axis " +
+                     std::to_string(a) + " at " + std::to_string(q) + " steps from the origin;";
+        }
+        worst_vertex = std::max(worst_vertex, std::sqrt(d2) / e);
+        if (std::sqrt(d2) > e + round && over_vertex++ < 3)
+          first += " vertex " + std::to_string(g) + "/" + std::to_string(corner[j]) + " off by " +
+                   std::to_string(std::sqrt(d2)) + " > cluster_error x diagonal " +
+                   std::to_string(e) + ";";
+      }
+    }
+    for (uint32_t g = 0; g < meshes.size(); ++g)
+      for (uint32_t f = 0; f < meshes[g].face_count(); ++f)
+        EXPECT_EQ(fan_seen[std::make_pair(g, f)] + 2, meshes[g].face_sizes[f])
+            << "face " << g << "/" << f;
+    std::printf(
+        "  cluster_error %.0e%s: step 2^%d, decoded axes within %.3f of step/2, vertices "
+        "within %.3f of cluster_error x diagonal\n",
+        c.err, given ? " (lattice_box)" : "", int(std::log2(step)), worst_axis, worst_vertex);
+    EXPECT_EQ(over_axis, 0u) << first;
+    EXPECT_EQ(over_vertex, 0u) << first;
+    EXPECT_EQ(off_lattice, 0u) << first;
+    // The lattice is used, not merely respected: some coordinate moves by more than a quarter
+    // step (a finer lattice than promised would keep every error below step / 4).
+    EXPECT_GT(worst_axis, 0.5);
   }
 }
 

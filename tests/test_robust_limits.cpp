@@ -259,8 +259,12 @@ TEST(RobustLimits, AllCoplanar) {
         const Hit h = s.intersect(make_ray({x, y, 1.0f}, d));
         ASSERT_TRUE(h.valid()) << x << "," << y;
         EXPECT_NEAR(h.t, 1.0f, 1e-6f);
-        if (d.x == 0) {
-          EXPECT_EQ(h.primID, face);
+        // The face under the hit point (x + d.x, y + d.y at t = 1), where it is not within 1e-3
+        // of a face border.
+        const float hx = x + d.x, hy = y + d.y;
+        if (std::fabs(hx - std::round(hx)) >= 1e-3f && std::fabs(hy - std::round(hy)) >= 1e-3f) {
+          EXPECT_EQ(h.primID, uint32_t(std::floor(hy)) * n + uint32_t(std::floor(hx)))
+              << x << "," << y << " along " << d.x << "," << d.y;
         }
       }
       const Hit up = s.intersect(make_ray({x, y, -2.0f}, {0, 0, 1}));

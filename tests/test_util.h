@@ -213,6 +213,16 @@ inline double surface_distance(const std::vector<RefTri>& tris, const double p[3
   return d;
 }
 
+// The smallest distance from p to the boundary of one of the triangles of the face (geom, prim);
+// INFINITY when no triangle of `tris` stands for the face.
+inline double face_boundary_distance(const std::vector<RefTri>& tris, uint32_t geom, uint32_t prim,
+                                     const double p[3]) {
+  double d = INFINITY;
+  for (const RefTri& t : tris)
+    if (t.geom == geom && t.prim == prim) d = std::min(d, boundary_distance(t, p));
+  return d;
+}
+
 // The point org + t * dir in double.
 inline void point_on_ray(const Ray& r, double t, double p[3]) {
   for (int k = 0; k < 3; ++k) p[k] = double(r.org[k]) + t * double(r.dir[k]);

@@ -10,8 +10,18 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 BUILD = os.environ.get("SLIMRT_BUILD_DIR", os.path.join(ROOT, "build"))
 if os.path.isdir(os.path.join(BUILD, "python")):
     sys.path.insert(0, os.path.join(BUILD, "python"))
-# The real meshes (MANIFEST there), beside the repository; tests that need them skip without.
+# The real meshes (MANIFEST there), beside the repository; tests that need them skip without,
+# or fail when SLIM_REQUIRE_DATA is set (see data_required()).
 SHARED_DATA = os.environ.get("SLIMRT_SHARED_DATA", os.path.join(ROOT, "..", "shared", "data"))
+
+
+def data_required():
+    """SLIM_REQUIRE_DATA=1 (set by .ci/run): a test that needs ../shared/data fails instead of
+    skipping when the data (or one of its files) is missing, as the C++ tests do
+    (tests/test_util.h), so the real-mesh evidence cannot vanish from CI while pytest stays
+    green."""
+    e = os.environ.get("SLIM_REQUIRE_DATA", "")
+    return e not in ("", "0")
 
 
 def import_slimrt():
@@ -155,6 +165,13 @@ def random_rays(rng, lo, hi, n, origin_scale=2.0):
 
 def shared_mesh(name):
     path = os.path.join(SHARED_DATA, name)
-    if not os.path.exists(path):
-        pytest.skip(f"{path} is missing (the real meshes live in ../shared/data)")
+    missing = None
+    if not os.path.exists(os.path.join(SHARED_DATA, "MANIFEST")):
+        missing = f"{SHARED_DATA}/MANIFEST is missing (the real meshes live in ../shared/data)"
+    elif not os.path.exists(path):
+        missing = f"{path} is missing (a file of ../shared/data)"
+    if missing:
+        if data_required():
+            pytest.fail(f"{missing} (SLIM_REQUIRE_DATA is set: missing data fails)")
+        pytest.skip(missing)
     return path

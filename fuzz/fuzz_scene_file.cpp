@@ -10,8 +10,8 @@
 //   - open either succeeds or throws slim::Error naming the file;
 //   - an opened scene traces rays through its bounds without memory errors, undefined behaviour
 //     or hangs, and every hit has tnear <= t <= tfar.
-// The seeds (fuzz/make_seeds.cpp) are small scene files of the configurations the structure
-// check covers, and one it does not.
+// The seeds (fuzz/make_seeds.cpp) are small scene files of every configuration of the registry
+// (the structure check covers them all) and of joined scenes.
 #include <unistd.h>
 #include <xxhash.h>
 

@@ -158,23 +158,29 @@ int main(int argc, char** argv) {
       "0 0 0\n1e300 0 0\n0 1 0\n3 0 1 4294967295\n");
   for (const slim::seeds::BinarySeed& b : slim::seeds::binary_seeds())
     put(b.target, b.name, b.bytes);
-  // scene_file: small scene files (Scene::save) of the configurations the structure check walks,
-  // and of two it does not (their sections are still parsed and their header checked).
-  for (const char* config : {"bvh8-tri4v", "bvh8-tri4i", "qbvh8-tri4v", "clbvh-compact",
-                             "bvh8-pairs", "lossy-grid-shared", "costa-PFV"}) {
-    const fs::path p = out / "scene_file" / (std::string(config) + ".slim");
-    fs::create_directories(p.parent_path());
-    slim::Scene::build(slim::make_terrain(3, 1), slim::BuildOptions::from_config(config))
-        .save(p.string());
-    ++n;
-  }
-  // A scene joined from chunk scenes (Scene::build_chunked): the join.* sections and c<i>.
-  // prefixes.
+  // scene_file: a small scene file (Scene::save) of every configuration of the registry (the
+  // structure check covers them all), over a terrain and a few loose triangles (the grid formats'
+  // leftover triangles).
   {
+    std::vector<slim::PolyMesh> meshes{slim::make_terrain(3, 1)};
+    slim::PolyMesh soup = slim::make_sphere(1, 0.05f, 1);
+    soup.face_sizes.resize(4);
+    soup.face_indices.resize(12);
+    meshes.push_back(soup);
+    for (const std::string& config : slim::all_config_names()) {
+      const fs::path p = out / "scene_file" / (config + ".slim");
+      fs::create_directories(p.parent_path());
+      slim::Scene::build(meshes, slim::BuildOptions::from_config(config)).save(p.string());
+      ++n;
+    }
+  }
+  // Scenes joined from chunk scenes (Scene::build_chunked): the join.* sections and c<i>.
+  // prefixes, over chunks of a few formats.
+  for (const char* config : {"bvh8-tri4v", "lossy-grid-shared", "costa-PFV", "cluster"}) {
     slim::ChunkedBuildOptions chunking;
     chunking.max_chunk_triangles = 8;
-    const fs::path p = out / "scene_file" / "joined-bvh8-tri4v.slim";
-    slim::Scene::build_chunked("terrain:4", slim::BuildOptions::from_config("bvh8-tri4v"), chunking)
+    const fs::path p = out / "scene_file" / ("joined-" + std::string(config) + ".slim");
+    slim::Scene::build_chunked("terrain:4", slim::BuildOptions::from_config(config), chunking)
         .save(p.string());
     ++n;
   }

@@ -8,10 +8,17 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <string>
 #include <vector>
 
+#include "bvh/bvh8.h"
+#include "prim/cluster.h"
+#include "prim/costa_leaf.h"
+#include "prim/lossy_subgrid.h"
+#include "prim/subgrid.h"
+#include "prim/triangles.h"
 #include "slimrt/render.h"
 #include "slimrt/slimrt.h"
 #include "test_util.h"
@@ -357,13 +364,130 @@ TEST(SceneFile, StructureCheckNamesSectionAndOffset) {
   const std::string msg4 = try_open(bad, pb, oo, pr.rays);
   EXPECT_NE(msg4.find("pair corner order"), std::string::npos) << msg4;
   std::filesystem::remove(pr.path);
-  // A format the check does not cover says so.
-  Small g = small_file("lossy-grid", "struct_grid");
-  const std::string msg3 = try_open(bad, g.bytes, oo, g.rays);
-  EXPECT_NE(msg3.find("not available"), std::string::npos) << msg3;
   std::filesystem::remove(bad);
   std::filesystem::remove(s.path);
-  std::filesystem::remove(g.path);
+}
+
+// ---- the structure check of every configuration ------------------------------------------------
+
+// The meshes of the structure check's tests: a terrain (grids) and a few loose triangles (the
+// grid formats' leftover triangles, geomID 1).
+std::vector<PolyMesh> check_meshes(int n) {
+  std::vector<PolyMesh> m{make_terrain(n, 2)};
+  PolyMesh soup = test::random_soup(40, 7, 0.3f);
+  for (Vec3f& p : soup.positions) p = p * float(n);
+  m.push_back(soup);
+  return m;
+}
+
+struct SectionInfo {
+  std::string name;
+  uint64_t offset, size;
+};
+std::vector<SectionInfo> sections_of(const std::string& b) {
+  std::vector<SectionInfo> v;
+  for (uint32_t k = 0; k < section_count(b); ++k)
+    v.push_back(
+        {std::string(b.data() + entry(k)), get64(b, entry(k) + 48), get64(b, entry(k) + 56)});
+  return v;
+}
+SectionInfo section(const std::string& b, const std::string& name) {
+  for (const SectionInfo& s : sections_of(b))
+    if (s.name == name) return s;
+  ADD_FAILURE() << "no section " << name;
+  return {name, 0, 0};
+}
+
+OpenOptions structure_check() {
+  OpenOptions oo;
+  oo.verify_checksums = false;
+  oo.check_structure = true;
+  return oo;
+}
+
+// Scenes joined from chunk scenes of a few formats (Scene::build_chunked).
+Scene joined_scene(const std::string& config, uint64_t max_chunk_triangles) {
+  ChunkedBuildOptions chunking;
+  chunking.max_chunk_triangles = max_chunk_triangles;
+  return Scene::build_chunked("terrain:12", BuildOptions::from_config(config), chunking);
+}
+const char* const kJoinedConfigs[] = {"bvh8-tri4i", "lossy-grid-shared", "costa-PFV", "cluster"};
+
+TEST(SceneFile, StructureCheckPassesEveryConfiguration) {
+  const std::vector<PolyMesh> meshes = check_meshes(20);
+  const std::string path = temp_path("check_all");
+  int tested = 0;
+  auto check = [&](const Scene& built, const std::string& what) {
+    built.save(path);
+    const Scene opened = Scene::open(path, structure_check());
+    expect_same_hits(built, opened, test_rays(built.bounds(), 2000, 5), what);
+    OpenOptions both;
+    both.check_structure = true;
+    EXPECT_NO_THROW((void)Scene::open(path, both)) << what;
+    ++tested;
+  };
+  for (const std::string& name : all_config_names()) {
+    SCOPED_TRACE(name);
+    check(Scene::build(meshes, BuildOptions::from_config(name)), name);
+  }
+  EXPECT_EQ(tested, int(all_config_names().size()));
+  for (const char* config : kJoinedConfigs)
+    check(joined_scene(config, 64), "joined " + std::string(config));
+  std::filesystem::remove(path);
+}
+
+// Flips `count` bytes at random positions of each section (and of the header, which its checksum
+// guards) of a file, opens each with the structure check and without the checksums, and traces
+// rays through what opens. Returns the opens that failed, and the flips tried.
+std::pair<int, int> flip_sections(const Scene& built, const std::string& what,
+                                  const std::string& tag, int count, uint32_t seed) {
+  const std::string path = temp_path(tag), bad = temp_path(tag + "_bad");
+  built.save(path);
+  const std::string bytes = read_all(path);
+  const std::vector<Ray> rays = test_rays(built.bounds(), 48, seed);
+  const OpenOptions oo = structure_check();
+  EXPECT_EQ(try_open(bad, bytes, oo, rays), "") << what;
+  Rng rng(seed);
+  int errors = 0, tried = 0;
+  std::vector<SectionInfo> secs = sections_of(bytes);
+  secs.push_back({"(header)", 0, get64(bytes, kHeaderBytesAt)});
+  for (const SectionInfo& sec : secs) {
+    if (sec.size == 0) continue;
+    for (int i = 0; i < count; ++i) {
+      std::string b = bytes;
+      const uint64_t at = sec.offset + uint64_t(rng.uniform() * float(sec.size)) % sec.size;
+      b[at] = char(b[at] ^ (1 + int(rng.uniform() * 254.0f)));
+      const std::string msg = try_open(bad, b, oo, rays);
+      ++tried;
+      if (sec.name == "(header)")
+        EXPECT_FALSE(msg.empty()) << what << ": header flip at " << at << " opened";
+      if (!msg.empty()) {
+        ++errors;
+        EXPECT_NE(msg.find(bad), std::string::npos) << msg;
+        EXPECT_NE(msg.find("offset"), std::string::npos) << msg;
+      }
+    }
+  }
+  std::filesystem::remove(path);
+  std::filesystem::remove(bad);
+  return {errors, tried};
+}
+
+TEST(SceneFile, SectionByteFlipsWithStructureCheckNeverCrash) {
+  const std::vector<PolyMesh> meshes = check_meshes(6);
+  uint32_t seed = 100;
+  for (const std::string& name : all_config_names()) {
+    SCOPED_TRACE(name);
+    const auto [errors, tried] = flip_sections(
+        Scene::build(meshes, BuildOptions::from_config(name)), name, "flipsec", 24, seed++);
+    EXPECT_GT(errors, 0) << name << ": none of " << tried << " flips refused";
+  }
+  for (const char* config : kJoinedConfigs) {
+    SCOPED_TRACE(config);
+    const auto [errors, tried] = flip_sections(
+        joined_scene(config, 96), std::string("joined ") + config, "flipsec_j", 6, seed++);
+    EXPECT_GT(errors, 0) << config << ": none of " << tried << " flips refused";
+  }
 }
 
 TEST(SceneFile, HeaderErrorsAreClear) {
@@ -475,6 +599,192 @@ TEST(SceneFile, SavingAnOpenedSceneWritesTheSameBytes) {
   check(joined, "joined lossy-grid-shared");
   std::filesystem::remove(a);
   std::filesystem::remove(b);
+}
+
+// The first leaf reference of the BVH under `prefix` in a scene file's bytes, found from the root
+// through the first used child of each node; 0 if the root is empty.
+uint64_t first_leaf(const std::string& b, const std::string& prefix) {
+  const SectionInfo meta = section(b, prefix + "bvh.meta"),
+                    nodes = section(b, prefix + "bvh.nodes");
+  uint64_t ref = get64(b, meta.offset);  // BvhMeta::root
+  while (NodeRef::tag(ref) == kRefNode8 || NodeRef::tag(ref) == kRefQNode8) {
+    const uint64_t child =
+        nodes.offset + NodeRef::offset(ref) +
+        (NodeRef::tag(ref) == kRefNode8 ? offsetof(Node8, child) : offsetof(QNode8, child));
+    uint64_t next = 0;
+    for (int i = 0; i < 8 && next == 0; ++i) next = get64(b, child + 8 * i);
+    ref = next;
+  }
+  return ref;
+}
+// The file offset of the first block of that leaf (behind the header of a multi-leaf).
+uint64_t first_block(const std::string& b, const std::string& prefix) {
+  const uint64_t ref = first_leaf(b, prefix);
+  EXPECT_TRUE(NodeRef::tag(ref) == kRefLeaf || NodeRef::tag(ref) == kRefMulti);
+  return section(b, prefix + "bvh.leaves").offset + NodeRef::offset(ref) +
+         (NodeRef::tag(ref) == kRefMulti ? sizeof(MultiLeaf8) : 0);
+}
+void put32(std::string& s, uint64_t at, uint32_t v) { std::memcpy(s.data() + at, &v, 4); }
+// A child reference of the first node of the BVH under `prefix` (its root), to `ref`.
+void set_root_child(std::string& b, const std::string& prefix, uint64_t ref) {
+  const uint64_t root = get64(b, section(b, prefix + "bvh.meta").offset);
+  ASSERT_TRUE(NodeRef::tag(root) == kRefNode8 || NodeRef::tag(root) == kRefQNode8);
+  const uint64_t child =
+      section(b, prefix + "bvh.nodes").offset + NodeRef::offset(root) +
+      (NodeRef::tag(root) == kRefNode8 ? offsetof(Node8, child) : offsetof(QNode8, child));
+  put64(b, child, ref);
+}
+
+// For each format, one reference set out of range: the structure check names the section, the
+// offset and what is wrong, where the checksums are off.
+TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
+  const std::vector<PolyMesh> meshes = check_meshes(10);
+  const std::string path = temp_path("badref"), bad = temp_path("badref_bad");
+  struct Case {
+    std::string config;
+    std::string what;  // what the corruption does
+    std::function<void(std::string&)> corrupt;
+    std::string section, message;  // expected in the error
+  };
+  auto far_node = [](RefTag tag) {
+    return [tag](std::string& b) {
+      set_root_child(b, "", NodeRef::make(tag, (section(b, "bvh.nodes").size + 1024) & ~63ull));
+    };
+  };
+  auto block_field = [](uint64_t field, uint32_t value) {
+    return [field, value](std::string& b) { put32(b, first_block(b, "") + field, value); };
+  };
+  auto every = [](const std::string& name, uint64_t elem, uint64_t field, uint32_t value) {
+    return [=](std::string& b) {
+      const SectionInfo t = section(b, name);
+      for (uint64_t at = 0; at + elem <= t.size; at += elem) put32(b, t.offset + at + field, value);
+    };
+  };
+  const std::vector<Case> cases = {
+      {"bvh8-tri4v", "Node8 child beyond the node arena", far_node(kRefNode8), "bvh.nodes",
+       "node outside the node arena"},
+      {"qbvh8-tri4v", "QNode8 child beyond the node arena", far_node(kRefQNode8), "bvh.nodes",
+       "node outside the node arena"},
+      {"clbvh-tri4v", "multi-leaf beyond the leaf arena",
+       [](std::string& b) {
+         set_root_child(b, "",
+                        NodeRef::make(kRefMulti, (section(b, "bvh.leaves").size + 64) & ~63ull, 2));
+       },
+       "bvh.leaves", "multi-leaf outside the leaf arena"},
+      {"bvh8-tri4v", "leaf of too many blocks",
+       [](std::string& b) {
+         set_root_child(b, "", NodeRef::make(kRefLeaf, section(b, "bvh.leaves").size & ~3ull, 1));
+       },
+       "bvh.leaves", "leaf block outside the arena"},
+      {"bvh8-tri4i", "vertex index", block_field(offsetof(Tri4iBlock, v), 0xffffffffu),
+       "bvh.leaves", "vertex index beyond the vertex array"},
+      {"clbvh-compact", "vertex dictionary entry",
+       [](std::string& b) {
+         const uint64_t ref = first_leaf(b, "");
+         const uint64_t at = section(b, "bvh.leaves").offset + NodeRef::offset(ref);
+         if (NodeRef::tag(ref) == kRefMulti)  // the dictionary behind the k blocks
+           put32(b, at + 72 + NodeRef::blocks(ref) * sizeof(Tri4iCompactBlock), 0xffffffffu);
+         else
+           put32(b, at, 0xffffffffu);
+       },
+       "bvh.leaves", "vertex index beyond the vertex array"},
+      {"bvh8-pairs", "pair corner order", block_field(240, 0xffffffffu), "bvh.leaves",
+       "pair corner order"},
+      {"grid", "sub-grid vertex", block_field(offsetof(SubGridRef, vertex), 0xfffffff0u),
+       "bvh.leaves", "grid.vertices"},
+      {"grid", "sub-grid's grid", block_field(offsetof(SubGridRef, grid), 0xfffffff0u),
+       "bvh.leaves", "grid index beyond the grid tables"},
+      {"grid", "flip masks of every grid",
+       every("grid.hot", sizeof(GridHot), offsetof(GridHot, flips), 0x7fffffffu), "bvh.leaves",
+       "grid.flips"},
+      {"lossy-grid", "sub-grid's grid",
+       block_field(offsetof(LossySubGrid, primitive_id), 0xfffffff0u), "bvh.leaves",
+       "grid index beyond the grid tables"},
+      {"lossy-grid-e2", "sub-grid resolution",
+       block_field(offsetof(LossySubGrid, res) - 3, 0xff000000u), "bvh.leaves", "resolution"},
+      {"lossy-grid-qbvh8", "face tables of every grid",
+       [](std::string& b) {
+         const SectionInfo t = section(b, "grid.table");
+         for (uint64_t at = 0; at + sizeof(GridInfo) <= t.size; at += sizeof(GridInfo)) {
+           put32(b, t.offset + at + offsetof(GridInfo, flags), kGridFaceTable);
+           put32(b, t.offset + at + offsetof(GridInfo, face0), 0x7fffffffu);
+         }
+       },
+       "bvh.leaves", "grid.faces"},
+      {"lossy-grid-qbvh8", "exact vertices of every grid",
+       [](std::string& b) {
+         // Every displacement code of the first block an escape, past the grid's exact vertices.
+         const uint64_t at = first_block(b, "") + offsetof(LossySubGrid, displ);
+         for (int k = 0; k < 21; ++k) {
+           const uint32_t c = escape_code(kMaxExactIndex);
+           b[at + 3 * k] = char(c), b[at + 3 * k + 1] = char(c >> 8),
+                      b[at + 3 * k + 2] = char(c >> 16);
+         }
+       },
+       "bvh.leaves", "grid.exact"},
+      {"lossy-grid-shared", "lattice corner",
+       block_field(offsetof(LossySubGridShared, corner), 0xfffffff0u), "bvh.leaves",
+       "corner chunk table"},
+      {"lossy-grid-shared", "corner chunk table", every("grid.corner_grid", 4, 0, 0x7fffffffu),
+       "bvh.leaves", "grid.corner_grid"},
+      {"lossy-grid-shared", "grid count",
+       [](std::string& b) { put32(b, section(b, "grid.params").offset, 0x7fffffffu); },
+       "grid.params", "grid count"},
+      {"lossy-grid", "sub-grid parts",
+       [](std::string& b) { put32(b, section(b, "grid.params").offset + 8, 3); }, "grid.params",
+       "sub-grid parts"},
+      {"grid", "leftover triangles' node child",
+       [](std::string& b) {
+         set_root_child(
+             b, "tris.",
+             NodeRef::make(kRefNode8, (section(b, "tris.bvh.nodes").size + 1024) & ~63ull));
+       },
+       "tris.bvh.nodes", "node outside the node arena"},
+      {"cluster", "cluster header", block_field(0, 0), "bvh.leaves", "cluster"},
+      {"cluster-lossless", "cluster header", block_field(0, 0), "bvh.leaves", "cluster"},
+      {"costa", "primitive range", block_field(offsetof(CostaBlock, first), 0xfffffff0u),
+       "bvh.leaves", "primitive range beyond the store"},
+      {"costa-PFV", "primitive count", block_field(offsetof(CostaBlock, count), 9), "bvh.leaves",
+       "primitive count"},
+      {"costa", "face entries", every("costa.faces", 4, 0, 0x7ffffff0u), "bvh.leaves",
+       "costa.vertices"},
+      {"costa-P", "offset predictor",
+       [](std::string& b) { put64(b, section(b, "costa.params").offset + 8, uint64_t(1) << 61); },
+       "bvh.leaves", "offset predictor out of range"},
+      {"costa-F", "packed face entries", every("costa.packed_faces", 4, 0, 0xffffffffu),
+       "bvh.leaves", "costa."},
+      {"costa-PFV", "face map",
+       [](std::string& b) { put32(b, section(b, "costa.params").offset + 48, 40); }, "bvh.leaves",
+       "face map width"},
+  };
+  int checked = 0;
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.config + ": " + c.what);
+    const Scene built = Scene::build(meshes, BuildOptions::from_config(c.config));
+    built.save(path);
+    std::string b = read_all(path);
+    const std::vector<Ray> rays = test_rays(built.bounds(), 32, 9);
+    ASSERT_EQ(try_open(bad, b, structure_check(), rays), "");
+    c.corrupt(b);
+    ASSERT_NE(b, read_all(path)) << "nothing corrupted";
+    const std::string msg = try_open(bad, b, structure_check(), rays);
+    EXPECT_NE(msg.find(bad), std::string::npos) << msg;
+    EXPECT_NE(msg.find("section '" + c.section + "', offset"), std::string::npos) << msg;
+    EXPECT_NE(msg.find(c.message), std::string::npos) << msg;
+    // Without the structure check, the section checksums catch the same bytes.
+    EXPECT_NE(try_open(bad, b, {}, rays).find("checksum"), std::string::npos);
+    ++checked;
+  }
+  EXPECT_EQ(checked, int(cases.size()));
+  // A chunk of a joined scene: the section under the chunk's prefix.
+  const Scene joined = joined_scene("lossy-grid-shared", 96);
+  joined.save(path);
+  std::string b = read_all(path);
+  put32(b, first_block(b, "c0.") + offsetof(LossySubGridShared, corner), 0xfffffff0u);
+  const std::string msg = try_open(bad, b, structure_check(), {});
+  EXPECT_NE(msg.find("section 'c0.bvh.leaves', offset"), std::string::npos) << msg;
+  std::filesystem::remove(path);
+  std::filesystem::remove(bad);
 }
 
 }  // namespace

@@ -231,8 +231,8 @@ struct OpenOptions {
   bool verify_checksums = true;
   // Walks every node and leaf block and checks every offset and index the traversal follows
   // (bounds-safe, reads the whole file): for files of unknown origin opened without checksums.
-  // Throws slim::Error naming the section and the byte offset of the first bad reference, or for
-  // a configuration whose leaves it cannot check yet (README.md lists them).
+  // Throws slim::Error naming the section and the byte offset of the first bad reference; a scene
+  // it accepts traces reading inside its sections only. Every configuration.
   bool check_structure = false;
 };
 

@@ -71,8 +71,25 @@ inline CollapseRule collapse_rule(const BuildOptions& opt) {
   return default_collapse_rule(node_kind(opt.nodes));
 }
 
+// The structure check of scene files (OpenOptions::check_structure) needs every leaf format to
+// check its blocks: Leaf::check_block(ctx, block), and for a multi-leaf layout with data of its
+// own Leaf::check_multileaf(ctx, data, children, bytes left in the leaf arena), each answering
+// nullptr / "" for a block the traversal reads inside the mapped sections only, else what is
+// wrong (fault_text, api/scene_file.h). BvhScene refuses to compile for a leaf without them.
+template <class Leaf>
+concept StructureCheckedLeaf = requires(const typename Leaf::Context& c, const uint8_t* b) {
+  { fault_text(Leaf::check_block(c, b)) } -> std::same_as<std::string>;
+}
+&&(!HasMultiLeafLayout<Leaf> || requires(const typename Leaf::Context& c, const uint8_t* b) {
+  { fault_text(Leaf::check_multileaf(c, b, 1u, uint64_t(0))) } -> std::same_as<std::string>;
+});
+
 template <class Leaf>
 class BvhScene : public Scene::Impl {
+  static_assert(StructureCheckedLeaf<Leaf>,
+                "a leaf format needs its structure check: Leaf::check_block (and "
+                "Leaf::check_multileaf for a multi-leaf layout with data of its own)");
+
  public:
   Bvh8 bvh;
   typename Leaf::Context ctx{};
@@ -159,36 +176,22 @@ class BvhScene : public Scene::Impl {
   }
   void sections(SectionVisitor& v) override { bvh_sections(v, ""); }
 
-  // The checks of an opened BVH (Scene::Impl::check_opened). The deep walk needs the leaf's
-  // block check (Leaf::check_block, and Leaf::check_multileaf for layouts with data of their
-  // own); formats without them cannot be checked that way (README.md).
-  static constexpr bool kCheckable = requires(const typename Leaf::Context& c, const uint8_t* b) {
-    { Leaf::check_block(c, b) } -> std::same_as<const char*>;
-  }
-  &&(!HasMultiLeafLayout<Leaf> ||
-     requires(const typename Leaf::Context& c, const uint8_t* b) {
-       { Leaf::check_multileaf(c, b, 1u, uint64_t(0)) } -> std::same_as<const char*>;
-     }) &&
-      !HasMultiLeafParts<Leaf>;
+  // The checks of an opened BVH (Scene::Impl::check_opened): the root reference and block size;
+  // with `deep`, the walk of every reference with the leaf's block checks. Formats whose blocks
+  // index side tables check those tables' own fields first (their check_opened).
   void check_bvh(const std::string& p, bool deep) const {
     check_bvh_root(bvh, p, Leaf::kBlockBytes);
     if (!deep) return;
-    if constexpr (kCheckable) {
-      BvhWalkHooks h;
-      const uint8_t* leaves = bvh.leaves.data();
-      h.block = [&](uint64_t off) { return Leaf::check_block(ctx, leaves + off); };
-      if constexpr (HasMultiLeafLayout<Leaf>)
-        h.multi = [&](uint64_t off, uint32_t k) {
-          // off + 72 <= size: checked by the walk.
-          return Leaf::check_multileaf(ctx, leaves + off + sizeof(MultiLeaf8), k,
-                                       bvh.leaves.size() - off - sizeof(MultiLeaf8));
-        };
-      walk_bvh_checked(bvh, p, h);
-    } else {
-      throw SectionFault{p + "bvh.leaves", 0,
-                         "the structure check (OpenOptions::check_structure) is not available "
-                         "for this leaf format; open with verify_checksums"};
-    }
+    BvhWalkHooks h;
+    const uint8_t* leaves = bvh.leaves.data();
+    h.block = [&](uint64_t off) { return fault_text(Leaf::check_block(ctx, leaves + off)); };
+    if constexpr (HasMultiLeafLayout<Leaf>)
+      h.multi = [&](uint64_t off, uint32_t k) {
+        // off + 72 <= size: checked by the walk.
+        return fault_text(Leaf::check_multileaf(ctx, leaves + off + sizeof(MultiLeaf8), k,
+                                                bvh.leaves.size() - off - sizeof(MultiLeaf8)));
+      };
+    walk_bvh_checked(bvh, p, h);
   }
   void check_opened(bool deep) const override { check_bvh("", deep); }
 

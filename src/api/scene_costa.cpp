@@ -115,6 +115,10 @@ class CostaScene : public BvhScene<CostaLeaf<P, F, V>> {
     c.faces.width = k.face_width;
     c.faces.mesh_count = k.mesh_count;
     c.prim_count = k.prim_count;
+    // The array sizes the structure check bounds the blocks' references by.
+    c.counts = n;
+    c.face_map_bytes = face_map_bytes;
+    c.face_base_count = face_base;
   }
 
   bool validate(std::string* why) const override {

@@ -467,7 +467,7 @@ struct Walker {
   void block(uint64_t off) {
     if (!fits(off, b.block_bytes, b.leaves.size()))
       leaves_fault(off, "leaf block outside the arena");
-    if (const char* e = h.block(off)) leaves_fault(off, e);
+    if (std::string e = h.block(off); !e.empty()) leaves_fault(off, e);
   }
 
   // `where`: the node holding the reference (for messages).
@@ -514,7 +514,7 @@ struct Walker {
         if (!fits(off, sizeof(MultiLeaf8), b.leaves.size()))
           leaves_fault(off, "multi-leaf outside the leaf arena");
         if (h.multi) {
-          if (const char* e = h.multi(off, k)) leaves_fault(off, e);
+          if (std::string e = h.multi(off, k); !e.empty()) leaves_fault(off, e);
         } else {
           for (uint32_t i = 0; i < k; ++i)
             block(off + sizeof(MultiLeaf8) + uint64_t(i) * b.block_bytes);

@@ -315,6 +315,8 @@ class GridScene final : public BvhScene<Leaf> {
     this->bvh_sections(v, "");
     auto& c = this->ctx;
     size_t slot = 0;
+    // Returns the table's element count (the structure check bounds the blocks' references by
+    // these, GridTableSizes).
     auto table = [&](const std::string& name, const auto& vec, auto*& ptr) {
       using T = std::remove_cvref_t<decltype(*ptr)>;
       uint64_t& opened = opened_count.at(slot++);
@@ -325,15 +327,17 @@ class GridScene final : public BvhScene<Leaf> {
         ptr = d;
         opened = n;
       }
+      return n;
     };
-    table("grid.table", grid_table, c.grids);
-    table("grid.hot", hot, c.hot);
-    table("grid.faces", face_table, c.faces);
-    table("grid.flips", flips, c.flips);
+    GridTableSizes& n = c.sizes;
+    n.grids = table("grid.table", grid_table, c.grids);
+    n.hot = table("grid.hot", hot, c.hot);
+    n.faces = table("grid.faces", face_table, c.faces);
+    n.flips = table("grid.flips", flips, c.flips);
     if constexpr (std::is_same_v<typename Leaf::Context, LossyContext>) {
-      table("grid.exact", exact, c.exact);
-      table("grid.corners", vertices, c.corners);
-      table("grid.corner_grid", corner_grid, c.corner_grid);
+      n.exact = table("grid.exact", exact, c.exact);
+      n.corners = table("grid.corners", vertices, c.corners);
+      n.corner_grid = table("grid.corner_grid", corner_grid, c.corner_grid);
       struct {
         uint32_t grid_count;
         int32_t bias;
@@ -344,15 +348,27 @@ class GridScene final : public BvhScene<Leaf> {
       c.bias = k.bias;
       c.parts = k.parts;
     } else {
-      table("grid.vertices", vertices, c.vertices);
+      n.vertices = table("grid.vertices", vertices, c.vertices);
     }
     uint32_t has_tris[2] = {tris ? 1u : 0u, 0};
     v.pod("grid.has_leftover_triangles", has_tris);
     if (!v.saving() && has_tris[0]) tris = std::make_unique<BvhScene<Tri4v>>();
     if (tris) tris->bvh_sections(v, "tris.");
   }
+  // The leftover triangles' BVH, the grid parameters, then the sub-grid BVH with the blocks'
+  // checks (prim/subgrid.h, prim/lossy_subgrid.h: every side-table entry a block reaches).
   void check_opened(bool deep) const override {
-    if (tris) tris->check_bvh("tris.", false);
+    if (tris) tris->check_bvh("tris.", deep);
+    if constexpr (std::is_same_v<typename Leaf::Context, LossyContext>) {
+      const LossyContext& c = this->ctx;
+      if (deep && c.parts != 1 && c.parts != 2 && c.parts != 4)
+        throw SectionFault{"grid.params", 8,
+                           "sub-grid parts " + std::to_string(c.parts) + " (1, 2 or 4)"};
+      if (deep && (c.grid_count > c.sizes.hot || c.grid_count > c.sizes.grids))
+        throw SectionFault{"grid.params", 0,
+                           "grid count " + std::to_string(c.grid_count) +
+                               " beyond the grid tables (grid.table, grid.hot)"};
+    }
     this->check_bvh("", deep);
   }
 

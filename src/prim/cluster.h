@@ -553,6 +553,28 @@ struct ClusterLeaf {
   static constexpr uint32_t kBlockBytes = 8;
   static constexpr bool kMultiLeafLayout = true;
 
+  // Scene files' structure check (OpenOptions::check_structure): the cluster a multi-leaf holds
+  // (`avail` bytes from `data` to the end of the leaf arena, whose last kClusterReadSlack bytes
+  // are the decoders' read slack), and the side arena's record an isolated leaf names.
+  static std::string check_multileaf(const Context&, const uint8_t* data, uint32_t k,
+                                     uint64_t avail) {
+    std::string why;
+    if (avail < kClusterReadSlack) return "cluster beyond the leaf arena";
+    if (!cluster::check(data, avail - kClusterReadSlack, k, kLossless, &why)) return why;
+    return {};
+  }
+  static std::string check_block(const Context& ctx, const uint8_t* block) {
+    uint64_t off;
+    std::memcpy(&off, block, 8);
+    if (ctx.side_bytes < kClusterReadSlack || off > ctx.side_bytes - kClusterReadSlack)
+      return "cluster record offset beyond the side arena (cluster.side)";
+    std::string why;
+    if (!cluster::check(ctx.side + off, ctx.side_bytes - kClusterReadSlack - off, 1, kLossless,
+                        &why))
+      return why + " (cluster.side)";
+    return {};
+  }
+
   // ---- build side ----
   // A block encoded ahead was made of exactly these children (the cache is keyed by the first
   // triangle only).

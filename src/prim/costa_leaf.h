@@ -78,9 +78,79 @@ struct CostaLeaf {
     CostaView<P, F, V> view;
     CostaFaceMap faces;
     uint32_t prim_count = 0;
+    // Scene files' structure check: the element counts of the store's arrays and of the face map
+    // (bytes) and face_base (entries), from the section sizes (api/scene_costa.cpp).
+    QuantizedMesh::Counts counts{};
+    uint64_t face_map_bytes = 0, face_base_count = 0;
   };
   static constexpr uint32_t kBlockPrims = 4;
   static constexpr uint32_t kBlockBytes = sizeof(CostaBlock);
+
+  // Scene files' structure check (OpenOptions::check_structure) of the store's parameters: bit
+  // widths the readers take, a linear predictor whose sums fit int64 (predict_offset), a face
+  // map whose mesh search stays inside face_base.
+  static const char* check_params(const Context& ctx) {
+    const auto& r = ctx.view.r;
+    if constexpr (P) {
+      if (r.residual_bits > 32) return "offset residual width beyond 32 bits (costa.params)";
+      const double avg = r.avg;
+      const int64_t min = r.residual_min, lim = int64_t(1) << 60;
+      if (!(avg >= 0.0 && avg * (double(ctx.prim_count) + 1.0) < 0x1p62) || min < -lim || min > lim)
+        return "offset predictor out of range (costa.params)";
+    }
+    if constexpr (F)
+      if (r.face_bits > 32) return "face entry width beyond 32 bits (costa.params)";
+    const CostaFaceMap& m = ctx.faces;
+    if (m.width > 32) return "face map width beyond 32 bits (costa.params)";
+    if (uint64_t(m.mesh_count) + 1 > ctx.face_base_count)
+      return "mesh count beyond the face bases (costa.face_base)";
+    if (m.mesh_count > 1 && m.face_base[0] != 0) return "first face base not 0 (costa.face_base)";
+    return nullptr;
+  }
+  // Whether bit_read(data, width, i) stays inside `bytes` (it loads 8 bytes).
+  static bool bits_readable(uint64_t bytes, uint32_t width, uint64_t i) {
+    return ((i * width) >> 3) + 8 <= bytes;
+  }
+  // A block: its primitive range inside the store, each primitive's two offsets, its 3+ face
+  // entries and the vertices they name, its face map entry (what intersect() and visit() read).
+  static const char* check_block(const Context& ctx, const uint8_t* p) {
+    CostaBlock blk;
+    std::memcpy(&blk, p, sizeof(blk));
+    if (blk.count == 0 || blk.count > kBlockPrims) return "primitive count outside 1..4";
+    if (uint64_t(blk.first) + blk.count > ctx.prim_count)
+      return "primitive range beyond the store (costa.params prim_count)";
+    if (const char* e = check_params(ctx)) return e;
+    const CostaView<P, F, V>& s = ctx.view;
+    const QuantizedMesh::Counts& n = ctx.counts;
+    for (uint64_t prim = blk.first; prim < uint64_t(blk.first) + blk.count; ++prim) {
+      if constexpr (P) {
+        if (!bits_readable(n.residual_bytes, s.r.residual_bits, prim + 1))
+          return "primitive offset beyond the residual array (costa.residuals)";
+      } else {
+        if (prim + 1 >= n.offsets)
+          return "primitive offset beyond the offset array (costa.offsets)";
+      }
+      const uint32_t o0 = s.offset(uint32_t(prim)), o1 = s.offset(uint32_t(prim + 1));
+      if (uint64_t(o0) + 3 > o1)
+        return "primitive of fewer than 3 face entries (costa.offsets or costa.residuals)";
+      if constexpr (F) {
+        if (!bits_readable(n.packed_face_bytes, s.r.face_bits, uint64_t(o1) - 1))
+          return "face entry beyond the face array (costa.packed_faces)";
+      } else {
+        if (o1 > n.faces) return "face entry beyond the face array (costa.faces)";
+      }
+      for (uint32_t j = o0; j < o1; ++j) {
+        uint32_t f = s.face(j);
+        if (j == o0 && o1 - o0 >= kFanStripFlagMin) f >>= 1;
+        if (V ? 3 * uint64_t(f) + 3 > n.qvertices : f >= n.vertices)
+          return "face entry names a vertex beyond the vertex array (costa.faces, "
+                 "costa.vertices)";
+      }
+      if (!bits_readable(ctx.face_map_bytes, ctx.faces.width, prim))
+        return "primitive beyond the face map (costa.face_map)";
+    }
+    return nullptr;
+  }
 
   // Up to 8 triangles gathered for one SIMD test.
   struct Batch {

@@ -396,7 +396,8 @@ struct LossyContext {
   const uint32_t* corner_grid = nullptr;  // shared layout: per 16 corners (kCornerChunkShift)
   uint32_t grid_count = 0;                // shared layout: grids (entries of hot)
   int bias = 0;
-  uint32_t parts = 1;  // multi-leaf children per sub-grid: 1, 2 (halves) or 4 (quarters)
+  uint32_t parts = 1;    // multi-leaf children per sub-grid: 1, 2 (halves) or 4 (quarters)
+  GridTableSizes sizes;  // scene files' structure check
 };
 
 // What both lossy leaves share: decoding, the build-side hooks, the whole, half and quarter
@@ -427,6 +428,35 @@ struct LossyLeafBase {
   }
   // Multi-leaf child i is the first part of its block (validate() counts each block once).
   static bool primary_part(const Context& ctx, uint32_t i) { return i % ctx.parts == 0; }
+
+  // Scene files' structure check (OpenOptions::check_structure): the block's resolution and its
+  // grid's table entries (Leaf::check_block), then what both layouts read through the grid: the
+  // exact vertices of escape codes, the flip mask (entry `flip_index` when the grid has flips)
+  // and the face table entries of its cells at grid position (gx, gy).
+  static const char* check_grid_refs(const Context& ctx, const Block& b, uint32_t grid,
+                                     uint32_t flip_index, uint32_t gx, uint32_t gy) {
+    const GridHot& h = ctx.hot[grid];
+    for (int s = 0; s < 21; ++s) {
+      const uint32_t code = load_code(b.displ + 3 * s);
+      if (displ_exponent(code) == kDisplEscape &&
+          uint64_t(h.exact) + escape_index(code) >= ctx.sizes.exact)
+        return "escape code beyond the exact vertices (grid.exact)";
+    }
+    if (h.flips != kNoFlips && flip_index >= ctx.sizes.flips)
+      return "flip mask index beyond the flip table (grid.flips)";
+    return check_grid_faces(ctx.grids[grid], ctx.sizes.faces, gx, gy, b.res & 15, b.res >> 4);
+  }
+  // A multi-leaf's blocks: child i reads block i / parts (intersect_in_multileaf).
+  static const char* check_multileaf(const Context& ctx, const uint8_t* data, uint32_t k,
+                                     uint64_t avail) {
+    if (ctx.parts != 1 && ctx.parts != 2 && ctx.parts != 4)
+      return "sub-grid parts other than 1, 2 or 4 (grid.params)";
+    const uint64_t blocks = (k - 1) / ctx.parts + 1;
+    if (blocks * kBlockBytes > avail) return "multi-leaf blocks beyond the leaf arena";
+    for (uint64_t i = 0; i < blocks; ++i)
+      if (const char* e = Leaf::check_block(ctx, data + i * kBlockBytes)) return e;
+    return nullptr;
+  }
 
   // Code groups g0 .. g1-1 of the block, escapes applied.
   static SLIM_INLINE void decode(const Context& ctx, const Block& b, SubGridVerts& w, int g0 = 0,
@@ -549,13 +579,24 @@ struct LossyGridLeaf : LossyLeafBase<LossyGridLeaf<kEnc>, LossySubGrid, kEnc> {
   using Context = LossyContext;
 
   static SLIM_INLINE uint32_t grid(const Context&, const LossySubGrid& b) { return b.primitive_id; }
+  static SLIM_INLINE uint32_t flip_index(const Context& ctx, const LossySubGrid& b, uint32_t grid) {
+    return subgrid_flip_index(ctx.hot[grid], b.grid_x / kSubGridCells, b.grid_y / kSubGridCells,
+                              (b.grid_res_x + kSubGridCells - 2) / kSubGridCells);
+  }
+  static const char* check_block(const Context& ctx, const uint8_t* p) {
+    LossySubGrid b;
+    std::memcpy(&b, p, sizeof b);
+    if (!subgrid_res_ok(b.res & 15, b.res >> 4)) return "sub-grid resolution outside 2..5";
+    const uint32_t g = grid(ctx, b);
+    if (g >= ctx.sizes.grids || g >= ctx.sizes.hot)
+      return "grid index beyond the grid tables (grid.table, grid.hot)";
+    return LossyGridLeaf::check_grid_refs(ctx, b, g, flip_index(ctx, b, g), b.grid_x, b.grid_y);
+  }
   static SLIM_INLINE void corners(const Context&, const LossySubGrid& b, uint32_t, Vec3f c[4]) {
     for (int k = 0; k < 4; ++k) c[k] = b.corner[k];
   }
   static SLIM_INLINE uint32_t flips(const Context& ctx, const LossySubGrid& b, uint32_t grid) {
-    return subgrid_flips(ctx.hot[grid], ctx.flips, b.grid_x / kSubGridCells,
-                         b.grid_y / kSubGridCells,
-                         (b.grid_res_x + kSubGridCells - 2) / kSubGridCells);
+    return ctx.hot[grid].flips == kNoFlips ? 0u : ctx.flips[flip_index(ctx, b, grid)];
   }
   static SLIM_INLINE void record(const Context& ctx, const LossySubGrid& b, uint32_t grid,
                                  const SubGridHit& h, HitRecord& hit) {
@@ -596,6 +637,37 @@ struct LossySharedLeaf : LossyLeafBase<LossySharedLeaf<kEnc>, LossySubGridShared
     uint32_t sx, sy;
     position(g, b, sx, sy);
     return subgrid_flips(g, ctx.flips, sx, sy, g.lattice_row - 1);
+  }
+  // Scene files' structure check: the corner chunk table and the grid it names (found in at most
+  // kMaxGridSteps steps, as in a file the builder wrote), the four lattice corners, then the
+  // references both layouts share.
+  static constexpr uint32_t kMaxGridSteps = 16;
+  static const char* check_block(const Context& ctx, const uint8_t* p) {
+    LossySubGridShared b;
+    std::memcpy(&b, p, sizeof b);
+    if (!subgrid_res_ok(b.res & 15, b.res >> 4)) return "sub-grid resolution outside 2..5";
+    if ((b.corner >> kCornerChunkShift) >= ctx.sizes.corner_grid)
+      return "lattice corner beyond the corner chunk table (grid.corner_grid)";
+    if (ctx.grid_count > ctx.sizes.hot || ctx.grid_count > ctx.sizes.grids)
+      return "grid count beyond the grid tables (grid.params)";
+    // grid(), counting its steps.
+    uint32_t g = ctx.corner_grid[b.corner >> kCornerChunkShift];
+    for (uint32_t steps = 0; g + 1 < ctx.grid_count && ctx.hot[g + 1].lattice_first <= b.corner;
+         ++steps) {
+      if (steps == kMaxGridSteps)
+        return "corner chunk table entry far before the corner's grid (grid.corner_grid)";
+      ++g;
+    }
+    if (g >= ctx.grid_count) return "corner chunk table entry beyond the grids (grid.corner_grid)";
+    const GridHot& h = ctx.hot[g];
+    if (h.lattice_row == 0) return "grid lattice of zero corners per row (grid.hot)";
+    const uint32_t row = h.lattice_row;
+    for (uint32_t c : {b.corner, b.corner + 1, b.corner + row, b.corner + row + 1})
+      if (c >= ctx.sizes.corners) return "lattice corner beyond the corner array (grid.corners)";
+    uint32_t sx, sy;
+    position(h, b, sx, sy);
+    return LossySharedLeaf::check_grid_refs(ctx, b, g, subgrid_flip_index(h, sx, sy, row - 1),
+                                            kSubGridCells * sx, kSubGridCells * sy);
   }
   static SLIM_INLINE void record(const Context& ctx, const LossySubGridShared& b, uint32_t grid,
                                  const SubGridHit& h, HitRecord& hit) {

@@ -68,19 +68,56 @@ static_assert(sizeof(GridHot) == 16, "grid decoder entry is 16 bytes");
 
 // Flip mask of a sub-grid: bit 4*j + i set if cell (i, j) is triangulated along its anti-diagonal
 // (mesh/grids.h: the cell keeps its input quad's fan diagonal).
+// The flip table entry of sub-grid (sx, sy) of a grid with flips (h.flips != kNoFlips).
+SLIM_INLINE uint32_t subgrid_flip_index(const GridHot& h, uint32_t sx, uint32_t sy,
+                                        uint32_t subgrids_x) {
+  return h.flips + sy * subgrids_x + sx;
+}
 SLIM_INLINE uint32_t subgrid_flips(const GridHot& h, const uint16_t* table, uint32_t sx,
                                    uint32_t sy, uint32_t subgrids_x) {
-  return h.flips == kNoFlips ? 0u : table[h.flips + sy * subgrids_x + sx];
+  return h.flips == kNoFlips ? 0u : table[subgrid_flip_index(h, sx, sy, subgrids_x)];
 }
 
+SLIM_INLINE bool grid_face_from_table(const GridInfo& g) {
+  return (g.flags & (kGridFaceTable | kGridFaceTable1)) != 0;
+}
+// The face table entry of cell (x, y), triangle tri of a grid whose faces come from the table.
+SLIM_INLINE uint64_t grid_face_index(const GridInfo& g, uint32_t x, uint32_t y, int tri) {
+  const uint64_t cell = uint64_t(y) * (g.res_x - 1u) + x;
+  return g.flags & kGridFaceTable ? g.face0 + 2 * cell + uint64_t(tri) : g.face0 + cell;
+}
 SLIM_INLINE uint32_t grid_face(const GridInfo& g, const uint32_t* table, uint32_t x, uint32_t y,
                                int tri) {
-  if (g.flags & (kGridFaceTable | kGridFaceTable1)) {
-    const uint64_t cell = uint64_t(y) * (g.res_x - 1u) + x;
-    return g.flags & kGridFaceTable ? table[g.face0 + 2 * cell + tri] : table[g.face0 + cell];
-  }
+  if (grid_face_from_table(g)) return table[grid_face_index(g, x, y, tri)];
   return uint32_t(int64_t(g.face0) + int64_t(x) * g.face_dx + int64_t(y) * g.face_dy +
                   int64_t(tri) * g.face_ab);
+}
+
+// Element counts of the side tables the grid leaves' blocks index: what the structure check of
+// scene files (OpenOptions::check_structure) bounds every reference by. Set from the section
+// sizes when a scene file is written or opened (api/scene_grids.cpp).
+struct GridTableSizes {
+  uint64_t grids = 0, hot = 0, faces = 0, flips = 0;
+  uint64_t vertices = 0;                  // `grid`: grid vertices
+  uint64_t exact = 0;                     // lossy: exact vertices
+  uint64_t corners = 0, corner_grid = 0;  // shared layout
+};
+
+// The structure check of a block whose cells [0, res_x-1) x [0, res_y-1) lie at (gx, gy) in grid
+// `grid` (both table entries already checked): every face table entry a hit on them reads.
+inline const char* check_grid_faces(const GridInfo& g, uint64_t faces, uint32_t gx, uint32_t gy,
+                                    uint32_t res_x, uint32_t res_y) {
+  if (!grid_face_from_table(g)) return nullptr;
+  for (uint32_t j = 0; j + 1 < res_y; ++j)
+    for (uint32_t i = 0; i + 1 < res_x; ++i)
+      for (int tri = 0; tri < 2; ++tri)
+        if (grid_face_index(g, gx + i, gy + j, tri) >= faces)
+          return "face table entry of a cell beyond the face table (grid.faces)";
+  return nullptr;
+}
+// Sub-grid resolutions the kernels take: 2..5 vertices per side.
+SLIM_INLINE bool subgrid_res_ok(uint32_t res_x, uint32_t res_y) {
+  return res_x >= 2 && res_x <= kSubGridRes && res_y >= 2 && res_y <= kSubGridRes;
 }
 
 // ---- the 5x5 kernel (section 5) --------------------------------------------------------------
@@ -400,9 +437,29 @@ struct SubGridLeaf {
     const GridHot* hot = nullptr;
     const uint32_t* faces = nullptr;  // face table
     const uint16_t* flips = nullptr;  // flip masks
+    GridTableSizes sizes;             // scene files' structure check
   };
   static constexpr uint32_t kBlockPrims = 1;
   static constexpr uint32_t kBlockBytes = sizeof(SubGridRef);
+
+  // Scene files' structure check: the grid, its vertex rows, flip mask and face table entries.
+  static const char* check_block(const Context& ctx, const uint8_t* p) {
+    SubGridRef b;
+    std::memcpy(&b, p, sizeof b);
+    if (!subgrid_res_ok(b.res_x, b.res_y)) return "sub-grid resolution outside 2..5";
+    if (b.grid >= ctx.sizes.grids || b.grid >= ctx.sizes.hot)
+      return "grid index beyond the grid tables (grid.table, grid.hot)";
+    // decode() reads res_x vertices of rows 0 .. res_y-1, `stride` vertices apart.
+    if (uint64_t(b.vertex) + uint64_t(b.res_y - 1) * b.stride + b.res_x > ctx.sizes.vertices)
+      return "sub-grid vertices beyond the vertex array (grid.vertices)";
+    const GridHot& h = ctx.hot[b.grid];
+    if (h.flips != kNoFlips &&
+        subgrid_flip_index(h, b.grid_x / kSubGridCells, b.grid_y / kSubGridCells,
+                           (b.stride + kSubGridCells - 2) / kSubGridCells) >= ctx.sizes.flips)
+      return "flip mask index beyond the flip table (grid.flips)";
+    return check_grid_faces(ctx.grids[b.grid], ctx.sizes.faces, b.grid_x, b.grid_y, b.res_x,
+                            b.res_y);
+  }
 
   // Build-time source: the blocks, already encoded, and their bounds.
   struct Source {

@@ -41,7 +41,7 @@ struct BenchOptions {
   // are replaced by `threads`.
   BuildOptions tuning;
   int repeat = 3;                   // timed rounds (each builds and traces every config)
-  int width = 1024, height = 1024;  // BENCHMARK.md camera
+  int width = 1024, height = 1024;  // docs/benchmark.md camera
   int max_bounces = 8;              // workload 2
   int psnr_size = 256;              // lossy configurations: normals render, size x size
   uint64_t memory_budget = 0;       // bytes of built scenes kept between rounds; 0: half of
@@ -49,7 +49,7 @@ struct BenchOptions {
   bool progress = true;             // progress lines on stderr
 };
 
-// BENCHMARK.md hit agreement: both miss, or both hit with t equal within 1e-5 relative.
+// docs/benchmark.md hit agreement: both miss, or both hit with t equal within 1e-5 relative.
 bool hits_agree(const Hit& a, const Hit& b);
 
 // Runs the whole benchmark. Throws slim::Error for a scene that cannot be loaded or an unknown

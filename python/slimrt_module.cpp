@@ -65,6 +65,26 @@ py::array as_array(py::handle obj) {
   return py::module_::import("numpy").attr("asarray")(o).cast<py::array>();
 }
 
+// Whether a scene may keep a reference to `a` instead of a copy: its data is aligned for its
+// element type and belongs to numpy (the chain of .base ends at an array owning its data), to an
+// mmap (np.memmap: an mmap cannot be resized or closed while arrays view it) or to immutable
+// bytes. Memory that other objects export (an Open3D Vector3dVector, a tensor's buffer) can be
+// reallocated behind the scene's back, so it is copied.
+bool can_reference(const py::array& a, size_t align) {
+  if (reinterpret_cast<uintptr_t>(a.data()) % align != 0) return false;
+  py::object base = a.attr("base");
+  while (py::isinstance<py::array>(base)) base = base.attr("base");
+  if (base.is_none() || py::isinstance<py::bytes>(base)) return true;
+  return py::isinstance(base, py::module_::import("mmap").attr("mmap"));
+}
+
+// A C-contiguous copy of `a` as `dtype`, owned by the scene.
+py::array owned_copy(const py::array& a, const char* dtype) {
+  using namespace py::literals;
+  return py::module_::import("numpy").attr("array")(a, "dtype"_a = dtype, "order"_a = "C",
+                                                    "copy"_a = true);
+}
+
 // A float32 C-contiguous view of `obj` (no copy when it already is one). Float dtypes other than
 // float32 are converted; anything else is a TypeError.
 py::array_t<float, py::array::c_style> float_array(py::handle obj, const char* what,
@@ -182,8 +202,9 @@ class RaycastingScene {
   }
 
   // Vertices and triangles are referenced, not copied, when they are float32 and uint32 (or
-  // int32) C-contiguous arrays: the scene keeps the arrays alive and reads them when it builds.
-  // Any other dtype or layout is converted once into an array the scene owns.
+  // int32) C-contiguous numpy arrays that can_reference() accepts: the scene keeps the arrays
+  // alive and reads them when it builds. Any other dtype, layout or owner is converted once into
+  // an array the scene owns.
   uint32_t add_triangles(py::handle vertices_obj, py::handle triangles_obj) {
     check_not_in_own_callback();
     Geometry g;
@@ -204,10 +225,11 @@ class RaycastingScene {
     if (nv > size_t(kInvalid))
       throw py::value_error("vertices: at most 2^32 - 1 vertices, got " + std::to_string(nv));
 
-    if (py::isinstance<py::array_t<float, py::array::c_style>>(v)) {
+    if (py::isinstance<py::array_t<float, py::array::c_style>>(v) &&
+        can_reference(v, alignof(float))) {
       g.vertices = v;
     } else {
-      g.vertices = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(v);
+      g.vertices = owned_copy(v, "float32");
       g.vertices_owned = true;
     }
     g.positions = static_cast<const float*>(g.vertices.data());
@@ -217,7 +239,8 @@ class RaycastingScene {
     // then read as uint32: the same bits), other integer dtypes converted to uint32 after the
     // range check in their own type.
     const bool as_is = (py::isinstance<py::array_t<uint32_t, py::array::c_style>>(t) ||
-                        py::isinstance<py::array_t<int32_t, py::array::c_style>>(t));
+                        py::isinstance<py::array_t<int32_t, py::array::c_style>>(t)) &&
+                       can_reference(t, alignof(uint32_t));
     std::string bad;
     if (as_is) {
       g.triangles = t;
@@ -237,7 +260,7 @@ class RaycastingScene {
     }
     if (!bad.empty()) throw py::value_error(bad);
     if (!as_is) {
-      g.triangles = py::array_t<uint32_t, py::array::c_style | py::array::forcecast>::ensure(t);
+      g.triangles = owned_copy(t, "uint32");
       g.triangles_owned = true;
     }
     g.indices = static_cast<const uint32_t*>(g.triangles.data());
@@ -913,8 +936,10 @@ Array.__module__ = "slimrt"
            "C-contiguous arrays are not copied: the scene keeps references to the arrays and "
            "reads them when it builds (on the next query, and again after more geometry is "
            "added), so they must not change while the scene is in use. Any other dtype "
-           "(float64, int64, ...) or layout (strided, Fortran order) is copied once, converted "
-           "to float32 / uint32; memory() counts such copies in input_meshes and the referenced "
+           "(float64, int64, ...), layout (strided, Fortran order, unaligned) or memory numpy does "
+           "not own (a view of an Open3D vector or tensor; np.memmap is referenced) is copied "
+           "once, converted to float32 / uint32; memory() counts such copies in input_meshes and "
+           "the referenced "
            "arrays in input_referenced.")
       .def("add_mesh", &RaycastingScene::add_mesh, py::arg("path"),
            "Adds a mesh file (.obj .ply .gltf .glb, optionally .xz) or a procedural scene; "

@@ -186,6 +186,31 @@ TEST(HostileOutputsStacks, CliRendersThroughASymlink) {
   EXPECT_GT(fs::file_size(d.path("real/img.png")), 0u);
 }
 
+// An output name that is a link to the process's stdout (/dev/stdout -> /proc/self/fd/1 ->
+// "pipe:[N]", no path) writes into the pipe; a reader that stops early gives a write error
+// (exit 1, EPIPE), not a death by SIGPIPE.
+TEST(HostileOutputsStacks, CliWritesIntoAPipeThroughDevStdout) {
+  TempDir d{"slim_outputs"};
+  fs::create_symlink("/dev/stdout", d.path("so.png"));
+  const std::string render = std::string(SLIM_CLI_PATH) + " render terrain:64 --spp 1 -q -o " +
+                             d.path("so.png") + " --res ";
+  const std::string got = d.path("got.png");
+  int status =
+      std::system(("bash -c 'set -o pipefail; " + render + "16x16 | cat >" + got + "'").c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  const std::string png = contents(got);
+  ASSERT_GT(png.size(), 8u);
+  EXPECT_EQ(png.substr(1, 3), "PNG");
+  const std::string err = d.path("err.txt");
+  status = std::system(("bash -c '" + render + "1024x1024 2>" + err +
+                        " | head -c 10 >/dev/null; exit ${PIPESTATUS[0]}'")
+                           .c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  EXPECT_NE(contents(err).find("Broken pipe"), std::string::npos) << contents(err);
+}
+
 // slimrt build onto a link to a character device: the device is written, the link stays, and
 // the summary does not fail on the device's size.
 TEST(HostileOutputsStacks, CliBuildsOntoALinkToADevice) {

@@ -1,6 +1,7 @@
 // The command-line flags of BuildOptions (build_flags.h).
 #include "build_flags.h"
 
+#include <cstdlib>
 #include <map>
 #include <string>
 #include <utility>
@@ -72,7 +73,12 @@ void add_build_options(CLI::App& app, BuildOptions& tuning) {
   app.add_option("--cluster-error", tuning.cluster_error,
                  "cluster: every vertex within this fraction of the box diagonal of its input "
                  "position (0 < E < 1)")
-      ->check(CLI::PositiveNumber & CLI::Range(0.0, 1.0))
+      ->check(CLI::Validator(
+          [](const std::string& v) {
+            const double e = std::strtod(v.c_str(), nullptr);
+            return e > 0 && e < 1 ? std::string() : "Value " + v + " not in 0 < E < 1";
+          },
+          "0 < E < 1"))
       ->capture_default_str()
       ->group(group);
   // Flags: their default (on or off) is stated in the help text.

@@ -23,7 +23,7 @@ namespace slim::cli {
 //   --sah-bins 2..64
 //   --max-leaf-size 1..124
 //   --cluster-error E      (0 < E < 1)
-//   --pair-coordinate-keys, --pair-weld, --pair-no-augment, --pair-prescan F (0..2)
+//   --pair-coordinate-keys, --pair-weld, --no-pair-augment, --pair-prescan F (0..2)
 // A value out of range or not among the choices makes the parse fail with a message naming the
 // flag. The defaults shown are those of `tuning` when called (BuildOptions' own for a default
 // BuildOptions).

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_configs.h"
 #include "bench_json.h"
 #include "bench_markdown.h"
 #include "bench_plot.h"
@@ -67,7 +68,8 @@ int cmd_bench(int argc, char** argv) {
                   sc + "` (MRays/s)");
   for (const std::string& c : opt.configs) bench::check_config_name(c);  // before any work
   opt.threads = opt.tuning.threads;
-  for (const std::string& c : opt.configs)  // a tuning a configuration cannot take: error now
+  // A tuning a configuration cannot take: an error now, not in the middle of the run.
+  for (const std::string& c : opt.configs.empty() ? bench::default_configs() : opt.configs)
     if (find_config(c)) build_options(c, opt.tuning);
   opt.memory_budget = uint64_t(budget_mb * 1e6);
   if (!json_path.empty()) check_output_path(json_path);

@@ -43,6 +43,9 @@ int main(int argc, char** argv) {
   // A file size limit (ulimit -f) makes writes fail with EFBIG, reported like a full disk,
   // instead of killing the process half-way through an output.
   std::signal(SIGXFSZ, SIG_IGN);
+  // A reader that goes away (a pipe closed early) makes writes fail with EPIPE, reported as a
+  // write error, instead of killing the process.
+  std::signal(SIGPIPE, SIG_IGN);
   int rc = -1;
   try {
     slim::check_cpu_isa();  // before any code compiled for the SIMD path runs

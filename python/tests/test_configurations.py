@@ -24,7 +24,7 @@ import re
 import numpy as np
 import pytest
 
-from conftest import SHARED_DATA, import_slimrt, random_rays
+from conftest import SHARED_DATA, data_required, import_slimrt, random_rays
 
 slimrt = import_slimrt()
 
@@ -53,7 +53,7 @@ def require_data():
         return
     why = (f"the shared meshes are missing: no MANIFEST or mesh files in {SHARED_DATA} "
            "(set SLIMRT_SHARED_DATA to the data folder)")
-    if os.environ.get("SLIM_REQUIRE_DATA") == "1":
+    if data_required():
         pytest.fail(why + "; SLIM_REQUIRE_DATA=1 requires them")
     pytest.skip(why)
 

@@ -400,6 +400,7 @@ std::unique_ptr<Scene::Impl> build_joined_scene(const detail::ChunkSource& src,
   if (opt.progress)
     progress = std::make_unique<PhaseProgress>(opt.progress, "chunks", src.triangles());
   std::vector<PrimRef> refs;
+  double duplicates = 0;  // the chunks' "duplicate_triangles" details, added up
   for (size_t i = 0; i < src.size(); ++i) {
     std::unique_ptr<Scene::Impl> c;
     {
@@ -420,6 +421,8 @@ std::unique_ptr<Scene::Impl> build_joined_scene(const detail::ChunkSource& src,
     s->stats.triangles += c->stats.triangles;
     s->stats.skipped_faces += c->stats.skipped_faces;
     s->stats.primitives += c->stats.primitives;
+    for (const auto& [k, v] : c->stats.details)
+      if (k == "duplicate_triangles") duplicates += v;
     s->mem.geometry_bytes += c->mem.geometry_bytes;
     s->mem.bvh_bytes += c->mem.bvh_bytes;
     s->mem.other_bytes += c->mem.other_bytes;
@@ -444,6 +447,7 @@ std::unique_ptr<Scene::Impl> build_joined_scene(const detail::ChunkSource& src,
                         s->record_store.size() * sizeof(ChunkRecord);
   s->stats.details.emplace_back("chunks", double(s->chunks.size()));
   s->stats.details.emplace_back("id_runs", double(s->run_store.size()));
+  if (duplicates > 0) s->stats.details.emplace_back("duplicate_triangles", duplicates);
   s->opt = opt;
   s->opt.progress = nullptr;
   return s;

@@ -44,7 +44,7 @@ std::string resolve_links(const std::string& path) {
   throw Error(path + ": more than 40 levels of symbolic links; expected a file name");
 }
 
-// What kind of file `target` (links resolved) is.
+// What kind of file `target` is (stat(2) follows symbolic links).
 enum class Kind { absent_or_regular, device, fifo };
 
 Kind kind_of(const std::string& path, const std::string& target) {
@@ -133,13 +133,14 @@ uint64_t cgroup_limit() {
 void write_atomically(const std::string& path, const std::function<void(const std::string&)>& fill,
                       bool allow_empty) {
   checked_folder(path);
-  const std::string target = resolve_links(path);
-  const Kind kind = kind_of(path, target);
+  // The kind comes from stat(2) on the name itself: the kernel follows every link, also
+  // /proc/self/fd/N links to pipes, whose readlink text ("pipe:[N]") is no path.
+  const Kind kind = kind_of(path, path);
   if (kind != Kind::absent_or_regular) {
     // Devices and pipes are written in place: nothing to rename, and fsync does not apply.
-    const int fifo = kind == Kind::fifo ? open_fifo(path, target) : -1;
+    const int fifo = kind == Kind::fifo ? open_fifo(path, path) : -1;
     try {
-      fill(target);
+      fill(path);
     } catch (...) {
       if (fifo >= 0) ::close(fifo);
       throw;
@@ -147,6 +148,7 @@ void write_atomically(const std::string& path, const std::function<void(const st
     if (fifo >= 0) ::close(fifo);
     return;
   }
+  const std::string target = resolve_links(path);
   const std::string dir = checked_folder(target);
   const std::string tmp = make_temp(path, target, dir);
   auto fail = [&](const std::string& what) {
@@ -201,14 +203,14 @@ void write_file_atomically(const std::string& path, std::string_view bytes) {
 
 void check_output_path(const std::string& path) {
   checked_folder(path);
-  const std::string target = resolve_links(path);
-  if (kind_of(path, target) != Kind::absent_or_regular) {
+  if (kind_of(path, path) != Kind::absent_or_regular) {
     // A device or a pipe: writable by this user? (A pipe's reader is checked when writing, so
     // that it may start after slimrt does.)
-    if (::access(target.c_str(), W_OK) != 0)
+    if (::access(path.c_str(), W_OK) != 0)
       throw Error(path + ": cannot write: " + std::strerror(errno));
     return;
   }
+  const std::string target = resolve_links(path);
   const std::string dir = checked_folder(target);
   const std::string tmp = make_temp(path, target, dir);
   ::unlink(tmp.c_str());

@@ -404,6 +404,11 @@ SceneFormat format_of(Leaf leaf) {
   throw Error("BuildOptions: unknown leaf format " + std::to_string(int(leaf)));
 }
 
+bool is_registered_leaf(uint8_t value) {
+  return std::any_of(configs().begin(), configs().end(),
+                     [&](const ConfigInfo& c) { return uint8_t(c.options.leaf) == value; });
+}
+
 std::optional<DecodedTriangles> decoded_triangles(const std::vector<const PolyMesh*>& meshes,
                                                   const BuildOptions& opt) {
   if (!describe(opt).own_geometry) {

@@ -2,6 +2,7 @@
 // column, src/api/registry.cpp).
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -18,6 +19,9 @@ struct SceneFormat {
 };
 // The functions of a leaf format; throws slim::Error for a value outside the enum.
 SceneFormat format_of(Leaf leaf);
+
+// Whether `value` is the Leaf of some registry row (a scene file's stored leaf is checked with it).
+bool is_registered_leaf(uint8_t value);
 
 // BuildOptions::lattice_box as a lossy format's builder takes it: the empty box when none is
 // given (the format then derives its scene-wide quantities from the meshes), else the box, after

@@ -342,7 +342,7 @@ void OpenVisitor::record(const std::string& name, void* p, uint32_t size) {
 }
 
 BuildOptions options_of(const OptionsRecord& r, Opener& o) {
-  if (r.nodes > uint8_t(Nodes::CompressedLeaf) || r.leaf > uint8_t(Leaf::LosslessClusters) ||
+  if (r.nodes > uint8_t(Nodes::CompressedLeaf) || !is_registered_leaf(r.leaf) ||
       r.grid_encoding < 1 || r.grid_encoding > 2 || r.pairing > 1 || r.collapse > 2 ||
       r.grid_leftovers > 2 || std::memchr(r.costa, 0, sizeof r.costa) == nullptr)
     o.fail(offsetof(FileHeader, options), "", "build options out of range");

@@ -43,6 +43,7 @@ nlohmann::json report_json(const BenchReport& report) {
                     {"threads", report.machine.threads},
                     {"isa", report.machine.isa}};
   out["rounds"] = report.repeat;
+  out["min_seconds_per_timing"] = report.min_seconds;
   out["memory_budget_bytes"] = report.memory_budget;
   nlohmann::json results = nlohmann::json::array();
   for (const BenchRow& r : report.rows) {
@@ -81,6 +82,8 @@ nlohmann::json report_json(const BenchReport& report) {
     j["seconds_diffuse_rounds"] = r.seconds_diffuse;
     j["cpu_seconds_primary_rounds"] = r.cpu_seconds_primary;
     j["cpu_seconds_diffuse_rounds"] = r.cpu_seconds_diffuse;
+    j["passes_primary_rounds"] = r.passes_primary;
+    j["passes_diffuse_rounds"] = r.passes_diffuse;
     if (r.measured()) {
       j["kept_between_rounds"] = r.kept;
       j["rays_primary"] = r.rays_primary;

@@ -50,7 +50,10 @@ std::string report_markdown(const BenchReport& report) {
     << ".\n"
     << "W1 = one primary ray per pixel, W2 = diffuse path tracing (up to " << report.max_bounces
     << " bounces, every ray counted). Each round times every configuration once (W1 then W2), in "
-       "an order rotating by one configuration per round. MRays/s = median over the rounds. "
+       "an order rotating by one configuration per round; each timing repeats its workload "
+       "until "
+    << report.min_seconds
+    << " s have passed and counts the fastest pass. MRays/s = median over the rounds. "
        "ratio = median over the rounds of MRays/s over embree-tri's in the same round, (min-max) "
        "over the rounds; ! = the range is wider than +-10% of the median. box/prim = tests per ray "
        "(slimrt only, untimed counting pass): W1 over all workload-1 rays, W2s over the paths of "

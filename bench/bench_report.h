@@ -39,7 +39,10 @@ struct BenchRow {
   // Medians over the rounds with their ranges; a ratio is the median of the per-round ratios to
   // embree-tri timed in the same round.
   std::optional<Spread> mrays_primary, mrays_diffuse, ratio_primary, ratio_diffuse;
-  std::vector<double> seconds_primary, seconds_diffuse;  // per round, in round order
+  // Seconds of one pass of the workload, per round in round order: the fastest of the round's
+  // passes_* passes (BenchOptions::min_seconds).
+  std::vector<double> seconds_primary, seconds_diffuse;
+  std::vector<int> passes_primary, passes_diffuse;
   // Process CPU seconds of the same runs (every thread, idle workers' spinning included): less
   // sensitive than wall time to other processes taking the cores.
   std::vector<double> cpu_seconds_primary, cpu_seconds_diffuse;
@@ -67,7 +70,8 @@ struct MachineInfo {
 
 struct BenchReport {
   MachineInfo machine;
-  int repeat = 0;  // rounds
+  int repeat = 0;          // rounds
+  double min_seconds = 0;  // each timing repeats its workload at least this long
   int width = 0, height = 0, max_bounces = 0;
   uint64_t memory_budget = 0;  // bytes of built scenes kept between rounds (bench_stats.h)
   std::vector<BenchRow> rows;

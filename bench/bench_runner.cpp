@@ -59,7 +59,30 @@ struct RunResult {
   double cpu_seconds = 0;  // process CPU time over the run (includes idle workers' spinning)
   uint64_t rays = 0;
   double checksum = 0;
+  int passes = 1;          // passes timed (seconds and cpu_seconds are the fastest one's)
+  bool repeatable = true;  // every pass traced the same rays with the same checksum
 };
+
+// Runs `pass` (one whole workload) until min_seconds have passed, at least once and at most
+// kMaxTimingPasses times, and keeps the fastest pass: other processes on a shared machine only ever
+// slow a pass down, so the fastest is the least disturbed.
+template <class Pass>
+RunResult timed_passes(Pass&& pass, double min_seconds) {
+  RunResult best = pass();
+  double total = best.seconds;
+  int passes = 1;
+  bool repeatable = true;
+  while (total < min_seconds && passes < kMaxTimingPasses) {
+    const RunResult r = pass();
+    repeatable = repeatable && r.rays == best.rays && r.checksum == best.checksum;
+    total += r.seconds;
+    ++passes;
+    if (r.seconds < best.seconds) best = r;
+  }
+  best.passes = passes;
+  best.repeatable = repeatable;
+  return best;
+}
 
 // Runs body(tile, rays, checksum) over every tile in the arena, FTZ/DAZ set in every task; the
 // per-tile sums are added in tile order, so the checksum does not depend on the schedule.
@@ -416,12 +439,13 @@ struct SceneRun {
     BenchRow& row = report.rows[slot.row];
     if (!slot.built()) row.seconds_build.push_back(build(row, slot));  // not kept between turns
     RunResult p, d;
+    const double min_s = opt.min_seconds;
     if (slot.embree) {
-      p = run_primary(*slot.embree, arena, w);
-      d = run_diffuse(*slot.embree, arena, w);
+      p = timed_passes([&] { return run_primary(*slot.embree, arena, w); }, min_s);
+      d = timed_passes([&] { return run_diffuse(*slot.embree, arena, w); }, min_s);
     } else {
-      p = run_primary(*slot.slim, arena, w);
-      d = run_diffuse(*slot.slim, arena, w);
+      p = timed_passes([&] { return run_primary(*slot.slim, arena, w); }, min_s);
+      d = timed_passes([&] { return run_diffuse(*slot.slim, arena, w); }, min_s);
     }
     if (!row.kept) slot.release();
     if (round == 0) {
@@ -434,8 +458,13 @@ struct SceneRun {
       error(row, "round " + std::to_string(round + 1) +
                      " traced different rays than round 1 (not deterministic)");
     }
+    if (!p.repeatable || !d.repeatable)
+      error(row, "round " + std::to_string(round + 1) +
+                     ": the passes of one timing traced different rays (not deterministic)");
     row.seconds_primary.push_back(p.seconds);
     row.seconds_diffuse.push_back(d.seconds);
+    row.passes_primary.push_back(p.passes);
+    row.passes_diffuse.push_back(d.passes);
     row.cpu_seconds_primary.push_back(p.cpu_seconds);
     row.cpu_seconds_diffuse.push_back(d.cpu_seconds);
   }
@@ -545,6 +574,7 @@ BenchReport run_bench(const BenchOptions& opt) {
   // The compiled SIMD path of the library. Nothing public reports it yet (see the README).
   report.machine.isa = slim::simd_isa();
   report.repeat = std::max(opt.repeat, 1);
+  report.min_seconds = opt.min_seconds;
   report.width = opt.width;
   report.height = opt.height;
   report.max_bounces = opt.max_bounces;

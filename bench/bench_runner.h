@@ -33,6 +33,9 @@
 
 namespace slim::bench {
 
+// Passes of one timing at most (BenchOptions::min_seconds).
+constexpr int kMaxTimingPasses = 1000;
+
 struct BenchOptions {
   std::vector<std::string> scenes;   // mesh files or terrain:N, torus:N, canyon:N
   std::vector<std::string> configs;  // empty: default_configs(); embree-tri is always measured
@@ -40,7 +43,11 @@ struct BenchOptions {
   // The build options besides the format (BuildOptions::from_config(name, tuning)); its threads
   // are replaced by `threads`.
   BuildOptions tuning;
-  int repeat = 3;                   // timed rounds (each builds and traces every config)
+  int repeat = 3;  // timed rounds (each builds and traces every config)
+  // Each timing repeats its workload until this many seconds have passed (at least one pass,
+  // at most kMaxTimingPasses) and keeps the fastest pass: a pass of a small scene takes tens of
+  // milliseconds, and on a shared machine other processes only ever slow a pass down.
+  double min_seconds = 0.25;
   int width = 1024, height = 1024;  // docs/benchmark.md camera
   int max_bounces = 8;              // workload 2
   int psnr_size = 256;              // lossy configurations: normals render, size x size

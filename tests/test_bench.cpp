@@ -539,8 +539,9 @@ TEST(BenchCli, JsonSchemaOnTerrain64) {
   const std::string configs =
       "embree-tri,embree-tri-compact,embree-quad,embree-grid,bvh8-tri4v,bvh8-tri4i,qbvh8-tri4v,"
       "clbvh-tri4v,grid,lossy-grid,costa-PFV";
-  const std::string cmd = std::string(SLIM_CLI_PATH) + " bench terrain:64 --repeat 1 --threads 2" +
-                          " --config " + configs + " --json " + json_path + " > /dev/null";
+  const std::string cmd = std::string(SLIM_CLI_PATH) +
+                          " bench terrain:64 --repeat 1 --min-time 0 --threads 2" + " --config " +
+                          configs + " --json " + json_path + " > /dev/null";
   ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
   std::ifstream in(json_path);
   ASSERT_TRUE(in.good());
@@ -612,6 +613,8 @@ TEST(BenchCli, JsonSchemaOnTerrain64) {
     EXPECT_EQ(r["seconds_build_rounds"][0].get<double>(), r["build_s"].get<double>()) << config;
     EXPECT_EQ(r["seconds_primary_rounds"].size(), 1u) << config;
     EXPECT_EQ(r["seconds_diffuse_rounds"].size(), 1u) << config;
+    EXPECT_EQ(r["passes_primary_rounds"], nlohmann::json::array({1})) << config;  // --min-time 0
+    EXPECT_EQ(r["passes_diffuse_rounds"], nlohmann::json::array({1})) << config;
     EXPECT_EQ(r["rays_primary"].get<uint64_t>(), 1024u * 1024u) << config;
     EXPECT_GE(r["rays_diffuse"].get<uint64_t>(), 1024u * 1024u) << config;
     EXPECT_GT(r["checksum_primary"].get<double>(), 0.0) << config;
@@ -675,7 +678,7 @@ TEST(BenchCli, RoundsKeptOrRebuiltTraceTheSameRays) {
                                    ("slimrt_bench_rounds_" + std::to_string(getpid()) + ".json"))
                                       .string();
     const std::string cmd = std::string(SLIM_CLI_PATH) +
-                            " bench terrain:16 --repeat 3 --threads 2 --config "
+                            " bench terrain:16 --repeat 3 --min-time 0.1 --threads 2 --config "
                             "embree-tri,bvh8-tri4v,bvh8-pairs --json " +
                             json_path + extra + " > /dev/null 2>&1";
     EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
@@ -686,8 +689,10 @@ TEST(BenchCli, RoundsKeptOrRebuiltTraceTheSameRays) {
   };
   const nlohmann::json kept = run(""), rebuilt = run(" --memory-budget 0.000001");
   EXPECT_EQ(kept["rounds"].get<int>(), 3);
+  EXPECT_EQ(kept["min_seconds_per_timing"].get<double>(), 0.1);
   ASSERT_EQ(kept["results"].size(), 3u);
   ASSERT_EQ(rebuilt["results"].size(), 3u);
+  int max_passes = 0;
   for (size_t i = 0; i < 3; ++i) {
     const nlohmann::json &k = kept["results"][i], &r = rebuilt["results"][i];
     const std::string config = k["config"];
@@ -699,6 +704,21 @@ TEST(BenchCli, RoundsKeptOrRebuiltTraceTheSameRays) {
       EXPECT_EQ((*x)["seconds_diffuse_rounds"].size(), 3u) << config;
       EXPECT_EQ((*x)["cpu_seconds_primary_rounds"].size(), 3u) << config;
       EXPECT_EQ((*x)["cpu_seconds_diffuse_rounds"].size(), 3u) << config;
+      // --min-time 0.1: each timing repeats its workload until 0.1 s have passed (at most
+      // 1000 passes) and keeps the fastest pass, so n passes of at least that time each took
+      // less than 0.1 s before the last one.
+      for (const char* w : {"primary", "diffuse"}) {
+        const nlohmann::json& passes = (*x)[std::string("passes_") + w + "_rounds"];
+        const nlohmann::json& secs = (*x)[std::string("seconds_") + w + "_rounds"];
+        ASSERT_EQ(passes.size(), 3u) << config << " " << w;
+        for (size_t k = 0; k < 3; ++k) {
+          const int n = passes[k].get<int>();
+          EXPECT_GE(n, 1) << config << " " << w;
+          EXPECT_LE(n, 1000) << config << " " << w;
+          EXPECT_LT((n - 1) * secs[k].get<double>(), 0.1) << config << " " << w;
+          max_passes = std::max(max_passes, n);
+        }
+      }
       // Each round builds every configuration once: three build times, the median among them.
       const nlohmann::json& builds = (*x)["seconds_build_rounds"];
       ASSERT_EQ(builds.size(), 3u) << config;
@@ -713,6 +733,7 @@ TEST(BenchCli, RoundsKeptOrRebuiltTraceTheSameRays) {
     for (const char* f : {"rays_primary", "rays_diffuse", "checksum_primary", "checksum_diffuse"})
       EXPECT_EQ(k[f], r[f]) << config << " " << f;
   }
+  EXPECT_GT(max_passes, 1);  // a pass of terrain:16 takes about 35 ms: some timing repeated it
   // The ratios are per round, against embree-tri's time in the same round: recomputed from the
   // rounds' seconds, their median and range are the reported ones (embree-tri's: 1, 1 and 1).
   for (const nlohmann::json* run : {&kept, &rebuilt}) {

@@ -1,6 +1,6 @@
-// `slimrt bench SCENE... [--config NAME...] [--repeat K] [--memory-budget MB] [--json FILE]
-//                [--plot FILE] [--strict] [build options: --threads N, --collapse ...,
-//                build_flags.h]`
+// `slimrt bench SCENE... [--config NAME...] [--repeat K] [--min-time S] [--memory-budget MB]
+//                [--json FILE] [--plot FILE] [--strict] [build options: --threads N, --collapse
+//                ..., build_flags.h]`
 // Every configuration beside Embree 3 on the same rays in this process (docs/benchmark.md);
 // the work is done by bench/bench_runner, the output by bench/bench_{markdown,json,plot}. Prints
 // the markdown table on stdout, progress and ERROR lines on stderr. Exit code 0, or 1 with --strict
@@ -43,6 +43,11 @@ int cmd_bench(int argc, char** argv) {
                  "interleaved timed rounds (each builds, then traces every configuration once; "
                  "medians and ranges over the rounds)")
       ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  app.add_option("--min-time", opt.min_seconds,
+                 "seconds each timing repeats its workload for at least (the fastest pass counts; "
+                 "0 = one pass)")
+      ->check(CLI::Range(0.0, 60.0))
       ->capture_default_str();
   double budget_mb = 0;
   app.add_option("--memory-budget", budget_mb,

@@ -961,7 +961,9 @@ Array.__module__ = "slimrt"
            py::arg("nthreads") = 0, py::arg("max_hits") = kDefaultMaxHits,
            "Number of intersections along each ray [..., 6] (int32). Each ray is traced again "
            "from just past its last hit, so hits at the same distance (a shared edge or vertex, "
-           "coincident triangles) count once; at most max_hits per ray.")
+           "coincident triangles) count once; at most max_hits per ray. Open3D also counts a hit "
+           "at the distance of the previous one once when it is on the same geometry; here "
+           "hits of different geometries at the same distance count once too.")
       .def("memory", &RaycastingScene::memory,
            "Bytes the scene keeps, by part (geometry, bvh, other, total) and per triangle; "
            "input_meshes: the input the scene owns to rebuild when geometry is added (mesh "

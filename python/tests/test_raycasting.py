@@ -527,3 +527,19 @@ def test_outputs_match_open3d_names_dtypes_and_miss_values():
         # Open3D's own Tensors as rays, and .numpy() on the answers as Open3D code does.
         hit = s.cast_rays(o3d.core.Tensor(np.array([[0.5, 0.5, 3, 0, 0, -1]], np.float32)))
         assert hit["t_hit"].numpy()[0] == 2.0
+
+
+def test_count_intersections_counts_a_shared_edge_once():
+    # Two unit squares, each split along its diagonal x = y, at z = 0 and z = -1: a ray down
+    # through a point of the diagonals crosses two surfaces, though it meets four triangles
+    # (Open3D counts these once too: same geometry, same distance).
+    v = np.array([[[0, 0, z], [1, 0, z], [1, 1, z], [0, 1, z]] for z in (0.0, -1.0)],
+                 dtype=np.float32).reshape(-1, 3)
+    t = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]], dtype=np.uint32)
+    rays = np.array([[0.5, 0.5, 1, 0, 0, -1],     # through both diagonals
+                     [0.25, 0.25, 1, 0, 0, -1],   # ditto, elsewhere on them
+                     [0.7, 0.2, 1, 0, 0, -1]],    # inside one triangle of each square
+                    dtype=np.float32)
+    for config in ("bvh8-tri4v", "bvh8-pairs", "cluster-lossless"):
+        s = build(config, v, t)
+        assert s.count_intersections(rays).tolist() == [2, 2, 2], config

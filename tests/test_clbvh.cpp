@@ -92,7 +92,7 @@ TEST(Clbvh, MultiLeavesHoldMostLeaves) {
   Scene b8 = Scene::build(m, BuildOptions::from_config("bvh8-tri4v"));
   Scene cl = Scene::build(m, BuildOptions::from_config("clbvh-tri4v"));
   double leaves = 0, in_multi = 0;
-  for (auto& [k, v] : cl.stats().details) {
+  for (auto& [k, v] : stat_details(cl)) {
     if (k == "leaf_count") leaves = v;
     if (k == "leaves_in_multileaf") in_multi = v;
   }

@@ -677,7 +677,7 @@ TEST(CostaScene, KindsValidateAndMemory) {
     MemoryStats mem = s.memory();
     EXPECT_EQ(mem.total(), mem.geometry_bytes + mem.bvh_bytes + mem.other_bytes);
     double store = 0;
-    for (auto& [k, v] : s.stats().details)
+    for (auto& [k, v] : stat_details(s))
       if (k == "store_bytes") store = v;
     EXPECT_GT(store, 0);
     EXPECT_LT(store, double(mem.geometry_bytes));
@@ -795,7 +795,7 @@ TEST(CostaSizes, StoreOrderShrinksResidualsAndFlagBit) {
   BuildOptions o = BuildOptions::from_config("costa-PFV");
   Scene scene = Scene::build(m, o);
   double bits = -1, face_bits = -1;
-  for (const auto& [k, v] : scene.stats().details) {
+  for (const auto& [k, v] : stat_details(scene)) {
     if (k == "prim_residual_bits") bits = v;
     if (k == "face_bits") face_bits = v;
   }

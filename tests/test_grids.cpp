@@ -716,7 +716,7 @@ TEST(GridHits, SubGridPartChildrenMatchWholeSubGrids) {
   std::vector<PolyMesh> meshes{make_terrain(19),
                                add_uv_seams(rotate_some_faces(make_torus(64), 64, 6, 5), 64, 7, 3)};
   auto detail = [](const Scene& s, const std::string& key) {
-    for (const auto& [k, v] : s.stats().details)
+    for (const auto& [k, v] : stat_details(s))
       if (k == key) return v;
     return -1.0;
   };

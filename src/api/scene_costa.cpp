@@ -449,7 +449,7 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
   mem.geometry_bytes = q.bytes() + leaf_data_bytes;
   mem.other_bytes = data->face_map.bytes() + data->face_base.size() * sizeof(uint32_t);
   mem.triangles = stats_src.input_triangles;
-  SceneStats& st = s->stats;
+  SceneStatsAndDetails& st = s->stats;
   st.input_faces = stats_src.input_faces;
   st.triangles = stats_src.input_triangles;
   st.skipped_faces = stats_src.skipped_faces;

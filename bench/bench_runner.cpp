@@ -1,4 +1,4 @@
-// `slimrt bench` driver: see bench_runner.h and ../shared/BENCHMARK.md.
+// `slimrt bench` driver: see bench_runner.h and docs/benchmark.md.
 #include "bench_runner.h"
 
 #include <tbb/blocked_range.h>

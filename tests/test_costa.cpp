@@ -1,7 +1,7 @@
-// Costa quantized n-gon mesh (fast-mesh-compression-gpu-rt.txt): bit packing, GLU tessellation,
-// the store under every combination of T, P, F, V, the leaves against the brute-force reference
-// on the decoded geometry, sizes (Tables 1 and 3), PSNR of V renders, and a decode
-// micro-benchmark (disabled by default).
+// Costa quantized n-gon mesh (V. Costa, J. M. Pereira, J. A. Jorge, "Fast Compression of Meshes for
+// GPU Ray-Tracing", WSCG 2013): bit packing, GLU tessellation, the store under every combination of
+// T, P, F, V, the leaves against the brute-force reference on the decoded geometry, sizes (Tables 1
+// and 3), PSNR of V renders, and a decode micro-benchmark (disabled by default).
 #include <algorithm>
 #include <chrono>
 #include <cmath>

@@ -1,7 +1,7 @@
-// Triangle pairing (A. Aman, S. Fenney, "Fast Triangle Pairing for Ray Tracing",
-// ../shared/papers/fast-triangle-pairing.txt) and the pair leaves: pairing invariants against a
-// std::sort reference of the paper's algorithm, the key forms, weld, the window-2 baseline and the
-// pre-scan, and bvh8-pairs / clbvh-pairs against the brute-force reference.
+// Triangle pairing (A. Aman, S. Fenney, "Fast Triangle Pairing for Ray Tracing", Imagination
+// Technologies) and the pair leaves: pairing invariants against a std::sort reference of the
+// paper's algorithm, the key forms, weld, the window-2 baseline and the pre-scan, and bvh8-pairs /
+// clbvh-pairs against the brute-force reference.
 #include <gtest/gtest.h>
 
 #include <algorithm>

@@ -1,7 +1,8 @@
-// Costa quantized n-gon mesh scenes (fast-mesh-compression-gpu-rt.txt): configs costa, costa-P,
-// ..., costa-TPFV. Loading (section 3.1) -> optional T -> BVH2 over the primitives -> primitives
-// reordered in leaf order -> the store (section 3.2) -> BVH8 whose leaves are primitive ranges
-// (prim/costa_leaf.h). Also costa_sizes() (Tables 1 and 3) for the CLI and the benchmark.
+// Costa quantized n-gon mesh scenes (V. Costa, J. M. Pereira, J. A. Jorge, "Fast Compression of
+// Meshes for GPU Ray-Tracing", WSCG 2013): configs costa, costa-P, ..., costa-TPFV. Loading
+// (section 3.1) -> optional T -> BVH2 over the primitives -> primitives reordered in leaf order ->
+// the store (section 3.2) -> BVH8 whose leaves are primitive ranges (prim/costa_leaf.h). Also
+// costa_sizes() (Tables 1 and 3) for the CLI and the benchmark.
 #include <zlib.h>
 
 #include <algorithm>

@@ -1,4 +1,4 @@
-// Scene files: Scene::save and Scene::open (DESIGN.md "Scene files", api/scene_file.h).
+// Scene files: Scene::save and Scene::open (README.md "Scene files", api/scene_file.h).
 //
 // Layout (native byte order, recorded and checked; all offsets in bytes from the file start):
 //   FileHeader        512 B   magic, version, byte-order mark, sizes, the writer's instruction set,

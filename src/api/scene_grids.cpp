@@ -1,6 +1,5 @@
 // Grid formats: `grid`, `lossy-grid`, `lossy-grid-e2` (C. Benthin, K. Vaidyanathan, S. Woop,
-// "Ray Tracing Lossy Compressed Grid Primitives", ../shared/papers/
-// lossy-compressed-grid-primitives.txt; DESIGN.md "Grids", "Lossy 5x5 sub-grid").
+// "Ray Tracing Lossy Compressed Grid Primitives", Eurographics 2021 short papers).
 //
 // Scene::build: the meshes become grids (mesh/grids.h, section 3), each grid is cut into 5x5
 // sub-grids, and a BVH8 is built over the sub-grids, one sub-grid per leaf (section 5: "Each BVH

@@ -129,7 +129,7 @@ TEST(BuildProgress, SameSceneWithAndWithoutCallback) {
     Scene b = Scene::build(mesh, opt);
     EXPECT_GT(calls, 0);
     EXPECT_EQ(a.memory().total(), b.memory().total()) << config;
-    const StatDetails &da = stat_details(a), &db = stat_details(b);
+    const slim::StatDetails &da = stat_details(a), &db = stat_details(b);
     ASSERT_EQ(da.size(), db.size());
     for (size_t i = 0; i < da.size(); ++i) {
       const std::string& key = da[i].first;

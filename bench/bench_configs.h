@@ -22,8 +22,8 @@ bool is_lossy_config(const std::string& name);
 
 // Formats that intersect other triangles than the input's fan triangulation: lossy grids, costa
 // with V (quantized), costa's GLU tessellation of n-gons, the grid cells' diagonals. They are
-// validated against Embree run on their own decoded geometry (DESIGN.md "Baseline and oracle"),
-// with hits mapped back to the input faces.
+// validated against Embree run on their own decoded geometry (the same triangles, so agreement
+// measures the traversal, not the encoding), with hits mapped back to the input faces.
 struct OwnGeometry {
   PolyMesh mesh;                     // one triangle per face
   std::vector<uint32_t> geom, face;  // per triangle: the input mesh and face it decodes

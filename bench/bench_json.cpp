@@ -63,8 +63,8 @@ nlohmann::json report_json(const BenchReport& report) {
     spread_json(j, "ratio_diffuse", r.ratio_diffuse);
     j["box_tests_per_ray"] = opt_json(r.box_tests_per_ray);
     j["prim_tests_per_ray"] = opt_json(r.prim_tests_per_ray);
-    // Beyond BENCHMARK.md's schema: primitive records (a pair counts once), and the counts of
-    // the workload-2 sample (the paths of every 16th pixel).
+    // Primitive records (a pair counts once), and the counts of the workload-2 sample (the paths of
+    // every 16th pixel): docs/benchmark.md, "Counters".
     j["prim_records_per_ray"] = opt_json(r.prim_records_per_ray);
     j["box_tests_per_ray_w2s"] = opt_json(r.box_tests_per_ray_w2);
     j["prim_tests_per_ray_w2s"] = opt_json(r.prim_tests_per_ray_w2);

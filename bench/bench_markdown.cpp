@@ -58,8 +58,8 @@ std::string report_markdown(const BenchReport& report) {
        "over the rounds; ! = the range is wider than +-10% of the median. box/prim = tests per ray "
        "(slimrt only, untimed counting pass): W1 over all workload-1 rays, W2s over the paths of "
        "every 16th pixel. agree = workload-1 hits agreeing with Embree on the same geometry "
-       "(BENCHMARK.md): embree-tri, or for grid, lossy-grid* and costa-* embree-tri run on the "
-       "format's own decoded triangles; vs tri = agreement with embree-tri on the input's fan "
+       "(docs/benchmark.md): embree-tri, or for grid, lossy-grid* and costa-* embree-tri run on "
+       "the format's own decoded triangles; vs tri = agreement with embree-tri on the input's fan "
        "triangles. build s = median over the rounds (each round builds every configuration once, "
        "in the round's order, before timing rays), (min-max) over the rounds. MB = geometry + "
        "BVH + side tables.\n\n";

@@ -11,10 +11,11 @@
 
 namespace slim::bench {
 
-// BENCHMARK.md: a lossless format agreeing with Embree on fewer workload-1 hits is an ERROR.
+// docs/benchmark.md: a lossless format agreeing with Embree on fewer workload-1 hits is an ERROR.
 constexpr double kLosslessAgreement = 0.999;
 
-// Lossy formats' error figures (BENCHMARK.md, paper Table 3); null where they do not apply.
+// Lossy formats' error figures (docs/benchmark.md; Table 3 of Benthin et al., "Ray Tracing Lossy
+// Compressed Grid Primitives"); null where they do not apply.
 struct ErrorFigures {
   std::optional<double> rms, diag_avg_pct, diag_max_pct, psnr_db;
   bool psnr_identical = false;  // PSNR is +inf (images identical); psnr_db stays null in JSON
@@ -50,7 +51,7 @@ struct BenchRow {
   std::optional<double> box_tests_per_ray_w2, prim_tests_per_ray_w2;  // workload 2 sample
   // Primitive records tested (a triangle pair counts once: TraversalCounters::prim_records).
   std::optional<double> prim_records_per_ray, prim_records_per_ray_w2;
-  std::optional<double> hit_agreement;  // BENCHMARK.md definition
+  std::optional<double> hit_agreement;  // as docs/benchmark.md defines it
   std::optional<double> same_face;      // of the rays both hit: fraction naming the same face
   // Agreement with embree-tri on the input's fan triangles (equals hit_agreement except for the
   // formats validated on their own decoded geometry: grids, lossy grids, costa).

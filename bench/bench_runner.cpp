@@ -1,4 +1,4 @@
-// `slimrt bench` driver: see bench_runner.h and ../shared/BENCHMARK.md.
+// `slimrt bench` driver: see bench_runner.h and docs/benchmark.md.
 #include "bench_runner.h"
 
 #include <tbb/blocked_range.h>
@@ -193,12 +193,6 @@ void count_traversal(const Scene& scene, tbb::task_arena& arena, const Workload&
   }
 }
 
-std::optional<double> detail(const SceneStats& st, const char* key) {
-  for (const auto& [k, v] : st.details)
-    if (k == key) return v;
-  return std::nullopt;
-}
-
 void progress(const BenchOptions& opt, const std::string& line) {
   if (opt.progress) {
     std::fputs(line.c_str(), stderr);
@@ -353,10 +347,9 @@ struct SceneRun {
 
     if (row.config == "bvh8-tri4v" && need_psnr_reference) psnr_reference = normals_image(scene);
     if (row.lossy) {
-      const SceneStats& st = scene.stats();
-      row.error.rms = detail(st, "rms_error");
-      row.error.diag_avg_pct = detail(st, "diag_avg_pct");
-      row.error.diag_max_pct = detail(st, "diag_max_pct");
+      row.error.rms = stat_detail(scene, "rms_error");
+      row.error.diag_avg_pct = stat_detail(scene, "diag_avg_pct");
+      row.error.diag_max_pct = stat_detail(scene, "diag_max_pct");
       if (!psnr_reference) {  // bvh8-tri4v is not among the configurations: build it for this
         Scene ref = Scene::build(meshes, BuildOptions::from_config("bvh8-tri4v"));
         psnr_reference = normals_image(ref);

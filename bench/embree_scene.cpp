@@ -1,4 +1,4 @@
-// The Embree 3 baseline (BENCHMARK.md "Embree configurations"). See embree_scene.h for what each
+// The Embree 3 baseline (docs/benchmark.md, "Embree anchors"). See embree_scene.h for what each
 // configuration builds, how faces map back, and how memory is counted.
 #include "embree_scene.h"
 

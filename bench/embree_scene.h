@@ -1,5 +1,5 @@
-// The Embree 3 baseline of BENCHMARK.md ("Embree configurations (the anchors)"): the same input
-// meshes, triangulated exactly as slimrt does, behind the same intersect()/occluded() interface as
+// The Embree 3 baseline of docs/benchmark.md ("Embree anchors"): the same input meshes,
+// triangulated exactly as slimrt does, behind the same intersect()/occluded() interface as
 // slim::Scene, so that slim::trace_path and the benchmark loops run unchanged on either.
 //
 //   std::vector<const slim::PolyMesh*> meshes = {&mesh};
@@ -37,12 +37,12 @@
 // lattice column nx-x). The lattice is cut into RTCGrid records of at most 32767 vertices a side
 // (neighbours share their border row/column), all reading the one vertex buffer.
 //
-// Memory (BENCHMARK.md): bvh_bytes = the bytes Embree's device memory monitor reports, net, after
-// rtcCommitScene (BVH nodes, Embree's own leaf/primitive copies, allocator blocks);
+// Memory (docs/benchmark.md): bvh_bytes = the bytes Embree's device memory monitor reports, net,
+// after rtcCommitScene (BVH nodes, Embree's own leaf/primitive copies, allocator blocks);
 // geometry_bytes = the shared vertex, index and RTCGrid buffers Embree reads (the monitor does not
 // see shared buffers), vertex buffers including their 16 bytes of end padding; other_bytes = the
-// Embree primID -> input face table (absent when the mapping is the identity; for
-// embree-quad-pairs the two faces and corner bytes of each quad).
+// Embree primID -> input face table (absent when the mapping is the identity; for embree-quad-pairs
+// the two faces and corner bytes of each quad).
 #pragma once
 
 #include <cstdint>

@@ -1,11 +1,11 @@
 // Shared pieces of the libFuzzer targets (fuzz/*.cpp, built by cmake/fuzz.cmake, run by
 // ./fuzz.sh): what a loaded mesh must satisfy, and re-encoders for the round-trip checks.
 //
-// The contract every loader target checks (DESIGN.md "io/ ... clear errors, no crashes"): on any
-// bytes the reader either throws slim::Error or returns a mesh that passes check_mesh(). Any other
-// exception escapes LLVMFuzzerTestOneInput, and libFuzzer reports it as a crash; so do memory
-// errors and undefined behaviour (the targets are built with ASan + UBSan), hangs (-timeout) and
-// runaway allocations (-rss_limit_mb).
+// The contract every loader target checks (README.md: untrusted input gets an error, never a
+// crash): on any bytes the reader either throws slim::Error or returns a mesh that passes
+// check_mesh(). Any other exception escapes LLVMFuzzerTestOneInput, and libFuzzer reports it as a
+// crash; so do memory errors and undefined behaviour (the targets are built with ASan + UBSan),
+// hangs (-timeout) and runaway allocations (-rss_limit_mb).
 #pragma once
 
 #include <cmath>

@@ -15,8 +15,8 @@
 //   2. round trip: encode_subgrid() of a sub-grid of finite vertices (scaled by 2^-20..2^20),
 //      then decoding, gives the corners and the exact (escaped) vertices bit for bit, and every
 //      other vertex within the bound the format promises for its displacement d from the bilinear
-//      patch (spec_error below: DESIGN.md "Lossy 5x5 sub-grid", Benthin et al. section 4.1, the
-//      same derivation as tests/test_lossy_accuracy.cpp); the encoder is deterministic.
+//      patch (spec_error below: Benthin et al. section 4.1, the same derivation as
+//      tests/test_lossy_accuracy.cpp); the encoder is deterministic.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>

@@ -1,7 +1,7 @@
 // libFuzzer target: the triangle pairing (src/mesh/pairing.h; A. Aman, S. Fenney, "Fast Triangle
-// Pairing for Ray Tracing", ../shared/papers/fast-triangle-pairing.txt) on meshes made from the
-// fuzz input: degenerate, duplicated and non-manifold triangles, fans of any valence, coincident
-// unwelded vertices, several groups (input meshes).
+// Pairing for Ray Tracing", Imagination Technologies) on meshes made from the fuzz input:
+// degenerate, duplicated and non-manifold triangles, fans of any valence, coincident unwelded
+// vertices, several groups (input meshes).
 //
 // Input bytes:
 //   [0]      bit 0: raw float vertices (any finite value within +-kMaxCoordinate; other bit

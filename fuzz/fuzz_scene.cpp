@@ -10,7 +10,7 @@
 //   then     vertices (3 x int8 or 3 x float each), rays (origin and direction, 6 x int8 or
 //            6 x float each), then faces until the input ends: a size byte (3 + byte % 4 corners)
 //            and one index byte per corner (modulo the vertex count)
-// Checks, for every configuration (DESIGN.md, README "Bad input"):
+// Checks, for every configuration (README.md: untrusted input gets an error, never a crash):
 //   - build either succeeds or throws slim::Error with a message (coordinates beyond
 //     kMaxCoordinate, a configuration that does not apply); validate() accepts what was built;
 //   - every hit names a face of the mesh, with tnear <= t <= tfar, finite t; occluded() is true

@@ -5,7 +5,7 @@
 // checksums (the default: damaged bytes must give slim::Error); without them and with the
 // structure check (OpenOptions::check_structure); and the same after the header checksum (always
 // verified) was recomputed over the input, so that the fuzzer gets past both checksums to the
-// header fields, the section table, the records and the node and leaf data. Checks (DESIGN.md
+// header fields, the section table, the records and the node and leaf data. Checks (README.md
 // "Scene files"):
 //   - open either succeeds or throws slim::Error naming the file;
 //   - an opened scene traces rays through its bounds without memory errors, undefined behaviour

@@ -34,6 +34,7 @@
 #include <thread>
 #include <vector>
 
+#include "slimrt/analysis.h"
 #include "slimrt/slimrt.h"
 
 namespace py = pybind11;
@@ -466,7 +467,7 @@ class RaycastingScene {
     d["lossy"] = scene->is_lossy();
     d["error_bound"] = scene->error_bound();
     py::dict details;
-    for (const auto& [k, v] : s.details) details[py::str(k)] = v;
+    for (const auto& [k, v] : slim::stat_details(*scene)) details[py::str(k)] = v;
     d["details"] = details;
     return d;
   }

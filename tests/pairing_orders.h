@@ -1,6 +1,6 @@
 // The index-key pairing order of A. Aman, S. Fenney, "Fast Triangle Pairing for Ray Tracing"
-// (../shared/papers/fast-triangle-pairing.txt), applied in the two ways the library does not use,
-// for tests/test_pairing.cpp and fuzz/fuzz_pairing.cpp: they must give the pairs of the library's
+// (Imagination Technologies), applied in the two ways the library does not use, for
+// tests/test_pairing.cpp and fuzz/fuzz_pairing.cpp: they must give the pairs of the library's
 // TwinSort (pair_by_edge_heuristic) and of the std::stable_sort reference
 // (tests/pairing_reference.h).
 #pragma once

@@ -1,7 +1,6 @@
 // The triangle pairing's reference and invariants (A. Aman, S. Fenney, "Fast Triangle Pairing for
-// Ray Tracing", ../shared/papers/fast-triangle-pairing.txt, "Greedy pairing"), shared by
-// tests/test_pairing.cpp and the libFuzzer target fuzz/fuzz_pairing.cpp. No gtest here: problems
-// come back as text.
+// Ray Tracing", Imagination Technologies, "Greedy pairing"), shared by tests/test_pairing.cpp and
+// the libFuzzer target fuzz/fuzz_pairing.cpp. No gtest here: problems come back as text.
 #pragma once
 
 #include <algorithm>

@@ -1,5 +1,5 @@
 // The benchmark instrument: the Embree adapter against slimrt, the interleaved rounds and
-// their statistics, and `slimrt bench --json` against the BENCHMARK.md schema. No test
+// their statistics, and `slimrt bench --json` against the schema of docs/benchmark.md. No test
 // asserts a timing.
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -531,7 +531,7 @@ TEST(BenchReport, RatiosAsMedianWithRangeInJsonAndMarkdown) {
   EXPECT_NE(md.find("5 interleaved rounds"), std::string::npos) << md;
 }
 
-// `slimrt bench terrain:64 --repeat 1 --json` against the BENCHMARK.md schema.
+// `slimrt bench terrain:64 --repeat 1 --json` against the schema of docs/benchmark.md.
 TEST(BenchCli, JsonSchemaOnTerrain64) {
   const std::string json_path = (std::filesystem::temp_directory_path() /
                                  ("slimrt_bench_" + std::to_string(getpid()) + ".json"))
@@ -628,7 +628,7 @@ TEST(BenchCli, JsonSchemaOnTerrain64) {
     EXPECT_EQ(r["prim_records_per_ray"], r["prim_tests_per_ray"]) << config;
     if (!bench::is_lossy_config(config)) {
       // 1.0 up to the rays that slip through Embree's non-watertight triangle test (about one
-      // in a million here; BENCHMARK.md: a lossless format under 99.9% is an error).
+      // in a million here; docs/benchmark.md: a lossless format under 99.9% is an error).
       EXPECT_GE(r["hit_agreement"].get<double>(), 0.9999) << config;
       for (const char* f : error_fields) EXPECT_TRUE(r["error"][f].is_null()) << config << " " << f;
     }

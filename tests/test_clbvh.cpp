@@ -1,6 +1,7 @@
-// Compressed-leaf BVH, QBVH8 and the compact variant (compressed-leaf-bvh.txt): lossless, so every
-// configuration must give bit-identical hit distances to bvh8-tri4v (same triangles, same
-// watertight arithmetic), on random soups, procedural scenes and the meshes of ../shared/data.
+// Compressed-leaf BVH, QBVH8 and the compact variant (C. Benthin, I. Wald, S. Woop, A. T. Afra,
+// "Compressed-Leaf Bounding Volume Hierarchies", HPG 2018): lossless, so every configuration must
+// give bit-identical hit distances to bvh8-tri4v (same triangles, same watertight arithmetic), on
+// random soups, procedural scenes and the meshes of ../shared/data.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -84,15 +85,16 @@ TEST(Clbvh, SharedMeshesIdenticalToBvh8) {
 }
 
 TEST(Clbvh, MultiLeavesHoldMostLeaves) {
-  // compressed-leaf-bvh.txt section 4.3: most leaves end up in multi-leaf nodes, and the node
-  // memory drops well below the BVH8's (issue target: <= 0.6x, on the benchmark scenes). The
-  // ratio falls with the scene size (the top of the tree is Node8 either way): terrain:128 0.600
-  // since the BVH8 takes the SAH-optimal collapse, terrain:256 0.579, terrain:1024 0.51.
+  // Benthin et al. 2018, section 4.3 "Builder Modifications": most leaves end up in multi-leaf
+  // nodes, and the node memory drops well below the BVH8's (target: <= 0.6x, on the benchmark
+  // scenes). The ratio falls with the scene size (the top of the tree is Node8 either way):
+  // terrain:128 0.600 since the BVH8 takes the SAH-optimal collapse, terrain:256 0.579,
+  // terrain:1024 0.51.
   PolyMesh m = load("terrain:256");
   Scene b8 = Scene::build(m, BuildOptions::from_config("bvh8-tri4v"));
   Scene cl = Scene::build(m, BuildOptions::from_config("clbvh-tri4v"));
   double leaves = 0, in_multi = 0;
-  for (auto& [k, v] : cl.stats().details) {
+  for (auto& [k, v] : stat_details(cl)) {
     if (k == "leaf_count") leaves = v;
     if (k == "leaves_in_multileaf") in_multi = v;
   }

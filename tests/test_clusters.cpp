@@ -30,7 +30,7 @@ uint32_t bits_of(float f) {
 }
 
 double detail(const Scene& s, const std::string& key) {
-  for (const auto& [k, v] : s.stats().details)
+  for (const auto& [k, v] : stat_details(s))
     if (k == key) return v;
   ADD_FAILURE() << "no detail " << key;
   return -1;

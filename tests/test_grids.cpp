@@ -1,6 +1,7 @@
-// Grid primitives (lossy-compressed-grid-primitives.txt): mesh -> grids, the displacement codes,
-// the 128-byte layout, hits against the brute-force reference on the decompressed triangles,
-// watertightness across sub-grid and grid borders, u,v and face mapping, attributes.
+// Grid primitives (C. Benthin, K. Vaidyanathan, S. Woop, "Ray Tracing Lossy Compressed Grid
+// Primitives", Eurographics 2021 short papers): mesh -> grids, the displacement codes, the 128-byte
+// layout, hits against the brute-force reference on the decompressed triangles, watertightness
+// across sub-grid and grid borders, u,v and face mapping, attributes.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -585,7 +586,8 @@ TEST(GridHits, AttributeInterpolation) {
 }
 
 // Every input vertex decodes to the same bits in every sub-grid, grid and leftover that uses it
-// (DESIGN.md: border vertices shared by different grids decode identically on both sides).
+// (border vertices shared by different grids decode identically on both sides, so that the
+// surface stays closed there).
 TEST(GridWatertight, SharedVerticesDecodeIdentically) {
   const PolyMesh m = add_uv_seams(rotate_some_faces(make_torus(48), 48, 5, 4), 48, 7, 5);
   ASSERT_GT(make_grids({&m}).multi_cell_grids, 10u);
@@ -617,10 +619,10 @@ TEST(GridWatertight, SharedVerticesDecodeIdentically) {
   }
 }
 
-// Watertightness (section 5, DESIGN.md): rays from inside a closed displaced torus towards points
-// on triangle edges and vertices of its decoded geometry (sub-grid borders and borders between
-// different grids among them) all hit. The second torus is cut into many grids (uv seams) with
-// flipped cells (rotated faces), and 3-cell-wide strips give partial sub-grids.
+// Watertightness (section 5): rays from inside a closed displaced torus towards points on triangle
+// edges and vertices of its decoded geometry (sub-grid borders and borders between different grids
+// among them) all hit. The second torus is cut into many grids (uv seams) with flipped cells
+// (rotated faces), and 3-cell-wide strips give partial sub-grids.
 TEST(GridWatertight, ClosedTorusNoLeaks) {
   // 2 x 10^5 rays for lossy-grid (compressed-leaf BVH), 10 times fewer for the others;
   // SLIM_GRID_LEAK_RAYS overrides (the 10^6 run of the report).
@@ -716,7 +718,7 @@ TEST(GridHits, SubGridPartChildrenMatchWholeSubGrids) {
   std::vector<PolyMesh> meshes{make_terrain(19),
                                add_uv_seams(rotate_some_faces(make_torus(64), 64, 6, 5), 64, 7, 3)};
   auto detail = [](const Scene& s, const std::string& key) {
-    for (const auto& [k, v] : s.stats().details)
+    for (const auto& [k, v] : stat_details(s))
       if (k == key) return v;
     return -1.0;
   };

@@ -252,7 +252,7 @@ PolyMesh coincident_stack(uint32_t n, bool mirrored) {
 }
 
 double detail_of(const Scene& s, const std::string& name) {
-  for (const auto& [k, v] : s.stats().details)
+  for (const auto& [k, v] : stat_details(s))
     if (k == name) return v;
   return -1;
 }

@@ -25,7 +25,7 @@ std::string read_all(const std::string& p) {
 }
 
 double detail_of(const Scene& s, const std::string& key) {
-  for (const auto& [k, v] : s.stats().details)
+  for (const auto& [k, v] : stat_details(s))
     if (k == key) return v;
   return -1;
 }

@@ -475,7 +475,7 @@ TEST(LatticeBox, ChunkedBuildOfTheTorusHasNoLeaks) {
     const BuildOptions opt = BuildOptions::from_config(config);
     const Scene joined = Scene::build_chunked("torus:128", opt, chunking);
     double chunks = 0;
-    for (const auto& [k, v] : joined.stats().details)
+    for (const auto& [k, v] : stat_details(joined))
       if (k == "chunks") chunks = v;
     EXPECT_GE(chunks, 16) << config;
     std::vector<Vec3f> aim = m.positions;
@@ -561,7 +561,7 @@ TEST(LatticeBox, GridBoundaryVerticesAreExact) {
     boxed.lattice_box = torus.bounds();
     auto exact = [&](const BuildOptions& o) {
       const Scene scene = Scene::build(torus, o);
-      for (const auto& [k, v] : scene.stats().details)
+      for (const auto& [k, v] : stat_details(scene))
         if (k == "exact_vertices") return v;
       return -1.0;
     };

@@ -7,7 +7,7 @@
 //     nearest): every decoded vertex within half a step per axis, e = |step| / 2 with
 //     step = (box size) / 65535, plus a few float roundings of lo + q * step.
 //   lossy-grid*: a vertex is (bilinear patch of its 5x5 sub-grid's corners) + a quantized
-//     displacement d (Benthin et al., section 4.1; DESIGN.md "Lossy 5x5 sub-grid"). Encoding 1:
+//     displacement d (Benthin et al., Eurographics 2021, section 4.1). Encoding 1:
 //     a direction from 1024 first-octant unit vectors on 45 rings of an equal-area map (ring
 //     spacing 1/44 in the map radius, at most 43 azimuth steps of pi/2 on a ring; the map
 //     stretches angles by at most 2 radially and sqrt(2) tangentially: at most 0.041 rad to the

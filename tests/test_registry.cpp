@@ -218,7 +218,7 @@ TEST(Registry, BuildOptionsAreCheckedAndOrthogonal) {
   BuildOptions pairs = BuildOptions::from_config("bvh8-pairs");
   pairs.pairing_options.prescan_threshold = 2.0;
   auto detail = [](const Scene& s, const char* key) {
-    for (const auto& [k, v] : s.stats().details)
+    for (const auto& [k, v] : stat_details(s))
       if (k == key) return v;
     return -1.0;
   };

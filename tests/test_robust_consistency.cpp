@@ -12,8 +12,8 @@
 //     grid): G = the input, oracle = embree-tri;
 //   formats that store their own triangles (lossy-grid*, and costa-*: V quantizes vertices, and
 //     even without V its 5+-gons are tessellated by GLU, not fanned): G = their decoded
-//     triangles (grid_triangles / costa_triangles), oracle = embree-tri built on G. DESIGN.md:
-//     "lossy formats agree with Embree run on their own decompressed geometry".
+//     triangles (grid_triangles / costa_triangles), oracle = embree-tri built on G: such a format
+//     must agree with Embree run on its own decompressed geometry.
 // A ray agrees when both miss, or both hit with t within 1e-4 relative and the same input face.
 // A different face at the same t is a tie only where checked geometrically on G: slimrt's face
 // passes within tie_delta (~1e-6 of the distance) of Embree's hit point, near the boundary of

@@ -203,7 +203,7 @@ void expect_refused_without_allocating(const std::function<bool()>& fn) {
 
 // Headers and accessors claiming 2^31 - 1 faces or vertices on a file of a few hundred bytes:
 // a clean slim::Error naming the count, decided from the file size before any allocation (a
-// header count is never trusted: DESIGN.md "check counts against file size before allocating").
+// header count is never trusted: counts are checked against the file size before allocating).
 TEST(RobustLimits, HeaderClaimingTwoToThe31FacesIsAnErrorNotAnAllocation) {
   TempDir d{"slimrt_robust"};
   struct Case {

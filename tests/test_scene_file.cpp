@@ -125,10 +125,11 @@ void expect_same_figures(const Scene& a, const Scene& b, const std::string& what
   EXPECT_EQ(sa.skipped_faces, sb.skipped_faces) << what;
   EXPECT_EQ(sa.primitives, sb.primitives) << what;
   EXPECT_EQ(sa.build_seconds, sb.build_seconds) << what;
-  ASSERT_EQ(sa.details.size(), sb.details.size()) << what;
-  for (size_t i = 0; i < sa.details.size(); ++i) {
-    EXPECT_EQ(sa.details[i].first, sb.details[i].first) << what;
-    EXPECT_EQ(std::memcmp(&sa.details[i].second, &sb.details[i].second, 8), 0) << what;
+  const StatDetails &da = stat_details(a), &db = stat_details(b);
+  ASSERT_EQ(da.size(), db.size()) << what;
+  for (size_t i = 0; i < da.size(); ++i) {
+    EXPECT_EQ(da[i].first, db[i].first) << what;
+    EXPECT_EQ(std::memcmp(&da[i].second, &db[i].second, 8), 0) << what;
   }
   EXPECT_EQ(a.error_bound(), b.error_bound()) << what;
   const Box3f ba = a.bounds(), bb = b.bounds();
@@ -593,7 +594,7 @@ TEST(SceneFile, SavingAnOpenedSceneWritesTheSameBytes) {
   const Scene joined =
       Scene::build_chunked("torus:128", BuildOptions::from_config("lossy-grid-shared"), chunking);
   double chunks = 0;
-  for (const auto& [key, value] : joined.stats().details)
+  for (const auto& [key, value] : stat_details(joined))
     if (key == "chunks") chunks = value;
   EXPECT_GE(chunks, 2) << "torus:128 in chunks of at most 4096 triangles";
   check(joined, "joined lossy-grid-shared");

@@ -2,6 +2,7 @@
 
 #include <string>
 
+#include "slimrt/analysis.h"
 #include "slimrt/math.h"
 #include "slimrt/scene.h"
 
@@ -25,4 +26,21 @@ TEST(Smoke, CpuHasTheCompiledInstructionSet) {
 #else
   EXPECT_EQ(isa, "scalar");
 #endif
+}
+
+// The format's own build figures are a measurement hook of slimrt/analysis.h beside the typed
+// SceneStats: none for an empty scene, in the builder's order for a built one, found by name.
+TEST(Smoke, BuildFiguresComeFromTheAnalysisHeader) {
+  const slim::Scene empty;
+  EXPECT_TRUE(slim::stat_details(empty).empty());
+  EXPECT_FALSE(slim::stat_detail(empty, "leaf_count").has_value());
+
+  const slim::Scene scene =
+      slim::Scene::build(slim::load("terrain:16"), slim::BuildOptions::from_config("bvh8-tri4v"));
+  EXPECT_EQ(scene.stats().triangles, 2u * 16 * 16);
+  const slim::StatDetails& d = slim::stat_details(scene);
+  ASSERT_FALSE(d.empty());
+  for (const auto& [name, value] : d) EXPECT_EQ(slim::stat_detail(scene, name), value) << name;
+  EXPECT_GT(slim::stat_detail(scene, "leaf_count").value_or(0), 0);
+  EXPECT_FALSE(slim::stat_detail(scene, "no_such_figure").has_value());
 }

@@ -296,7 +296,7 @@ inline Ray random_ray(Rng& rng, const Box3f& box) {
   return ray;
 }
 
-// Hit agreement as BENCHMARK.md defines it: both miss, or both hit with t equal within rel_tol
+// Hit agreement as docs/benchmark.md defines it: both miss, or both hit with t equal within rel_tol
 // (same face, or a tie at a shared edge/vertex).
 inline bool agrees(const Hit& h, const RefHit& r, double rel_tol = 1e-5) {
   if (!h.valid() || !r.valid()) return h.valid() == r.valid();

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 
 #include <unistd.h>
 
@@ -16,6 +17,7 @@
 #include "mesh/chunk_sources.h"
 #include "mesh/procedural.h"
 #include "progress.h"
+#include "slimrt/analysis.h"
 #include "slimrt/output.h"
 #include "slimrt/scene.h"
 
@@ -63,8 +65,8 @@ int save_and_report(const std::string& scene_name, const Scene& scene, const std
   char load[64] = "";
   if (load_s >= 0) std::snprintf(load, sizeof load, "load %.3f s | ", load_s);
   std::string chunks;
-  for (const auto& [k, v] : scene.stats().details)
-    if (k == "chunks") chunks = std::to_string(uint64_t(v)) + " chunks, ";
+  if (const std::optional<double> n = stat_detail(scene, "chunks"))
+    chunks = std::to_string(uint64_t(*n)) + " chunks, ";
   // A device or a named pipe (slimrt/output.h writes them in place) has no size to report.
   std::error_code ec;
   const uint64_t bytes = std::filesystem::file_size(output, ec);
@@ -73,7 +75,7 @@ int save_and_report(const std::string& scene_name, const Scene& scene, const std
       "%s: %s, %s%llu triangles%s | %sbuild %.3f s | save %.3f s | scene %s (%.2f B/triangle) | "
       "file %s, %s\n",
       scene_name.c_str(), scene.options().config_name().c_str(), chunks.c_str(),
-      (unsigned long long)m.triangles, discarded_note(scene.stats()).c_str(), load,
+      (unsigned long long)m.triangles, discarded_note(scene).c_str(), load,
       scene.stats().build_seconds, save_s, format_bytes(m.total()).c_str(), m.bytes_per_triangle(),
       output.c_str(), file_size.c_str());
   return 0;

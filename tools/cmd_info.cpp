@@ -51,7 +51,7 @@ nlohmann::json scene_report(const Scene& scene, bool json, bool& valid) {
   a["bytes_other"] = m.other_bytes;
   a["bytes_total"] = m.total();
   a["bytes_per_triangle"] = m.bytes_per_triangle();
-  for (const auto& [k, v] : st.details) a["details"][k] = v;
+  for (const auto& [k, v] : stat_details(scene)) a["details"][k] = v;
   a["valid"] = valid;
   if (!why.empty()) a["validate_error"] = why;
   if (!json) {
@@ -61,7 +61,7 @@ nlohmann::json scene_report(const Scene& scene, bool json, bool& valid) {
         "  memory: geometry %llu B, bvh %llu B, other %llu B, total %llu B = %.2f B/triangle\n",
         (unsigned long long)m.geometry_bytes, (unsigned long long)m.bvh_bytes,
         (unsigned long long)m.other_bytes, (unsigned long long)m.total(), m.bytes_per_triangle());
-    for (const auto& [k, v] : st.details) std::printf("  %-24s %.6g\n", k.c_str(), v);
+    for (const auto& [k, v] : stat_details(scene)) std::printf("  %-24s %.6g\n", k.c_str(), v);
     std::printf("  validate: %s%s\n", why.empty() ? "ok" : "FAILED: ", why.c_str());
   }
   return a;
@@ -329,13 +329,12 @@ int cmd_info(int argc, char** argv) {
       c["triangles"] = m.triangles;
       c["build_s"] = scene.stats().build_seconds;
       c["bytes_per_triangle"] = m.bytes_per_triangle();
-      for (const auto& [k, v] : scene.stats().details) c[k] = v;
+      for (const auto& [k, v] : stat_details(scene)) c[k] = v;
       if (!json) {
         std::printf("\n%s: %.2f B/triangle (geometry %.2f, BVH %.2f)\n", config,
                     m.bytes_per_triangle(), double(m.geometry_bytes) / double(m.triangles),
                     double(m.bvh_bytes) / double(m.triangles));
-        for (const auto& [k, v] : scene.stats().details)
-          std::printf("  %-28s %.6g\n", k.c_str(), v);
+        for (const auto& [k, v] : stat_details(scene)) std::printf("  %-28s %.6g\n", k.c_str(), v);
       }
       out["clusters"][config] = c;
     }

@@ -267,7 +267,7 @@ int render_command(int argc, char** argv, const RenderRanks& ranks) {
       "%s: %llu faces, %llu triangles%s | load %.3f s | build %.3f s (%s) | render %.3f s "
       "(%dx%d, %d spp, %s) | %.2f MRays/s%s | %s\n",
       scene_name.c_str(), (unsigned long long)faces, (unsigned long long)triangles,
-      discarded_note(scene.stats()).c_str(), load_s, build_s, config.c_str(), render_s, ropt.width,
+      discarded_note(scene).c_str(), load_s, build_s, config.c_str(), render_s, ropt.width,
       ropt.height, ropt.spp, shade.c_str(), mrays, processes.c_str(), output.c_str());
   return 0;
 }

@@ -1,6 +1,6 @@
-// slimrt info --costa: sizes of the Costa quantized n-gon mesh (Costa et al., fast mesh
-// compression for GPU ray tracing, Tables 1 and 3): regular and triangulated sizes, gzip -9, and
-// every combination of T, P, F, V.
+// slimrt info --costa: sizes of the Costa quantized n-gon mesh (V. Costa, J. M. Pereira,
+// J. A. Jorge, "Fast Compression of Meshes for GPU Ray-Tracing", WSCG 2013, Tables 1 and 3):
+// regular and triangulated sizes, gzip -9, and every combination of T, P, F, V.
 #include <cstdio>
 #include <string>
 

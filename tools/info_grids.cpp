@@ -1,6 +1,6 @@
-// `slimrt info --grids SCENE`: how the scene becomes vertex grids and what the lossy encodings
-// cost in accuracy (C. Benthin, K. Vaidyanathan, S. Woop, "Ray Tracing Lossy Compressed Grid
-// Primitives", HPG 2021, section 3 and Table 3).
+// `slimrt info --grids SCENE`: how the scene becomes vertex grids and what the lossy encodings cost
+// in accuracy (C. Benthin, K. Vaidyanathan, S. Woop, "Ray Tracing Lossy Compressed Grid
+// Primitives", Eurographics 2021 short papers, section 3 and Table 3).
 // With --json the figures go into a "grids" object of the output.
 #include <cstdio>
 

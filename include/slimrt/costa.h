@@ -26,7 +26,7 @@ struct CostaSizes {
   // running primitive size stays near the linear prediction of P (Listing 2), vertices renumbered
   // so that the fan/strip flag of F costs no extra bit when the flagged vertices fit (see
   // src/api/scene_costa.cpp). A V scene's BVH is built over quantized positions and can order a
-  // few primitives differently; Scene::stats().details lists the scene's own store bytes.
+  // few primitives differently; stat_details(scene) lists the scene's own store bytes.
   // gzip_bytes compresses the regular arrays in the same order.
   std::map<std::string, uint64_t> combos;
   // The same with the primitives and vertices in input order, as the paper's Table 3 has them.

@@ -1,5 +1,5 @@
 // slimrt grid statistics and grid attributes (C. Benthin, K. Vaidyanathan, S. Woop, "Ray Tracing
-// Lossy Compressed Grid Primitives", HPG 2021).
+// Lossy Compressed Grid Primitives", Eurographics 2021 short papers).
 //
 //   slim::GridStats g = slim::grid_stats(meshes);                // how the meshes became grids
 //   slim::GridErrorStats e = slim::grid_error(meshes, 1);        // paper Table 3, encoding 1

@@ -199,8 +199,8 @@ struct SceneStats {
   uint64_t triangles = 0;      // after fan triangulation
   uint64_t skipped_faces = 0;  // faces dropped at build: NaN/Inf vertex (see README)
   uint64_t primitives = 0;     // primitives the BVH was built over (triangles, pairs, ...)
-  // Format-specific figures (node counts per type, leaf fill, SAH cost, ...), in order.
-  std::vector<std::pair<std::string, double>> details;
+  // The format's own figures (node counts per type, leaf fill, SAH cost, ...) are measurement
+  // hooks: stat_details() in slimrt/analysis.h.
 };
 
 // Scene::build_chunked: an input larger than memory, built chunk by chunk (README.md "Inputs larger
@@ -307,6 +307,7 @@ class Scene {
   friend std::optional<DecodedTriangles> decoded_triangles(const Scene& scene,
                                                            const std::vector<const PolyMesh*>&);
   friend Hit intersect_counted(const Scene& scene, const Ray& ray, TraversalCounters& counters);
+  friend const std::vector<std::pair<std::string, double>>& stat_details(const Scene& scene);
   std::unique_ptr<Impl> impl_;
 };
 

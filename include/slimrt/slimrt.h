@@ -6,8 +6,9 @@
 //   slim::MemoryStats m = scene.memory();                                // slimrt/scene.h
 //
 // Errors are slim::Error (slimrt/error.h); build progress and cancellation are in
-// slimrt/progress.h. Measurement hooks (grid and pairing statistics, Costa sizes, the benchmark's
-// path tracer and PSNR, a traversal that counts its work) are in slimrt/analysis.h.
+// slimrt/progress.h. Measurement hooks (each format's own build figures, grid and pairing
+// statistics, Costa sizes, the benchmark's path tracer and PSNR, a traversal that counts its work)
+// are in slimrt/analysis.h.
 #pragma once
 
 #include "slimrt/error.h"

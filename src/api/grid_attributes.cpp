@@ -1,6 +1,6 @@
 // Per-vertex attributes of grid hits (C. Benthin, K. Vaidyanathan, S. Woop, "Ray Tracing Lossy
-// Compressed Grid Primitives", HPG 2021, section 6): attributes in the grid order of the vertices,
-// looked up with a hit's per-grid u,v (slimrt/grids.h GridAttributes).
+// Compressed Grid Primitives", Eurographics 2021 short papers, section 6): attributes in the grid
+// order of the vertices, looked up with a hit's per-grid u,v (slimrt/grids.h GridAttributes).
 #include <memory>
 
 #include "mesh/grids.h"

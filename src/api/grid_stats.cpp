@@ -1,6 +1,7 @@
 // The grid statistics of slimrt/grids.h (C. Benthin, K. Vaidyanathan, S. Woop, "Ray Tracing Lossy
-// Compressed Grid Primitives", HPG 2021): how the meshes become grids (section 3), the lossy
-// error (Table 3) and the decoded triangles, by the same conversion and encoders as Scene::build.
+// Compressed Grid Primitives", Eurographics 2021 short papers): how the meshes become grids
+// (section 3), the lossy error (Table 3) and the decoded triangles, by the same conversion and
+// encoders as Scene::build.
 #include <chrono>
 
 #include "api/scene_grids.h"

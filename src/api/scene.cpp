@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <string_view>
 
 #include "api/registry.h"
 #include "api/scene_impl.h"
@@ -180,6 +181,17 @@ MemoryStats Scene::memory() const { return impl_ ? impl_->mem : MemoryStats{}; }
 const SceneStats& Scene::stats() const {
   static const SceneStats empty;
   return impl_ ? impl_->stats : empty;
+}
+
+const StatDetails& stat_details(const Scene& scene) {
+  static const StatDetails empty;
+  return scene.impl_ ? scene.impl_->stats.details : empty;
+}
+
+std::optional<double> stat_detail(const Scene& scene, std::string_view name) {
+  for (const auto& [k, v] : stat_details(scene))
+    if (k == name) return v;
+  return std::nullopt;
 }
 
 Box3f Scene::bounds() const { return impl_ ? impl_->bounds : Box3f(); }

@@ -1,7 +1,8 @@
-// Costa quantized n-gon mesh scenes (fast-mesh-compression-gpu-rt.txt): configs costa, costa-P,
-// ..., costa-TPFV. Loading (section 3.1) -> optional T -> BVH2 over the primitives -> primitives
-// reordered in leaf order -> the store (section 3.2) -> BVH8 whose leaves are primitive ranges
-// (prim/costa_leaf.h). Also costa_sizes() (Tables 1 and 3) for the CLI and the benchmark.
+// Costa quantized n-gon mesh scenes (V. Costa, J. M. Pereira, J. A. Jorge, "Fast Compression of
+// Meshes for GPU Ray-Tracing", WSCG 2013): configs costa, costa-P, ..., costa-TPFV. Loading
+// (section 3.1) -> optional T -> BVH2 over the primitives -> primitives reordered in leaf order ->
+// the store (section 3.2) -> BVH8 whose leaves are primitive ranges (prim/costa_leaf.h). Also
+// costa_sizes() (Tables 1 and 3) for the CLI and the benchmark.
 #include <zlib.h>
 
 #include <algorithm>
@@ -449,7 +450,7 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
   mem.geometry_bytes = q.bytes() + leaf_data_bytes;
   mem.other_bytes = data->face_map.bytes() + data->face_base.size() * sizeof(uint32_t);
   mem.triangles = stats_src.input_triangles;
-  SceneStats& st = s->stats;
+  SceneStatsAndDetails& st = s->stats;
   st.input_faces = stats_src.input_faces;
   st.triangles = stats_src.input_triangles;
   st.skipped_faces = stats_src.skipped_faces;

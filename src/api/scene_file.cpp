@@ -1,10 +1,10 @@
-// Scene files: Scene::save and Scene::open (DESIGN.md "Scene files", api/scene_file.h).
+// Scene files: Scene::save and Scene::open (README.md "Scene files", api/scene_file.h).
 //
 // Layout (native byte order, recorded and checked; all offsets in bytes from the file start):
 //   FileHeader        512 B   magic, version, byte-order mark, sizes, the writer's instruction set,
 //                             the configuration and its BuildOptions, the scene's figures
 //   SectionEntry[n]    80 B each: name, offset, size, element size, XXH3-64 of the bytes
-//   details           the SceneStats::details pairs (u16 name length, name, f64 value)
+//   details           the stat_details() pairs (u16 name length, name, f64 value)
 //   (padding to 64)   header_bytes = the end of all of the above, 64-byte aligned
 //   sections          each 64-byte aligned, in table order, zero padding between them
 // The header checksum (XXH3-64 of [0, header_bytes) with its own field zeroed) is verified on

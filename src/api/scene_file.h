@@ -1,4 +1,4 @@
-// Scene files (DESIGN.md "Scene files"; Scene::save / Scene::open in slimrt/scene.h): the buffers a
+// Scene files (README.md "Scene files"; Scene::save / Scene::open in slimrt/scene.h): the buffers a
 // scene keeps, enumerated as named sections by one visitor that serves both directions. Saving
 // reads each buffer and writes it as a 64-byte aligned section; opening points the scene's
 // pointers (Leaf::Context pointers, the BVH arenas as AlignedBytes views) straight into the

@@ -1,6 +1,5 @@
 // Grid formats: `grid`, `lossy-grid`, `lossy-grid-e2` (C. Benthin, K. Vaidyanathan, S. Woop,
-// "Ray Tracing Lossy Compressed Grid Primitives", ../shared/papers/
-// lossy-compressed-grid-primitives.txt; DESIGN.md "Grids", "Lossy 5x5 sub-grid").
+// "Ray Tracing Lossy Compressed Grid Primitives", Eurographics 2021 short papers).
 //
 // Scene::build: the meshes become grids (mesh/grids.h, section 3), each grid is cut into 5x5
 // sub-grids, and a BVH8 is built over the sub-grids, one sub-grid per leaf (section 5: "Each BVH
@@ -10,9 +9,9 @@
 //   lossy-grid-e2  the same with encoding 2
 //   lossy-grid-shared  68-byte shared-corner sub-grids (section 9, Leaf::SharedLossyGrids)
 // Leaf::LossyGrids is the 128-byte Listing 1 sub-grid under any node layout.
-// Leftovers (lone quads, unpaired triangles) are stored either as 2x2 sub-grids in the same BVH
-// or as Tri4v triangle leaves in a second BVH traversed after the first, whichever the estimate
-// below says is smaller (SceneStats detail `leftover_triangle_leaves`). With the layouts above the
+// Leftovers (lone quads, unpaired triangles) are stored either as 2x2 sub-grids in the same BVH or
+// as Tri4v triangle leaves in a second BVH traversed after the first, whichever the estimate below
+// says is smaller (stat_details() figure `leftover_triangle_leaves`). With the layouts above the
 // triangle leaves always win (a lone quad costs ~116 B as triangles, 140-180 B as a sub-grid);
 // BuildOptions::grid_leftovers forces one.
 #include <tbb/blocked_range.h>
@@ -605,7 +604,7 @@ SubGridError measure_error(const SubGridInput& in, const SubGridVerts& w, const 
   return e;
 }
 
-void add_grid_details(const Prepared& p, SceneStats& st, double encode_s) {
+void add_grid_details(const Prepared& p, SceneStatsAndDetails& st, double encode_s) {
   const GridConversionFigures& f = p.gs.figures;
   uint64_t full = 0, subgrids = p.sub_start.back();
   for (size_t gi = 0; gi < p.gs.grids.size(); ++gi) {

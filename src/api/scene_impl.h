@@ -6,6 +6,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/ray.h"
@@ -16,9 +17,15 @@ namespace slim {
 
 class SectionVisitor;  // api/scene_file.h
 
+// Scene::stats() and the format's own figures (stat_details() in slimrt/analysis.h), which the
+// builders append as name/value pairs and a scene file keeps.
+struct SceneStatsAndDetails : SceneStats {
+  std::vector<std::pair<std::string, double>> details;
+};
+
 struct Scene::Impl {
   BuildOptions opt;
-  SceneStats stats;
+  SceneStatsAndDetails stats;
   MemoryStats mem;
   Box3f bounds;
   RaySetupBounds ray_setup;  // from bounds, set by Scene::build

@@ -1,6 +1,6 @@
-// A scene joined from chunk scenes (Scene::build_chunked; DESIGN.md "Out-of-core builds"): every
-// chunk of the input is a scene of the configuration's own format, and a small top-level BVH2 over
-// the chunks' boxes joins them.
+// A scene joined from chunk scenes (Scene::build_chunked; README.md "Inputs larger than memory"):
+// every chunk of the input is a scene of the configuration's own format, and a small top-level BVH2
+// over the chunks' boxes joins them.
 #pragma once
 
 #include <cstdint>

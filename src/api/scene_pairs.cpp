@@ -1,9 +1,8 @@
 // Triangle-pair formats: bvh8-pairs, clbvh-pairs (and qbvh8-pairs), and bvh8-pairs-w2 (the same
 // leaves over the paper's baseline pairing, in-order window N = 2). A. Aman, S. Fenney, "Fast
-// Triangle Pairing for Ray Tracing", Imagination Technologies
-// (../shared/papers/fast-triangle-pairing.txt): the fan triangles of the input are paired with the
-// edge-box surface-area heuristic (mesh/pairing.h, BuildOptions::pairing_options), and the BVH is
-// built over pairs stored in Pair4 leaves (prim/pairs.h).
+// Triangle Pairing for Ray Tracing", Imagination Technologies: the fan triangles of the input are
+// paired with the edge-box surface-area heuristic (mesh/pairing.h, BuildOptions::pairing_options),
+// and the BVH is built over pairs stored in Pair4 leaves (prim/pairs.h).
 //
 // Choices, measured single-threaded (diffuse paths, 160 x 160 pixels, thread CPU time, best of
 // 5-7 interleaved runs, AVX2, on the shared 2-core build VM):

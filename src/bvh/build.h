@@ -28,7 +28,7 @@ struct Bvh2Node {
 };
 
 struct Bvh2BuildConfig {
-  int bins = 32;               // SAH bins per axis (DESIGN.md: 32 or more)
+  int bins = 32;               // SAH bins per axis (BuildOptions::sah_bins)
   uint32_t max_leaf_size = 4;  // leaves never hold more primitives than this
   uint32_t block_prims = 4;    // leaf cost counts blocks of this many primitives (SIMD width)
   float trav_cost = 1.0f;      // cost of one node visit relative to one primitive block test

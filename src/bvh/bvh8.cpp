@@ -53,7 +53,7 @@ void AlignedBytes::shrink_to_fit() {
   swap(t);
 }
 
-// ---- quantized boxes (compressed-leaf-bvh.txt section 4.1) -----------------------------------
+// ---- quantized boxes (Benthin et al. 2018, section 4.1 "Node Compression and Decompression") ---
 
 namespace {
 
@@ -228,8 +228,9 @@ class Collapser {
   bool multileaf_candidate(uint32_t i) const {
     if (kind_ != NodeKind::CompressedLeaf && kind_ != NodeKind::QCompressedLeaf) return false;
     if (b2_.nodes[i].is_leaf()) return false;
-    // compressed-leaf-bvh.txt section 4.3: subtrees of fewer than N x M primitives; each of
-    // their (at most 8) leaves must fit one block so that child blocks are addressed implicitly.
+    // Benthin et al. 2018, section 4.3 "Builder Modifications": subtrees of fewer than N x M
+    // primitives; each of their (at most 8) leaves must fit one block so that child blocks are
+    // addressed implicitly.
     return prims_[i] < 8 * enc_.block_prims && leaves_[i] * enc_.parts_per_block <= 8 &&
            max_leaf_[i] <= enc_.block_prims;
   }

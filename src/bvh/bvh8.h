@@ -1,11 +1,15 @@
-// 8-wide BVH: node layouts, child references, and the BVH2 -> BVH8 collapse.
+// 8-wide BVH: node layouts, child references, and the BVH2 -> BVH8 collapse. Compressed-leaf
+// nodes: C. Benthin, I. Wald, S. Woop, A. T. Afra, "Compressed-Leaf Bounding Volume Hierarchies",
+// HPG 2018 (section numbers of the authors' full version).
 //
-// Node formats (byte budgets are part of DESIGN.md's spec):
+// Node formats (each size is checked by a static_assert below):
 //   Node8       256 B  8 float boxes SoA + 8 child refs (Embree's BVH8 multi-node).
 //   QNode8      136 B  float3 start + float3 extent + 8 boxes as 8-bit fixed point + 8 refs
-//                      (Embree's QBVH8; compressed-leaf-bvh.txt section 4.1, Listing 1).
+//                      (Embree's QBVH8; section 4.1 "Node Compression and Decompression",
+//                      Listing 1).
 //   MultiLeaf8   72 B  start/extent + 8 quantized boxes, no refs: the leaf blocks of its (up to)
-//                      8 children follow it in memory (compressed-leaf-bvh.txt section 4.2).
+//                      8 children follow it in memory (section 4.2 "Introducing Compressed
+//                      Multi-Leaf Nodes").
 #pragma once
 
 #include <cstdint>
@@ -125,7 +129,7 @@ class AlignedBytes {
 enum class NodeKind : uint8_t {
   Bvh8,            // Node8 everywhere
   QBvh8,           // QNode8 everywhere
-  CompressedLeaf,  // Node8 inner nodes, MultiLeaf8 for small subtrees (compressed-leaf-bvh.txt)
+  CompressedLeaf,  // Node8 inner nodes, MultiLeaf8 for small subtrees (Benthin et al. 2018)
   // QNode8 inner nodes, MultiLeaf8 for small subtrees: the cluster formats, whose inner nodes
   // are the largest part of the BVH (136 B per node instead of 256 B).
   QCompressedLeaf,
@@ -190,10 +194,10 @@ inline CollapseRule default_collapse_rule(NodeKind kind) {
              : CollapseRule::Optimal;
 }
 
-// Collapses a BVH2 into 8-wide nodes of the given kind by the given rule (DESIGN.md), writing
-// leaves through the encoder. For CompressedLeaf, every subtree with fewer
+// Collapses a BVH2 into 8-wide nodes of the given kind by the given rule (CollapseRule above),
+// writing leaves through the encoder. For CompressedLeaf, every subtree with fewer
 // than 8 x block_prims primitives that can be packed into at most 8 blocks becomes one multi-leaf
-// (compressed-leaf-bvh.txt section 4.3).
+// (Benthin et al. 2018, section 4.3 "Builder Modifications").
 // `progress` (optional) receives 2 x the primitive count: once as subtrees are measured, once as
 // they are written (one add per subtree of a few thousand primitives).
 Bvh8 collapse_bvh8(const Bvh2& bvh2, NodeKind kind, const LeafEncoder& enc, CollapseRule rule,

@@ -93,8 +93,9 @@ SLIM_INLINE bool intersect_leaf_blocks(const typename Leaf::Context& ctx, const 
 }
 
 // A leaf format may store the children of a multi-leaf differently from isolated leaves
-// (clbvh-compact: 8-bit indices into a per-multi-leaf dictionary, compressed-leaf-bvh.txt section
-// 4.5). It then provides
+// (clbvh-compact: 8-bit indices into a per-multi-leaf dictionary; C. Benthin, I. Wald, S. Woop,
+// A. T. Afra, "Compressed-Leaf Bounding Volume Hierarchies", HPG 2018, section 4.5 "Compressing
+// Leaf Data"). It then provides
 //   template <bool kAny, class Stats> static bool intersect_in_multileaf(const Context&,
 //       const uint8_t* data, uint32_t children, int i, TravRay&, HitRecord&, Stats&);
 // where data points right behind the 72-byte multi-leaf header.
@@ -115,11 +116,11 @@ concept HasMultiLeafParts = requires(const typename L::Source& s) {
   L::multileaf_parts(s);
 };
 
-// Multi-leaf (compressed-leaf-bvh.txt section 4.4): test the 8 quantized boxes, then the blocks
-// of the children hit. The paper tests them in any order; closest-hit rays here take them near to
-// far and stop at the first whose entry distance lies beyond the closest hit so far (with up to 8
-// sub-grid halves or quarters per multi-leaf, a ray often enters several children that a hit
-// then hides).
+// Multi-leaf (Benthin et al. 2018, section 4.4 "Traversal"): test the 8 quantized boxes, then the
+// blocks of the children hit. The paper tests them in any order; closest-hit rays here take them
+// near to far and stop at the first whose entry distance lies beyond the closest hit so far (with
+// up to 8 sub-grid halves or quarters per multi-leaf, a ray often enters several children that a
+// hit then hides).
 template <LeafFormat Leaf, bool kAny, class Stats>
 SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const uint8_t* p,
                                      uint32_t children, uint32_t block_bytes, TravRay& ray,

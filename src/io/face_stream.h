@@ -1,5 +1,5 @@
 // Face streams: the faces of a mesh file or a procedural scene in bounded batches, without the
-// whole PolyMesh in memory (DESIGN.md, "Out-of-core builds"; issue 27 item 2).
+// whole PolyMesh in memory (README.md "Inputs larger than memory").
 //
 // A batch holds polygons with their corner positions (copied out of the vertex array, bit for bit)
 // and the face id each one has in slim::load()'s PolyMesh. What stays in memory besides the batch:

@@ -1,8 +1,8 @@
 // PLY reader: ascii, binary_little_endian and binary_big_endian, any scalar and list types.
 //
 // Hand-written on purpose: Debian packages no C or C++ PLY library (`apt-cache search ply` lists
-// no libply/rply/happly/tinyply/miniply -dev package), and DESIGN.md forbids copying third-party
-// source into the tree. It also earns its place by speed and memory: it parses straight out of the
+// no libply/rply/happly/tinyply/miniply -dev package), and slimrt copies no third-party source
+// into the tree. It also earns its place by speed and memory: it parses straight out of the
 // (decompressed) file image with no per-element allocation. Measured on fg_terrain_hawaii.ply
 // (1M vertices, 2M faces, 37 MiB): 0.13 s to parse on a busy 2-core machine, against about 2 s of
 // CPU for liblzma to decompress the same file; peak memory is the file image plus the output.

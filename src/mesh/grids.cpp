@@ -1,5 +1,6 @@
-// Mesh -> vertex grids: lossy-compressed-grid-primitives.txt, section 3 ("Conversion to Vertex
-// Grids"), with the choices of DESIGN.md "Grids". See grids.h for the rules.
+// Mesh -> vertex grids: C. Benthin, K. Vaidyanathan, S. Woop, "Ray Tracing Lossy Compressed Grid
+// Primitives", Eurographics 2021 short papers, section 3 ("Conversion to Vertex Grids"), with the
+// choices the paper leaves open made in grids.h. See grids.h for the rules.
 //
 // Memory (a 50 M triangle terrain must convert on a 24 GiB machine): quad faces are cells by their
 // face index (no copy of their corners); only n-gon quads and triangle pairs are stored; the
@@ -325,7 +326,7 @@ void collect_cells(const PolyMesh& m, uint32_t geom, const GridBuildOptions& opt
   cells.quad_count = identity ? uint32_t(nf) : uint32_t(cells.quad_faces.size());
   std::vector<Cells::Extra> ngon_quads = std::move(cells.extra);
   cells.extra.clear();
-  // Triangle pairs (fast-triangle-pairing.txt) become cells.
+  // Triangle pairs (mesh/pairing.h, the edge heuristic of Aman and Fenney) become cells.
   const uint64_t nt = tri_faces.size();
   std::vector<uint8_t> paired(nt, 0);
   if (opt.pair_triangles && nt >= 2) {

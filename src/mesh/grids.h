@@ -1,4 +1,5 @@
-// Mesh -> vertex grids (lossy-compressed-grid-primitives.txt, section 3; DESIGN.md "Grids").
+// Mesh -> vertex grids (C. Benthin, K. Vaidyanathan, S. Woop, "Ray Tracing Lossy Compressed Grid
+// Primitives", Eurographics 2021 short papers, section 3 "Conversion to Vertex Grids").
 //
 // The faces of each input mesh become "cells" (quads with 4 corners c0..c3, triangulated as
 // (c0,c1,c2) + (c0,c2,c3), i.e. along the c0-c2 diagonal as slimrt's fan triangulation does):
@@ -6,7 +7,8 @@
 //   - an n-gon (n >= 5) gives the quads (v0, v_k, v_k+1, v_k+2) of its fan, k = 1, 3, ..., and a
 //     last fan triangle when n is odd;
 //   - triangle faces (and odd n-gon remainders) are paired by mesh/pairing.h (the edge-heuristic
-//     of fast-triangle-pairing.txt); a pair (a,b,c) + (a,c,d) sharing a-c is the cell (a,b,c,d).
+//     of A. Aman, S. Fenney, "Fast Triangle Pairing for Ray Tracing"); a pair (a,b,c) + (a,c,d)
+//     sharing a-c is the cell (a,b,c,d).
 // Cells are merged greedily (section 3: "a locally greedy algorithm ... trying to maximize its
 // size") into rectangles: a seed cell grows one row or column at a time, right, down, left, up in
 // turn, while every new cell exists, is not used yet and shares its edges with its neighbours in
@@ -18,8 +20,8 @@
 // surface (torus) repeats the seam vertices: the copies are the same input vertex, so they decode
 // to the same bits.
 //
-// Cells left alone (1-cell grids) and unpaired triangles are the "leftovers" (DESIGN.md): the
-// scene builders store them as 2x2 grids or as triangle leaves, whichever takes less memory.
+// Cells left alone (1-cell grids) and unpaired triangles are the "leftovers": the scene builders
+// store them as 2x2 grids or as triangle leaves, whichever takes less memory.
 #pragma once
 
 #include <cstdint>
@@ -107,13 +109,14 @@ GridSet make_grids(const std::vector<const PolyMesh*>& meshes, const GridBuildOp
 // multiple of 4 or the grid's last column; likewise for rows.
 inline bool lattice_line(uint32_t x, uint32_t res) { return x % 4 == 0 || x + 1 == res; }
 
-// Grid positions whose vertex a lossy format must store exactly (DESIGN.md, "Between two
-// different grids ..."). A lossy decoder rebuilds a vertex from the sub-grid corners around it:
-// corners are exact, a point on a sub-grid border depends on the two corners of that border only,
-// an interior point on all four. A vertex used in several places (another grid, the same grid
-// across a seam, a leftover triangle or 1-cell grid) decodes to the same bits everywhere only if
-// every lossy use has the same border corners and offset (a torus grid's seam does), so all the
-// others are listed here: positions y * res_x + x, ascending, per multi-cell grid.
+// Grid positions whose vertex a lossy format must store exactly, so that a vertex shared by two
+// grids decodes to the same bits in both. A lossy decoder rebuilds a vertex from the sub-grid
+// corners around it: corners are exact, a point on a sub-grid border depends on the two corners of
+// that border only, an interior point on all four. A vertex used in several places (another grid,
+// the same grid across a seam, a leftover triangle or 1-cell grid) decodes to the same bits
+// everywhere only if every lossy use has the same border corners and offset (a torus grid's seam
+// does), so all the others are listed here: positions y * res_x + x, ascending, per multi-cell
+// grid.
 // escape_boundary (a build with BuildOptions::lattice_box: a chunk of a larger mesh) also lists
 // every vertex on a boundary edge of the meshes (an edge of one triangle or cell only, vertex
 // identity as above): a chunk's cut is such an edge in both chunks, whose grids differ, so its

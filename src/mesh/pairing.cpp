@@ -1,5 +1,5 @@
 // Triangle pairing: A. Aman, S. Fenney, "Fast Triangle Pairing for Ray Tracing", Imagination
-// Technologies (../shared/papers/fast-triangle-pairing.txt). See pairing.h.
+// Technologies. See pairing.h.
 //
 // Stages (paper, "Edge bbox surface area heuristic"):
 //   1. half-edge table: (BBSA, smaller vertex, larger vertex, triangle) per non-degenerate

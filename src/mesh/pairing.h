@@ -1,5 +1,5 @@
 // Triangle pairing: A. Aman, S. Fenney, "Fast Triangle Pairing for Ray Tracing", Imagination
-// Technologies (../shared/papers/fast-triangle-pairing.txt).
+// Technologies.
 //
 // pair_triangles() pairs triangles on shared edges with the edge-box surface-area heuristic of the
 // paper: a half-edge table (BBSA, smaller vertex, larger vertex, triangle), sorted descending by

@@ -2,7 +2,7 @@
 // the tests run (tests/pairing_orders.cpp: the index-key full table and the local order): the
 // greedy scan state, the twins of the counting sort, the full-table record and its sort + scan.
 // Not part of the library's interface; A. Aman, S. Fenney, "Fast Triangle Pairing for Ray
-// Tracing" (../shared/papers/fast-triangle-pairing.txt).
+// Tracing", Imagination Technologies.
 #pragma once
 
 #include <algorithm>

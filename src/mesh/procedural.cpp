@@ -1,4 +1,4 @@
-// Procedural benchmark scenes (BENCHMARK.md, "Scenes"), generated deterministically from (N, seed)
+// Procedural benchmark scenes (docs/benchmark.md), generated deterministically from (N, seed)
 // so that anyone can reproduce a figure with one command and no download.
 //
 //  terrain:N  N x N quads over [0,1] x [0,1] in x,y, z up, (N+1)^2 vertices. Height = 8-octave fBm

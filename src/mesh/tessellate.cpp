@@ -1,4 +1,4 @@
-// Scene loading of the Costa quantized n-gon mesh (fast-mesh-compression-gpu-rt.txt, section 3.1):
+// Scene loading of the Costa quantized n-gon mesh (Costa et al., WSCG 2013, section 3.1):
 // triangles, quads as 4-vertex fans, and GLU's tessellation of larger polygons into triangles,
 // fans and strips. See tessellate.h for the rules, the COMBINE policy and the fallbacks.
 #include "mesh/tessellate.h"

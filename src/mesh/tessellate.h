@@ -1,6 +1,5 @@
 // Scene loading of the Costa quantized n-gon mesh: V. Costa, J. M. Pereira, J. A. Jorge, "Fast
-// Compression of Meshes for GPU Ray-Tracing" (../shared/papers/fast-mesh-compression-gpu-rt.txt),
-// section 3.1.
+// Compression of Meshes for GPU Ray-Tracing", WSCG 2013, section 3.1 "Scene Loading".
 //
 //   - a polygon of 3 vertices stays a triangle,
 //   - a polygon of 4 vertices becomes a 4-vertex triangle fan (the "quad" primitive: triangles

@@ -1,4 +1,5 @@
-// Leaf format of the Costa quantized n-gon mesh (fast-mesh-compression-gpu-rt.txt, section 3.3):
+// Leaf format of the Costa quantized n-gon mesh (V. Costa, J. M. Pereira, J. A. Jorge, "Fast
+// Compression of Meshes for GPU Ray-Tracing", WSCG 2013, section 3.3 "Intersection Testing"):
 // a leaf block is a RANGE of primitives of the store (prim/quantized_mesh.h). The store's
 // primitives are reordered in BVH leaf order at build, so the leaves need no index array.
 //

@@ -1,4 +1,4 @@
-// Lossy compressed grid primitives (lossy-compressed-grid-primitives.txt): the unit vector table
+// Lossy compressed grid primitives (Benthin et al., Eurographics 2021): the unit vector table
 // and the displacement encoders of section 4.1, the patch weights and the code unpacking tables
 // of the section 4.3 decoder, and the sub-grid encoder of section 4 (Figure 2).
 #include "prim/lossy_subgrid.h"

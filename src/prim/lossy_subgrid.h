@@ -1,6 +1,5 @@
 // Lossy compressed 5x5 sub-grids: C. Benthin, K. Vaidyanathan, S. Woop, "Ray Tracing Lossy
-// Compressed Grid Primitives" (../shared/papers/lossy-compressed-grid-primitives.txt), section 4;
-// DESIGN.md "Lossy 5x5 sub-grid (128 B)".
+// Compressed Grid Primitives", Eurographics 2021 short papers, section 4.
 //
 // A sub-grid is a bilinear patch through its 4 corner vertices plus 21 displacements (the 25
 // vertices minus the corners), each quantized to 3 bytes (section 4.1). Two layouts:
@@ -21,7 +20,7 @@
 //   Exponent 0 is the zero displacement. Exponent 63 is an escape: the vertex is stored exactly in
 //   the scene's exact-vertex array, at (grid's first exact vertex) + the 18 other bits. slimrt uses
 //   it for vertices shared with another grid or with leftover triangles, so that both sides decode
-//   them to the same bits (DESIGN.md: "keep them exact"), and in a build with
+//   them to the same bits, and in a build with
 //   BuildOptions::lattice_box for the vertices on the meshes' boundary edges: a chunk's cut is a
 //   boundary of both chunks, built apart with different grids, and its vertices decode to the
 //   input's bits in each (mesh/grids.h, find_exact_positions); a grid's own sub-grid borders need
@@ -29,7 +28,7 @@
 //   `bias` is one per scene (from its size, or lattice_box's: the same in every chunk), so that the
 //   62 binades cover any displacement.
 //
-// Watertightness (section 4.3, DESIGN.md): patch points are lerps (1-t)*a + t*b with per-edge
+// Watertightness (section 4.3): patch points are lerps (1-t)*a + t*b with per-edge
 // weights w0(i) = (n-1-i)/(n-1), w1(i) = i/(n-1), exact at both ends, evaluated as
 // w0(j) * (w0(i) c00 + w1(i) c10) + w1(j) * (w0(i) c01 + w1(i) c11), so a border point depends
 // only on the two corners of its border; the encoder is deterministic; decoding is IEEE mul/add

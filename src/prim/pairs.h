@@ -1,7 +1,6 @@
 // Triangle-pair leaf format: A. Aman, S. Fenney, "Fast Triangle Pairing for Ray Tracing",
-// Imagination Technologies (../shared/papers/fast-triangle-pairing.txt), "Background": a pair of
-// triangles that share an edge is stored as 4 vertices and tested at once, sharing the maths of the
-// common edge.
+// Imagination Technologies, "Background": a pair of triangles that share an edge is stored as 4
+// vertices and tested at once, sharing the maths of the common edge.
 //
 //   Pair4  256 B  4 pairs = up to 8 triangles: 4 vertices per pair SoA, both input faces per pair,
 //                 tested 8 triangles at once (vfloat8); the leaf of bvh8-pairs / clbvh-pairs.

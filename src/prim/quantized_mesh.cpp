@@ -1,4 +1,4 @@
-// The Costa quantized n-gon mesh store (fast-mesh-compression-gpu-rt.txt, section 3.2): primitive
+// The Costa quantized n-gon mesh store (Costa et al., WSCG 2013, section 3.2): primitive
 // array packing (Listing 2), face packing (Listing 3), vertex quantization (Listing 4).
 #include "prim/quantized_mesh.h"
 

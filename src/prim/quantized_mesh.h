@@ -1,5 +1,5 @@
 // The Costa quantized n-gon mesh store: V. Costa, J. M. Pereira, J. A. Jorge, "Fast Compression
-// of Meshes for GPU Ray-Tracing" (../shared/papers/fast-mesh-compression-gpu-rt.txt), section 3.2.
+// of Meshes for GPU Ray-Tracing", WSCG 2013, section 3.2 "Geometry Compression".
 //
 // Three arrays, each stored plain or compressed (the paper's letters):
 //   primitive array  plain: n+1 prefix-summed uint32 offsets (Figure 6, Listing 1)

@@ -1,4 +1,5 @@
-// Grid primitives, part 1 (lossy-compressed-grid-primitives.txt; DESIGN.md "Grids"):
+// Grid primitives, part 1 (C. Benthin, K. Vaidyanathan, S. Woop, "Ray Tracing Lossy Compressed
+// Grid Primitives", Eurographics 2021 short papers):
 //   - the per-grid side table (GridInfo) that maps a sub-grid cell back to the input face;
 //   - the ray / 5x5 sub-grid kernel of section 5: a decompressed sub-grid (25 vertices) is moved
 //     to ray space once, then the 8 triangles of one row are tested at a time with the 8-wide

@@ -290,10 +290,11 @@ struct Tri4iCompactBlock {
 };
 static_assert(sizeof(Tri4iCompactBlock) == 44, "compact Triangle4i block is 44 bytes");
 
-// clbvh-compact (compressed-leaf-bvh.txt section 4.5): inside a multi-leaf, every distinct 32-bit
-// vertex index is stored once in a dictionary behind the children's blocks, and the blocks hold
-// 8-bit indices into it. Multi-leaf data: k x Tri4iCompactBlock, then the dictionary (uint32 each).
-// Isolated leaves keep plain Tri4i blocks.
+// clbvh-compact (C. Benthin, I. Wald, S. Woop, A. T. Afra, "Compressed-Leaf Bounding Volume
+// Hierarchies", HPG 2018, section 4.5 "Compressing Leaf Data"): inside a multi-leaf, every distinct
+// 32-bit vertex index is stored once in a dictionary behind the children's blocks, and the blocks
+// hold 8-bit indices into it. Multi-leaf data: k x Tri4iCompactBlock, then the dictionary (uint32
+// each). Isolated leaves keep plain Tri4i blocks.
 struct Tri4iCompact : Tri4i {
   static constexpr bool kMultiLeafLayout = true;
 

@@ -1,4 +1,4 @@
-// The cameras. The benchmark camera (BENCHMARK.md, "Rays"): a pinhole looking at the scene box
+// The cameras. The benchmark camera (docs/benchmark.md): a pinhole looking at the scene box
 // from one fixed direction and framing it whole, so every configuration of a scene traces the
 // same rays. The user's camera (view_camera, slimrt render): any up axis, eye, look-at point and
 // field of view, framing the box's corners by default.

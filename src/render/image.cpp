@@ -1,5 +1,5 @@
 // Image output (PNG 8-bit sRGB via stb_image_write, EXR float via tinyexr) and the image error
-// (PSNR) used to compare a lossy format's render with the uncompressed one (BENCHMARK.md).
+// (PSNR) used to compare a lossy format's render with the uncompressed one (docs/benchmark.md).
 // PSNR is measured on exactly the 8-bit values the PNG writer stores.
 #include <algorithm>
 #include <cctype>

@@ -1,5 +1,6 @@
-// The renderer: BENCHMARK.md workload 2 (diffuse path tracing, slim::trace_path) and two debug
-// shadings, over 32x32 tiles spread across threads with TBB (smaller tiles for a small region).
+// The renderer: the benchmark's workload 2 (docs/benchmark.md: diffuse path tracing,
+// slim::trace_path) and two debug shadings, over 32x32 tiles spread across threads with TBB
+// (smaller tiles for a small region).
 //
 // Rays are deterministic: sample s of pixel (x, y) uses slim::Rng(pixel_seed(x, y, s)) for its
 // jitter and its bounces, so an image does not depend on the thread count or the tile order and two

@@ -70,13 +70,22 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
     ASSERT_TRUE(
         cluster::check(data.data(), data.size() - kClusterReadSlack, uint32_t(kk), lossless, &why))
         << why;
+    // One view of the cluster serves all its children (as in the traversal).
+    const cluster::View view = lossless ? cluster::view<true>(data.data(), uint32_t(kk))
+                                        : cluster::view<false>(data.data(), uint32_t(kk));
     for (int c = 0; c < kk; ++c) {
-      cluster::Decoded8 d;
-      if (lossless)
+      cluster::Decoded8 d, dv;
+      if (lossless) {
         cluster::decode_child<true>(z.lattice, data.data(), uint32_t(kk), c, d);
-      else
+        cluster::decode_child<true>(z.lattice, view, c, dv);
+      } else {
         cluster::decode_child<false>(z.lattice, data.data(), uint32_t(kk), c, d);
+        cluster::decode_child<false>(z.lattice, view, c, dv);
+      }
       ASSERT_EQ(d.n, int(counts[c]));
+      ASSERT_EQ(dv.n, d.n);
+      ASSERT_EQ(dv.first, d.first);
+      ASSERT_EQ(std::memcmp(dv.v, d.v, sizeof(d.v)), 0) << "child " << c;
       // The strip order is the encoder's: the child's triangles (positions and ids) as multisets.
       std::vector<std::vector<uint32_t>> got, want;
       for (int l = 0; l < d.n; ++l) {
@@ -85,6 +94,10 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
           cluster::decode_ids<true>(data.data(), uint32_t(kk), uint32_t(d.first + l), g, p);
         else
           cluster::decode_ids<false>(data.data(), uint32_t(kk), uint32_t(d.first + l), g, p);
+        uint32_t gv, pv;
+        cluster::decode_ids(view, uint32_t(d.first + l), gv, pv);
+        ASSERT_EQ(gv, g);
+        ASSERT_EQ(pv, p);
         std::vector<uint32_t> row = {g, p};
         for (int j = 0; j < 3; ++j)
           for (int a = 0; a < 3; ++a) row.push_back(bits_of(d.v[j][a][l]));

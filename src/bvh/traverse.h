@@ -103,6 +103,18 @@ template <class L>
 concept HasMultiLeafLayout = requires {
   L::kMultiLeafLayout;
 };
+// A multi-leaf layout whose children share data to read first (the cluster formats: a header, a
+// stream layout and anchors) may read it once per multi-leaf visit instead of once per child:
+// then it provides
+//   L::MultiLeafView       what the children share;
+//   static MultiLeafView multileaf_view(const Context&, const uint8_t* data, uint32_t children);
+//   template <bool kAny, class Stats> static bool intersect_in_view(const Context&,
+//       const MultiLeafView&, int i, TravRay&, HitRecord&, Stats&);
+// and intersect_multileaf makes the view once, when the ray enters at least one child.
+template <class L>
+concept HasMultiLeafView = HasMultiLeafLayout<L> && requires {
+  typename L::MultiLeafView;
+};
 // Its multi-leaf data is written by L::encode_multileaf (clbvh-compact's vertex dictionary).
 template <class L>
 concept HasMultiLeafEncoder = requires {
@@ -133,6 +145,15 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
   const uint8_t* blocks = p + sizeof(MultiLeaf8);
   alignas(32) float d[8];
   if constexpr (!kAny) dist.store(d);
+  if constexpr (HasMultiLeafView<Leaf>)
+    if (!mask) return false;  // the view is read for a ray that enters a child only
+  [[maybe_unused]] const auto view = [&] {
+    struct NoView {};
+    if constexpr (HasMultiLeafView<Leaf>)
+      return Leaf::multileaf_view(ctx, blocks, children);
+    else
+      return NoView{};
+  }();
   while (mask) {
     int i;
     if constexpr (kAny) {
@@ -147,7 +168,9 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
       if (d[i] > ray.tfar) break;  // so are all others
     }
     bool h;
-    if constexpr (HasMultiLeafLayout<Leaf>)
+    if constexpr (HasMultiLeafView<Leaf>)
+      h = Leaf::template intersect_in_view<kAny>(ctx, view, i, ray, hit, st);
+    else if constexpr (HasMultiLeafLayout<Leaf>)
       h = Leaf::template intersect_in_multileaf<kAny>(ctx, blocks, children, i, ray, hit, st);
     else
       h = Leaf::template intersect<kAny>(ctx, blocks + uint64_t(i) * block_bytes, ray, hit, st);

@@ -76,17 +76,25 @@ struct RayVertex {
   VF x, y, z;
 };
 
+// Transforms a vertex given as its components along the ray's axes kx, ky, kz (for a leaf that
+// loads them from memory by those indices directly).
+template <class VF>
+SLIM_INLINE RayVertex<VF> to_ray_space_permuted(const WatertightRay& r, const VF& pkx,
+                                                const VF& pky, const VF& pkz) {
+  VF ax = pkx - VF(r.ox);
+  VF ay = pky - VF(r.oy);
+  VF az = pkz - VF(r.oz);
+  using simd::fnmadd;
+  using slim::fnmadd;
+  return {fnmadd(VF(r.Sx), az, ax), fnmadd(VF(r.Sy), az, ay), VF(r.Sz) * az};
+}
+
 // Transforms a vertex (given as its 3 components; for SIMD types, lanes are different vertices).
 template <class VF>
 SLIM_INLINE RayVertex<VF> to_ray_space(const WatertightRay& r, const VF& px, const VF& py,
                                        const VF& pz) {
   const VF* p[3] = {&px, &py, &pz};
-  VF ax = *p[r.kx] - VF(r.ox);
-  VF ay = *p[r.ky] - VF(r.oy);
-  VF az = *p[r.kz] - VF(r.oz);
-  using simd::fnmadd;
-  using slim::fnmadd;
-  return {fnmadd(VF(r.Sx), az, ax), fnmadd(VF(r.Sy), az, ay), VF(r.Sz) * az};
+  return to_ray_space_permuted(r, *p[r.kx], *p[r.ky], *p[r.kz]);
 }
 
 namespace detail {

@@ -426,51 +426,75 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
 }
 #endif
 
-// Child `child` of a cluster of `children` children (the multi-leaf's count).
+// What every child of one cluster shares: its header, the stream layout, the child sizes and the
+// anchors. The traversal reads them once per multi-leaf visit (ClusterLeaf::multileaf_view) for
+// all the children it tests, not once per child.
+struct View {
+  const uint8_t* bits = nullptr;  // the bit stream (right behind the header)
+  ClusterHeader h{};
+  Layout L;
+  uint32_t sizes = 0;       // child_sizes(h)
+  uint32_t anchor[3] = {};  // per-axis anchor codes
+};
 template <bool kLossless>
-SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, uint32_t children,
-                              int child, Decoded8& d) {
-  ClusterHeader h;
-  std::memcpy(&h, data, sizeof(h));
-  const uint8_t* bits = data + sizeof(ClusterHeader);
-  const Layout L = layout(h, children, kLossless);
-  const uint32_t sizes = child_sizes(h);
-  d.first = int(child_first(sizes, uint32_t(child)));
-  d.n = int(child_size(sizes, uint32_t(child)));
+SLIM_INLINE View view(const uint8_t* data, uint32_t children) {
+  View v;
+  std::memcpy(&v.h, data, sizeof(v.h));
+  v.bits = data + sizeof(ClusterHeader);
+  v.L = layout(v.h, children, kLossless);
+  v.sizes = child_sizes(v.h);
+  for (int a = 0; a < 3; ++a) v.anchor[a] = read_bits(v.bits, uint64_t(a) * v.L.aw, v.L.aw);
+  return v;
+}
+
+// Child `child` of the cluster `v`.
+template <bool kLossless>
+SLIM_INLINE void decode_child(const ClusterLattice& lat, const View& v, int child, Decoded8& d) {
+  const ClusterHeader& h = v.h;
+  const Layout& L = v.L;
+  d.first = int(child_first(v.sizes, uint32_t(child)));
+  d.n = int(child_size(v.sizes, uint32_t(child)));
   alignas(32) uint32_t tri[8];
-  decode_strip_packed(h, L, bits, uint32_t(child), uint32_t(d.n), tri);
-  uint32_t anchor[3];
-  for (int a = 0; a < 3; ++a) anchor[a] = read_bits(bits, uint64_t(a) * L.aw, L.aw);
+  decode_strip_packed(h, L, v.bits, uint32_t(child), uint32_t(d.n), tri);
 #if defined(SLIM_SIMD_AVX2)
-  decode_vertices_avx2<kLossless>(lat, h, bits, L, anchor, tri, d);
+  decode_vertices_avx2<kLossless>(lat, h, v.bits, L, v.anchor, tri, d);
 #else
   for (int l = d.n; l < 8; ++l) tri[l] = tri[d.n - 1];
   for (int l = 0; l < 8; ++l)
     for (int k = 0; k < 3; ++k) {
       uint64_t pos = L.verts + uint64_t((tri[l] >> (8 * k)) & 0xff) * L.vbits;
       for (int a = 0; a < 3; ++a) {
-        d.v[k][a][l] = decode_coord<kLossless>(lat, a, anchor[a] + read_bits(bits, pos, h.bits[a]));
+        d.v[k][a][l] =
+            decode_coord<kLossless>(lat, a, v.anchor[a] + read_bits(v.bits, pos, h.bits[a]));
         pos += h.bits[a];
       }
     }
 #endif
 }
+// Child `child` of a cluster of `children` children (the multi-leaf's count).
+template <bool kLossless>
+SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, uint32_t children,
+                              int child, Decoded8& d) {
+  decode_child<kLossless>(lat, view<kLossless>(data, children), child, d);
+}
 
+// primID and geomID of triangle t of the cluster `v`.
+SLIM_INLINE void decode_ids(const View& v, uint32_t t, uint32_t& geom, uint32_t& prim) {
+  const ClusterHeader& h = v.h;
+  const Layout& L = v.L;
+  const uint64_t pos = L.ids + uint64_t(t) * L.idbits;
+  const uint32_t run = read_bits(v.bits, pos, L.rb);
+  const uint32_t prim_base = read_bits(v.bits, 3 * L.aw, h.bb);
+  const uint32_t geom_base = read_bits(v.bits, 3 * L.aw + h.bb, h.hb);
+  prim = prim_base + read_bits(v.bits, L.runs + uint64_t(run) * h.pb, h.pb) +
+         read_bits(v.bits, pos + L.rb, h.ob);
+  geom = geom_base + read_bits(v.bits, pos + L.rb + h.ob, h.gb);
+}
 // primID and geomID of triangle t of a cluster of `children` children.
 template <bool kLossless>
 SLIM_INLINE void decode_ids(const uint8_t* data, uint32_t children, uint32_t t, uint32_t& geom,
                             uint32_t& prim) {
-  ClusterHeader h;
-  std::memcpy(&h, data, sizeof(h));
-  const uint8_t* bits = data + sizeof(ClusterHeader);
-  const Layout L = layout(h, children, kLossless);
-  const uint64_t pos = L.ids + uint64_t(t) * L.idbits;
-  const uint32_t run = read_bits(bits, pos, L.rb);
-  const uint32_t prim_base = read_bits(bits, 3 * L.aw, h.bb);
-  const uint32_t geom_base = read_bits(bits, 3 * L.aw + h.bb, h.hb);
-  prim = prim_base + read_bits(bits, L.runs + uint64_t(run) * h.pb, h.pb) +
-         read_bits(bits, pos + L.rb, h.ob);
-  geom = geom_base + read_bits(bits, pos + L.rb + h.ob, h.gb);
+  decode_ids(view<kLossless>(data, children), t, geom, prim);
 }
 
 // Checks that `size` bytes at `data` hold a well-formed cluster of `children` children (header
@@ -618,18 +642,25 @@ struct ClusterLeaf {
   }
 
   // ---- traversal side ----
+  // The cluster's header, layout and anchors, read once per multi-leaf visit (traverse.h,
+  // HasMultiLeafView) for every child the ray enters.
+  using MultiLeafView = cluster::View;
+  static SLIM_INLINE cluster::View multileaf_view(const Context&, const uint8_t* data,
+                                                  uint32_t children) {
+    return cluster::view<kLossless>(data, children);
+  }
   template <bool kAny, class Stats>
-  static SLIM_INLINE bool intersect_in_multileaf(const Context& ctx, const uint8_t* data,
-                                                 uint32_t children, int i, TravRay& ray,
-                                                 HitRecord& hit, Stats& st) {
+  static SLIM_INLINE bool intersect_in_view(const Context& ctx, const cluster::View& view, int i,
+                                            TravRay& ray, HitRecord& hit, Stats& st) {
     using namespace simd;
     cluster::Decoded8 d;
-    cluster::decode_child<kLossless>(ctx.lattice, data, children, i, d);
+    cluster::decode_child<kLossless>(ctx.lattice, view, i, d);
     st.prims(d.n);
     const WatertightRay& r = ray.wt;
+    // The coordinates loaded in the ray's axis order (no copies to pick them from).
     auto vert = [&](int k) {
-      return to_ray_space(r, vfloat8::load(d.v[k][0]), vfloat8::load(d.v[k][1]),
-                          vfloat8::load(d.v[k][2]));
+      return to_ray_space_permuted(r, vfloat8::load(d.v[k][r.kx]), vfloat8::load(d.v[k][r.ky]),
+                                   vfloat8::load(d.v[k][r.kz]));
     };
     RayVertex<vfloat8> A = vert(0), B = vert(1), C = vert(2);
     vfloat8 t(0.0f), u(0.0f), v(0.0f);
@@ -644,10 +675,16 @@ struct ClusterLeaf {
       if (tt[j] < tt[l]) l = j;
     }
     uint32_t geom, prim;
-    cluster::decode_ids<kLossless>(data, children, uint32_t(d.first + l), geom, prim);
+    cluster::decode_ids(view, uint32_t(d.first + l), geom, prim);
     auto p = [&](int k) { return Vec3f(d.v[k][0][l], d.v[k][1][l], d.v[k][2][l]); };
     detail::record_hit(tt[l], u[l], v[l], p(0), p(1), p(2), geom, prim, ray, hit);
     return true;
+  }
+  template <bool kAny, class Stats>
+  static SLIM_INLINE bool intersect_in_multileaf(const Context& ctx, const uint8_t* data,
+                                                 uint32_t children, int i, TravRay& ray,
+                                                 HitRecord& hit, Stats& st) {
+    return intersect_in_view<kAny>(ctx, multileaf_view(ctx, data, children), i, ray, hit, st);
   }
 
   template <bool kAny, class Stats>

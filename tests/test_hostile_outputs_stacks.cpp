@@ -286,6 +286,42 @@ TEST(HostileOutputsStacks, CoincidentTrianglesAreTracedInBoundedTime) {
   }
 }
 
+// Every configuration of the registry (pairs, clusters, costa and grids included): a ray through
+// a stack of 10^4 coincident triangles, or through its box beside the triangle, tests a bounded
+// number of triangles, and a hit is the lowest face of the stack. With a mirrored triangle added
+// (another surface, kept) the hit is the lowest face of one of the two surfaces.
+TEST(HostileOutputsStacks, EveryConfigurationTracesAStackInBoundedTime) {
+  const uint32_t n = 10000;
+  const PolyMesh stack = coincident_stack(n, false), mirrored = coincident_stack(n, true);
+  for (const ConfigInfo& c : configs()) {
+    const BuildOptions opt = BuildOptions::from_config(c.name);
+    for (const bool mirror : {false, true}) {
+      SCOPED_TRACE(c.name + (mirror ? " with a mirrored triangle" : ""));
+      const Scene s = Scene::build(mirror ? mirrored : stack, opt);
+      EXPECT_EQ(detail_of(s, "duplicate_triangles"), double(n - 1));
+      std::string why;
+      EXPECT_TRUE(s.validate(&why)) << why;
+      Ray ray;
+      ray.org = {0.25f, 0.25f, 1.0f};
+      ray.dir = {0, 0, -1};
+      TraversalCounters hit_counters;
+      const Hit h = intersect_counted(s, ray, hit_counters);
+      ASSERT_TRUE(h.valid());
+      EXPECT_FLOAT_EQ(h.t, 1.0f);
+      if (mirror)
+        EXPECT_TRUE(h.primID == 0u || h.primID == n) << h.primID;
+      else
+        EXPECT_EQ(h.primID, 0u);
+      EXPECT_LE(hit_counters.prim_tests, 16u);
+      // Inside the stack's box, beside the triangle: a miss after the same leaves.
+      ray.org = {0.75f, 0.75f, 1.0f};
+      TraversalCounters miss_counters;
+      EXPECT_FALSE(intersect_counted(s, ray, miss_counters).valid());
+      EXPECT_LE(miss_counters.prim_tests, 16u);
+    }
+  }
+}
+
 // The CLI's summary line says that input was left out.
 TEST(HostileOutputsStacks, CliSummaryShowsDroppedDuplicates) {
   TempDir d{"slim_outputs"};

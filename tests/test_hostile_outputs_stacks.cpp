@@ -359,17 +359,26 @@ TEST(HostileOutputsStacks, CoincidentTrianglesAreTracedInBoundedTime) {
   }
 }
 
-// Every configuration of the registry (pairs, clusters, costa and grids included): a ray through
-// a stack of 10^4 coincident triangles, or through its box beside the triangle, tests a bounded
-// number of triangles, and a hit is the lowest face of the stack. With a mirrored triangle added
-// (another surface, kept) the hit is the lowest face of one of the two surfaces.
+// Every configuration of the registry (pairs, clusters, costa and grids included), and the grid
+// formats with their leftovers as 2x2 sub-grids: a ray through a stack of 10^4 coincident
+// triangles, or through its box beside the triangle, tests a bounded number of triangles, and a
+// hit is the lowest face of the stack. With a mirrored triangle added (another surface, kept)
+// the hit is the lowest face of one of the two surfaces.
 TEST(HostileOutputsStacks, EveryConfigurationTracesAStackInBoundedTime) {
   const uint32_t n = 10000;
   const PolyMesh stack = coincident_stack(n, false), mirrored = coincident_stack(n, true);
+  std::vector<std::pair<std::string, BuildOptions>> cases;
   for (const ConfigInfo& c : configs()) {
-    const BuildOptions opt = BuildOptions::from_config(c.name);
+    cases.emplace_back(c.name, BuildOptions::from_config(c.name));
+    const Leaf leaf = c.options.leaf;
+    if (leaf == Leaf::Grids || leaf == Leaf::LossyGrids || leaf == Leaf::SharedLossyGrids) {
+      cases.emplace_back(c.name + " --grid-leftovers grids", c.options);
+      cases.back().second.grid_leftovers = GridLeftovers::Grids;
+    }
+  }
+  for (const auto& [name, opt] : cases) {
     for (const bool mirror : {false, true}) {
-      SCOPED_TRACE(c.name + (mirror ? " with a mirrored triangle" : ""));
+      SCOPED_TRACE(name + (mirror ? " with a mirrored triangle" : ""));
       const Scene s = Scene::build(mirror ? mirrored : stack, opt);
       EXPECT_EQ(detail_of(s, "duplicate_triangles"), double(n - 1));
       std::string why;

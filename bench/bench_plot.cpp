@@ -2,12 +2,14 @@
 #include "bench_plot.h"
 
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <sstream>
 #include <vector>
 
@@ -17,6 +19,21 @@
 namespace slim::bench {
 
 namespace {
+
+// Creates an empty file for gnuplot's messages in the system's temporary folder ($TMPDIR or
+// /tmp) and returns its name; its name holds no quote, so that it can be quoted for the shell.
+std::string gnuplot_log() {
+  std::error_code ec;
+  std::string dir = std::filesystem::temp_directory_path(ec).string();
+  if (ec || dir.find('\'') != std::string::npos) dir = "/tmp";
+  std::string name = dir + "/slimrt-gnuplot-XXXXXX";
+  const int fd = ::mkstemp(name.data());
+  if (fd < 0)
+    throw Error("cannot create a file for gnuplot's messages in '" + dir +
+                "': " + std::strerror(errno));
+  ::close(fd);
+  return name;
+}
 
 // Runs gnuplot on `script` (whose "set output" names SLIM_PLOT_OUTPUT) through write_atomically:
 // the PNG appears complete or not at all. gnuplot's own error lines are kept for the message.
@@ -30,9 +47,16 @@ bool run_gnuplot(const std::string& script, const std::string& png_path, std::st
       const std::string marker = "SLIM_PLOT_OUTPUT";
       if (const size_t at = full.find(marker); at != std::string::npos)
         full.replace(at, marker.size(), quoted);
-      const std::string log = tmp + ".log";
+      // gnuplot's messages go to a file of their own in the system's temporary folder, not
+      // beside the output: the output may be a device or a pipe (/dev/stdout, a FIFO), whose
+      // folder takes no new file.
+      const std::string log = gnuplot_log();
       FILE* pipe = popen(("gnuplot 2> '" + log + "'").c_str(), "w");
-      if (!pipe) throw Error("could not start gnuplot: " + std::string(std::strerror(errno)));
+      if (!pipe) {
+        const int e = errno;
+        std::remove(log.c_str());
+        throw Error("could not start gnuplot: " + std::string(std::strerror(e)));
+      }
       std::fwrite(full.data(), 1, full.size(), pipe);
       const int status = pclose(pipe);
       std::string said;

@@ -3,17 +3,21 @@
 // triangles.
 #include <fcntl.h>
 #include <gtest/gtest.h>
+#include <sys/prctl.h>
 #include <sys/stat.h>
 #include <sys/sysmacros.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <thread>
 #include <vector>
 
+#include "bench_plot.h"
 #include "io/gltf.h"
 #include "slimrt/analysis.h"
 #include "slimrt/output.h"
@@ -232,6 +236,75 @@ TEST(HostileOutputsStacks, CliBuildsOntoALinkToADevice) {
   EXPECT_TRUE(S_ISCHR(st.st_mode));
 }
 
+// ---- bench --plot onto devices and pipes ----
+
+bench::BenchReport plot_report() {
+  bench::BenchReport r;
+  r.machine.cpu = "test cpu";
+  r.machine.threads = 1;
+  for (const char* config : {"embree-tri", "bvh8-tri4v"}) {
+    bench::BenchRow row;
+    row.scene = "terrain:8";
+    row.config = config;
+    row.embree = std::string(config) == "embree-tri";
+    row.bytes_per_triangle = row.embree ? 60.0 : 40.0;
+    row.mrays_diffuse = bench::Spread{5.0, 4.0, 6.0};
+    r.rows.push_back(row);
+  }
+  return r;
+}
+
+// The plot is written in place onto a character device and into a pipe reached through
+// /dev/stdout, as the other outputs are: gnuplot's messages go to the temporary folder, since the
+// output's folder (/dev) may take no file. In a child process, as user nobody when the test runs
+// as root (root may create files in /dev).
+TEST(HostileOutputsStacks, BenchPlotOntoADeviceAndThroughDevStdout) {
+  if (std::system("gnuplot --version >/dev/null 2>&1") != 0) GTEST_SKIP() << "no gnuplot";
+  const bench::BenchReport report = plot_report();
+  std::fflush(stdout);
+  std::fflush(stderr);
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    if (::geteuid() == 0 && (::setgid(65534) != 0 || ::setuid(65534) != 0)) ::_exit(10);
+    ::prctl(PR_SET_DUMPABLE, 1);    // /proc/self/fd (behind /dev/stdout) stays ours after setuid
+    std::signal(SIGPIPE, SIG_IGN);  // as the CLI: a gnuplot that stops early is an error
+    std::string why;
+    if (!bench::write_plot(report, "/dev/null", &why)) {
+      std::fprintf(stderr, "/dev/null: %s\n", why.c_str());
+      ::_exit(1);
+    }
+    // Standard output as a pipe that a thread drains.
+    int fds[2];
+    if (::pipe(fds) != 0) ::_exit(11);
+    std::string png;
+    std::thread reader([&] {
+      char buf[65536];
+      ssize_t n;
+      while ((n = ::read(fds[0], buf, sizeof buf)) > 0) png.append(buf, size_t(n));
+    });
+    const int saved = ::dup(1);
+    ::dup2(fds[1], 1);
+    ::close(fds[1]);
+    const bool written = bench::write_plot(report, "/dev/stdout", &why);
+    ::dup2(saved, 1);  // the pipe's last writer closes: the reader sees its end
+    reader.join();
+    if (!written) {
+      std::fprintf(stderr, "/dev/stdout: %s\n", why.c_str());
+      ::_exit(2);
+    }
+    if (png.size() < 8 || png.substr(1, 3) != "PNG") {
+      std::fprintf(stderr, "/dev/stdout: %zu bytes, no PNG\n", png.size());
+      ::_exit(3);
+    }
+    ::_exit(0);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "1: /dev/null failed, 2: /dev/stdout failed, 3: no PNG";
+}
+
 // ---- stacks of coincident triangles ----
 
 // `n` triangles on (0,0,0) (1,0,0) (0,1,0): the same vertices in the three rotations, and the
@@ -283,6 +356,51 @@ TEST(HostileOutputsStacks, CoincidentTrianglesAreTracedInBoundedTime) {
     const Scene sm = Scene::build(mirrored, opt);
     EXPECT_EQ(detail_of(sm, "duplicate_triangles"), double(n - 1));
     EXPECT_TRUE(sm.validate(&why)) << why;
+  }
+}
+
+// Every configuration of the registry (pairs, clusters, costa and grids included), and the grid
+// formats with their leftovers as 2x2 sub-grids: a ray through a stack of 10^4 coincident
+// triangles, or through its box beside the triangle, tests a bounded number of triangles, and a
+// hit is the lowest face of the stack. With a mirrored triangle added (another surface, kept)
+// the hit is the lowest face of one of the two surfaces.
+TEST(HostileOutputsStacks, EveryConfigurationTracesAStackInBoundedTime) {
+  const uint32_t n = 10000;
+  const PolyMesh stack = coincident_stack(n, false), mirrored = coincident_stack(n, true);
+  std::vector<std::pair<std::string, BuildOptions>> cases;
+  for (const ConfigInfo& c : configs()) {
+    cases.emplace_back(c.name, BuildOptions::from_config(c.name));
+    const Leaf leaf = c.options.leaf;
+    if (leaf == Leaf::Grids || leaf == Leaf::LossyGrids || leaf == Leaf::SharedLossyGrids) {
+      cases.emplace_back(c.name + " --grid-leftovers grids", c.options);
+      cases.back().second.grid_leftovers = GridLeftovers::Grids;
+    }
+  }
+  for (const auto& [name, opt] : cases) {
+    for (const bool mirror : {false, true}) {
+      SCOPED_TRACE(name + (mirror ? " with a mirrored triangle" : ""));
+      const Scene s = Scene::build(mirror ? mirrored : stack, opt);
+      EXPECT_EQ(detail_of(s, "duplicate_triangles"), double(n - 1));
+      std::string why;
+      EXPECT_TRUE(s.validate(&why)) << why;
+      Ray ray;
+      ray.org = {0.25f, 0.25f, 1.0f};
+      ray.dir = {0, 0, -1};
+      TraversalCounters hit_counters;
+      const Hit h = intersect_counted(s, ray, hit_counters);
+      ASSERT_TRUE(h.valid());
+      EXPECT_FLOAT_EQ(h.t, 1.0f);
+      if (mirror)
+        EXPECT_TRUE(h.primID == 0u || h.primID == n) << h.primID;
+      else
+        EXPECT_EQ(h.primID, 0u);
+      EXPECT_LE(hit_counters.prim_tests, 16u);
+      // Inside the stack's box, beside the triangle: a miss after the same leaves.
+      ray.org = {0.75f, 0.75f, 1.0f};
+      TraversalCounters miss_counters;
+      EXPECT_FALSE(intersect_counted(s, ray, miss_counters).valid());
+      EXPECT_LE(miss_counters.prim_tests, 16u);
+    }
   }
 }
 

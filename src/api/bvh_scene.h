@@ -205,6 +205,8 @@ class BvhScene : public Scene::Impl {
     uint32_t max_leaf_size = 0, block_prims = 0;  // override the BVH2 config when nonzero
     bool quantized_inner = false;  // CompressedLeaf with QNode8 inner nodes (QCompressedLeaf)
     std::function<void(Bvh2&)> reshape;
+    // Bvh2BuildConfig::thin_stack, for leaves whose primitives hold several triangles.
+    std::function<void(const uint32_t* ids, uint32_t n, uint8_t* keep)> thin_stack;
     bool ends_prepare = true;
     std::string phase_suffix;
   };
@@ -251,6 +253,7 @@ class BvhScene : public Scene::Impl {
       cfg.duplicate_key = [&](uint32_t i) { return Leaf::duplicate_key(src, i); };
       cfg.same_primitive = [&](uint32_t a, uint32_t b) { return Leaf::same_surface(src, a, b); };
     }
+    cfg.thin_stack = hooks.thin_stack;
     Bvh2 b2 = build_bvh2(prim_count, fill, cfg);
     if (hooks.reshape) hooks.reshape(b2);
     if (progress) progress->finish();

@@ -285,7 +285,11 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   typename BvhScene<Leaf>::Bvh2Hooks hooks;
   hooks.max_leaf_size = hooks.block_prims = kClusterMax;
   hooks.quantized_inner = true;
-  hooks.reshape = [&](Bvh2& b2) { b2 = ClusterReshaper(b2, src).run(); };
+  hooks.reshape = [&](Bvh2& b2) {
+    std::vector<uint32_t> dropped = std::move(b2.dropped);  // duplicates outside every cluster
+    b2 = ClusterReshaper(b2, src).run();
+    b2.dropped = std::move(dropped);
+  };
   s->build(src, uint32_t(tm.tri_count()), o, hooks);
   // The decoders' 64-bit loads may read up to kClusterReadSlack bytes past a cluster's data.
   s->bvh.leaves.append(kClusterReadSlack, 1);

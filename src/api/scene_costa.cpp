@@ -13,6 +13,7 @@
 
 #include "api/bvh_scene.h"
 #include "api/registry.h"
+#include "core/hash.h"
 #include "mesh/tessellate.h"
 #include "prim/costa_leaf.h"
 #include "prim/quantized_mesh.h"
@@ -218,6 +219,8 @@ void order_leaves_for_prediction(Bvh2& b2, const NgonMesh& m) {
       leaf.erase(leaf.begin() + long(best));
     }
   }
+  // Primitives left out of every leaf as duplicates are left out of prim_ids too.
+  if (ids.size() != b2.prim_ids.size()) b2.prim_ids = LargeArray<uint32_t>(ids.size());
   std::copy(ids.begin(), ids.end(), b2.prim_ids.begin());
 }
 
@@ -295,27 +298,67 @@ uint64_t gzip9_bytes(const NgonMesh& m) {
 
 using CostaBlockLeaf = CostaLeaf<false, false, false>;  // block layout is the same for every letter
 
+// Exact duplicates among the primitives of `m` at the positions `p`, which the BVH2 builder
+// may drop from stacks of coincident ones (Bvh2BuildConfig::duplicate_key): the same number of
+// corners, the same fan/strip flag and the same positions bit for bit in the same order, or for
+// a triangle in any of its three rotations (as the triangle formats, TriangleSourceOps).
+struct CostaDuplicates {
+  const NgonMesh& m;
+  const std::vector<Vec3f>& p;
+
+  // Size, flag and the corners' position bits, starting at corner r.
+  std::vector<uint32_t> words(uint32_t i, uint32_t r) const {
+    const uint32_t o0 = m.prim_offsets[i], n = m.prim_size(i);
+    std::vector<uint32_t> w(2 + 3 * size_t(n));
+    w[0] = n;
+    for (uint32_t j = 0; j < n; ++j) {
+      uint32_t v = m.faces[o0 + (j + r) % n];
+      if ((j + r) % n == 0 && n >= kFanStripFlagMin) w[1] = v & 1, v >>= 1;
+      std::memcpy(&w[2 + 3 * size_t(j)], &p[v], 12);
+    }
+    return w;
+  }
+  uint64_t key(uint32_t i) const {
+    std::vector<uint32_t> w = words(i, 0);
+    if (m.prim_size(i) == 3) w = std::min({w, words(i, 1), words(i, 2)});
+    return nh_key(w.data(), 4 * w.size());
+  }
+  bool same(uint32_t a, uint32_t b) const {
+    if (m.prim_size(a) != m.prim_size(b)) return false;
+    const std::vector<uint32_t> wa = words(a, 0);
+    for (uint32_t r = 0; r < (m.prim_size(b) == 3 ? 3u : 1u); ++r)
+      if (words(b, r) == wa) return true;
+    return false;
+  }
+};
+
 // BVH2 over the primitive boxes of `loaded` at the positions `decoded` (as the store decodes them),
-// its leaves ordered for P; the source keys for validate() go to `expected` if given.
+// its leaves ordered for P; the source keys for validate() go to `expected` if given. With
+// `duplicates`, exact duplicates in stacks of coincident primitives are left out of every leaf
+// and of prim_ids (the lowest primitive of each group, that of the lowest input face, stays),
+// and the triangles they held are counted there.
 Bvh2 build_costa_bvh2(const NgonMesh& loaded, const std::vector<Vec3f>& decoded,
-                      const BuildOptions& opt, Fingerprint* expected) {
+                      const BuildOptions& opt, Fingerprint* expected,
+                      uint64_t* duplicates = nullptr) {
   const uint32_t prim_count = uint32_t(loaded.prim_count());
-  std::vector<PrimRef> refs(prim_count);
-  for (uint32_t i = 0; i < prim_count; ++i) {
+  auto source_key = [&](uint32_t i, Box3f* box) {
     const uint32_t o0 = loaded.prim_offsets[i], o1 = loaded.prim_offsets[i + 1];
-    Box3f box;
     CostaKey key;
     uint32_t flag = 0;
     for (uint32_t j = o0; j < o1; ++j) {
       uint32_t v = loaded.faces[j];
       if (j == o0 && o1 - o0 >= kFanStripFlagMin) flag = v & 1, v >>= 1;
-      box.extend(decoded[v]);
+      if (box) box->extend(decoded[v]);
       key.add(decoded[v]);
     }
-    if (expected) {
-      const uint32_t g = loaded.prim_face[i], mesh = mesh_of(loaded.face_base, g);
-      expected->add(key.finish(o1 - o0, flag, mesh, g - loaded.face_base[mesh]));
-    }
+    const uint32_t g = loaded.prim_face[i], mesh = mesh_of(loaded.face_base, g);
+    return key.finish(o1 - o0, flag, mesh, g - loaded.face_base[mesh]);
+  };
+  std::vector<PrimRef> refs(prim_count);
+  for (uint32_t i = 0; i < prim_count; ++i) {
+    Box3f box;
+    const uint64_t key = source_key(i, &box);
+    if (expected) expected->add(key);
     refs[i] = {box, i};
   }
   Bvh2BuildConfig cfg;
@@ -330,7 +373,19 @@ Bvh2 build_costa_bvh2(const NgonMesh& loaded, const std::vector<Vec3f>& decoded,
     progress = std::make_unique<PhaseProgress>(opt.progress, "bvh2", 2 * uint64_t(prim_count));
   }
   cfg.progress = progress.get();
+  const CostaDuplicates dup{loaded, decoded};
+  if (duplicates) {
+    cfg.duplicate_key = [&](uint32_t i) { return dup.key(i); };
+    cfg.same_primitive = [&](uint32_t a, uint32_t b) { return dup.same(a, b); };
+  }
   Bvh2 b2 = build_bvh2(refs, cfg);
+  if (duplicates) {
+    *duplicates = 0;
+    for (uint32_t i : b2.dropped) {
+      *duplicates += loaded.prim_size(i) - 2;
+      if (expected) expected->remove(source_key(i, nullptr));
+    }
+  }
   if (prim_count) order_leaves_for_prediction(b2, loaded);
   if (progress) progress->finish();
   return b2;
@@ -394,8 +449,10 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
   }
 
   Fingerprint expected;
-  Bvh2 b2 = build_costa_bvh2(loaded, decoded, opt, &expected);
+  uint64_t duplicates = 0;
+  Bvh2 b2 = build_costa_bvh2(loaded, decoded, opt, &expected, &duplicates);
   decoded = {};
+  const uint32_t kept = uint32_t(b2.prim_ids.size());  // the primitives in leaves (the store's)
 
   // "collapse": the store in leaf order, then the BVH8.
   std::unique_ptr<PhaseProgress> progress;
@@ -403,7 +460,7 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
     progress = std::make_unique<PhaseProgress>(opt.progress, "collapse", 2 * uint64_t(prim_count));
   // Reorder the primitives in leaf order: a leaf block is then a range of the store.
   std::vector<uint32_t> pos(prim_count);
-  for (uint32_t k = 0; k < prim_count; ++k) pos[b2.prim_ids[k]] = k;
+  for (uint32_t k = 0; k < kept; ++k) pos[b2.prim_ids[k]] = k;
   auto data = std::make_shared<CostaData>();
   NgonMesh stats_src;  // keeps the loading statistics after `loaded` is released
   {
@@ -418,8 +475,8 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
     data->store = QuantizedMesh(ordered, flags.P, flags.F, flags.V, lattice_box);  // section 3.2
     uint32_t max_face = 0;
     for (uint32_t g : ordered.prim_face) max_face = std::max(max_face, g);
-    data->face_map = BitArray(prim_count, bits_for(max_face));
-    for (uint32_t i = 0; i < prim_count; ++i) data->face_map.set(i, ordered.prim_face[i]);
+    data->face_map = BitArray(kept, bits_for(max_face));
+    for (uint32_t i = 0; i < kept; ++i) data->face_map.set(i, ordered.prim_face[i]);
     data->face_base = ordered.face_base;
     if (data->face_base.empty()) data->face_base.push_back(0);
   }
@@ -454,8 +511,9 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*
   st.input_faces = stats_src.input_faces;
   st.triangles = stats_src.input_triangles;
   st.skipped_faces = stats_src.skipped_faces;
-  st.primitives = prim_count;
+  st.primitives = kept;
   auto& d = st.details;
+  d.emplace_back("duplicate_triangles", double(duplicates));
   d.emplace_back("bvh2_depth", double(b2.depth));
   d.emplace_back("bvh8_depth", double(b8.depth));
   d.emplace_back("node8_count", double(b8.node8));

@@ -22,12 +22,14 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <string>
 
 #include "api/scene_grids.h"
 
 #include "api/bvh_scene.h"
 #include "api/registry.h"
+#include "core/hash.h"
 #include "mesh/grids.h"
 #include "prim/lossy_subgrid.h"
 #include "prim/subgrid.h"
@@ -67,8 +69,62 @@ struct Prepared {
   bool tri_leaves = false;          // leftovers as Tri4v leaves (else as 2x2 sub-grids)
   std::vector<uint64_t> sub_start;  // per grid: first sub-grid (grids.size() + 1 entries)
   uint64_t leftover_cells = 0, leftover_tris = 0;
+  uint64_t duplicates = 0;  // leftover triangles dropped before they became 2x2 sub-grids
   double seconds = 0;
 };
+
+// Leftover triangles about to become 2x2 sub-grids: exact duplicates (the same positions in any
+// rotation, as TriangleSourceOps) are dropped, the one of the lowest (mesh, face) kept, so that
+// a stack of coincident triangles is one sub-grid and not a subtree that every ray through it
+// walks to the bottom (the sub-grid BVH has no duplicate test of its own; Tri4v leaves have).
+// Returns the number dropped. Sorts the leftovers' keys: only on this non-default path.
+uint64_t drop_duplicate_leftovers(GridSet& gs, const std::vector<const PolyMesh*>& meshes) {
+  std::vector<LeftoverTriangle>& tris = gs.triangles;
+  auto rotation = [&](const LeftoverTriangle& t, int r) {
+    std::array<uint32_t, 9> w;
+    for (int k = 0; k < 3; ++k)
+      std::memcpy(&w[3 * k], &meshes[t.geom]->positions[t.v[(k + r) % 3]], 12);
+    return w;
+  };
+  auto canonical = [&](const LeftoverTriangle& t) {
+    return std::min({rotation(t, 0), rotation(t, 1), rotation(t, 2)});
+  };
+  std::vector<std::pair<uint64_t, uint32_t>> order(tris.size());  // (key, index)
+  for (size_t i = 0; i < tris.size(); ++i) {
+    const std::array<uint32_t, 9> w = canonical(tris[i]);
+    order[i] = {nh_key(w.data(), sizeof(w)), uint32_t(i)};
+  }
+  auto lower_face = [&](uint32_t a, uint32_t b) {
+    return tris[a].geom != tris[b].geom ? tris[a].geom < tris[b].geom : tris[a].face < tris[b].face;
+  };
+  std::sort(order.begin(), order.end(), [&](const auto& x, const auto& y) {
+    return x.first != y.first ? x.first < y.first : lower_face(x.second, y.second);
+  });
+  std::vector<uint8_t> gone(tris.size(), 0);
+  std::vector<std::array<uint32_t, 9>> kept;  // canonical positions kept with the current key
+  uint64_t dropped = 0;
+  for (size_t i = 0; i < order.size();) {
+    size_t j = i;
+    kept.clear();
+    for (; j < order.size() && order[j].first == order[i].first; ++j) {
+      const std::array<uint32_t, 9> w = canonical(tris[order[j].second]);
+      if (std::find(kept.begin(), kept.end(), w) != kept.end()) {
+        gone[order[j].second] = 1;
+        ++dropped;
+      } else {
+        kept.push_back(w);
+      }
+    }
+    i = j;
+  }
+  if (dropped) {
+    size_t out = 0;
+    for (size_t i = 0; i < tris.size(); ++i)
+      if (!gone[i]) tris[out++] = tris[i];
+    tris.resize(out);
+  }
+  return dropped;
+}
 
 Prepared prepare(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
   const Layout layout = layout_of(opt);
@@ -106,6 +162,7 @@ Prepared prepare(const std::vector<const PolyMesh*>& meshes, const BuildOptions&
       gs.grids.resize(gs.multi_cell_grids);
     }
   } else {
+    p.duplicates = drop_duplicate_leftovers(gs, meshes);
     append_triangle_grids(gs, /*with_corners=*/false);
     gs.triangles.clear();
   }
@@ -632,10 +689,12 @@ template <class Leaf>
 void finish_scene(GridScene<Leaf>& s, const Prepared& p, const std::vector<const PolyMesh*>& meshes,
                   const BuildOptions& opt) {
   s.tris = build_leftover_triangles(p.gs, meshes, opt);
-  double duplicates = 0;  // exact duplicates among the leftover triangles, dropped by their BVH
+  // Exact duplicates among the leftover triangles, dropped by their BVH or before they became
+  // 2x2 sub-grids.
+  double duplicates = double(p.duplicates);
   if (s.tris)
     for (const auto& [k, v] : s.tris->stats.details)
-      if (k == "duplicate_triangles") duplicates = v;
+      if (k == "duplicate_triangles") duplicates += v;
   s.stats.details.emplace_back("duplicate_triangles", duplicates);
   if (s.tris) {
     s.mem.bvh_bytes += s.tris->mem.bvh_bytes;

@@ -16,7 +16,10 @@
 //     4.59 / 4.83; and they take the least memory (bunny 46.4 vs 52.0 / 49.3 B/triangle). The
 //     price: twice the triangle tests per ray of tri4v (8 lanes per leaf test instead of 4); Pair2
 //     with 2-pair leaves tests as many triangles as tri4v (or slightly fewer) but gains only 3%.
+#include <algorithm>
 #include <cmath>
+#include <mutex>
+#include <vector>
 
 #include "api/bvh_scene.h"
 #include "mesh/pairing.h"
@@ -24,6 +27,91 @@
 #include "prim/pairs.h"
 
 namespace slim {
+
+namespace {
+
+// Stacks of coincident triangles (Bvh2BuildConfig::thin_stack). A pair can be a duplicate in
+// part (pairing joins coincident triangles too), so duplicates are found among the triangles of
+// the node's pairs: of each group of exact duplicates (TriangleSourceOps::duplicate_key: the
+// same positions in any rotation) the lowest triangle stays, which is the lowest input face of
+// the group (triangles are numbered in face order). A pair that loses one triangle becomes a lone
+// triangle; one that loses both, or a lone triangle that is a duplicate, is left out.
+class PairStackThinner {
+ public:
+  PairStackThinner(LargeVector<PairRef>& refs, const PairSource& src) : refs_(refs), src_(src) {}
+
+  void operator()(const uint32_t* ids, uint32_t n, uint8_t* keep) {
+    struct Tri {
+      uint64_t key;
+      uint32_t t;
+      uint32_t slot;  // 2 x position in ids, + 1 for triangle b of the pair
+    };
+    std::vector<Tri> tris;
+    tris.reserve(2 * size_t(n));
+    for (uint32_t i = 0; i < n; ++i) {
+      const PairRef& p = refs_[ids[i]];
+      tris.push_back({TriangleSourceOps::duplicate_key(src_.tris, p.a), p.a, 2 * i});
+      if (p.b != kLoneTriangle)
+        tris.push_back({TriangleSourceOps::duplicate_key(src_.tris, p.b), p.b, 2 * i + 1});
+    }
+    std::sort(tris.begin(), tris.end(), [](const Tri& x, const Tri& y) {
+      return x.key != y.key ? x.key < y.key : x.t < y.t;
+    });
+    std::vector<uint8_t> gone(2 * size_t(n), 0);
+    uint64_t dropped = 0;
+    std::vector<uint32_t> kept;  // triangles kept with the current key
+    for (size_t i = 0; i < tris.size();) {
+      size_t j = i;
+      kept.clear();
+      for (; j < tris.size() && tris[j].key == tris[i].key; ++j) {
+        bool dup = false;
+        for (size_t k = 0; k < kept.size() && !dup; ++k)
+          dup = TriangleSourceOps::same_surface(src_.tris, kept[k], tris[j].t);
+        if (dup) {
+          gone[tris[j].slot] = 1;
+          ++dropped;
+        } else {
+          kept.push_back(tris[j].t);
+        }
+      }
+      i = j;
+    }
+    if (!dropped) return;
+    std::vector<uint64_t> old_keys, new_keys;  // fingerprint keys of the rewritten pairs
+    for (uint32_t i = 0; i < n; ++i) {
+      PairRef& p = refs_[ids[i]];
+      const bool a_gone = gone[2 * i], b_gone = p.b == kLoneTriangle || gone[2 * i + 1];
+      if (a_gone && b_gone) {
+        keep[i] = 0;
+      } else if (a_gone || (b_gone && p.b != kLoneTriangle)) {
+        old_keys.push_back(Pair4::source_key(src_, ids[i]));
+        p = PairRef{a_gone ? p.b : p.a, kLoneTriangle, 1, 0};
+        new_keys.push_back(Pair4::source_key(src_, ids[i]));
+      }
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    dropped_ += dropped;
+    old_keys_.insert(old_keys_.end(), old_keys.begin(), old_keys.end());
+    new_keys_.insert(new_keys_.end(), new_keys.begin(), new_keys.end());
+  }
+
+  uint64_t dropped_triangles() const { return dropped_; }
+  // validate()'s fingerprint of the source, as it was taken before the pairs were rewritten,
+  // brought up to date.
+  void update(Fingerprint& f) const {
+    for (uint64_t k : old_keys_) f.remove(k);
+    for (uint64_t k : new_keys_) f.add(k);
+  }
+
+ private:
+  LargeVector<PairRef>& refs_;
+  const PairSource& src_;
+  std::mutex mutex_;
+  uint64_t dropped_ = 0;
+  std::vector<uint64_t> old_keys_, new_keys_;
+};
+
+}  // namespace
 
 std::unique_ptr<Scene::Impl> empty_pair_scene(const BuildOptions&) {
   return std::make_unique<BvhScene<Pair4>>();
@@ -51,7 +139,11 @@ std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>
   BuildOptions o = opt;
   o.max_leaf_size = int(Pair4::kBlockPrims);
   auto s = std::make_unique<BvhScene<Pair4>>();
-  s->build(src, uint32_t(refs.size()), o);
+  PairStackThinner thinner(refs, src);
+  BvhScene<Pair4>::Bvh2Hooks hooks;
+  hooks.thin_stack = [&](const uint32_t* ids, uint32_t n, uint8_t* keep) { thinner(ids, n, keep); };
+  s->build(src, uint32_t(refs.size()), o, hooks);
+  thinner.update(s->expected);
 
   const PairingStats& ps = pr.stats;
   auto& d = s->stats.details;
@@ -62,6 +154,7 @@ std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>
   d.emplace_back("pairing_s", ps.pairing_s);
   d.emplace_back("pairs", double(ps.pairs));
   d.emplace_back("unpaired_triangles", double(ps.unpaired));
+  d.emplace_back("duplicate_triangles", double(thinner.dropped_triangles()));
   if (opt.pairing ==
       PairingMethod::EdgeHeuristic) {  // pair_triangles: the pre-scan, then maybe the heuristic
     if (!ps.prescan_skipped) {

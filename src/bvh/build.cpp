@@ -404,39 +404,52 @@ class Builder {
   // Whether refs [begin, end) may hold duplicates to drop: more than a leaf takes, all with one
   // centroid (no split can separate them), not yet checked above (`checked`).
   bool drops_duplicates(uint32_t begin, uint32_t end, const Range& range, bool checked) const {
-    if (checked || !cfg_.duplicate_key || !cfg_.same_primitive) return false;
+    if (checked || !(cfg_.thin_stack || (cfg_.duplicate_key && cfg_.same_primitive))) return false;
     if (end - begin <= cfg_.max_leaf_size) return false;
     const Box3f cbox = range.cb.box3();
     return !(reduce_max(cbox.hi - cbox.lo) > 0.0f);
   }
 
-  // Drops exact duplicates among refs [begin, end): sorted by (duplicate_key, id), the first of
-  // each group of equal primitives (the lowest id) stays, the others move behind the kept ones
-  // and their ids go to Bvh2::dropped. Returns the new end. The range's boxes are unchanged (a
-  // duplicate has the box of the primitive kept).
+  // Drops exact duplicates among refs [begin, end). With duplicate_key: sorted by
+  // (duplicate_key, id), the first of each group of equal primitives (the lowest id) stays; with
+  // thin_stack, that hook chooses. The others move behind the kept ones and their ids go to
+  // Bvh2::dropped. Returns the new end. The range's boxes are unchanged (a duplicate has the box
+  // of the primitive kept; a thinned primitive lies inside its old box).
   uint32_t drop_duplicates(uint32_t begin, uint32_t end) {
     Ref* refs = refs_.data();
     const uint32_t n = end - begin;
-    std::vector<std::pair<uint64_t, uint32_t>> order(n);  // (key, position in refs)
-    for (uint32_t i = 0; i < n; ++i)
-      order[i] = {cfg_.duplicate_key(refs[begin + i].id()), begin + i};
-    std::sort(order.begin(), order.end(), [&](const auto& x, const auto& y) {
-      return x.first != y.first ? x.first < y.first : refs[x.second].id() < refs[y.second].id();
-    });
+    std::vector<uint8_t> keep(n, 1);
+    if (cfg_.thin_stack) {
+      std::vector<uint32_t> ids(n);
+      for (uint32_t i = 0; i < n; ++i) ids[i] = refs[begin + i].id();
+      cfg_.thin_stack(ids.data(), n, keep.data());
+    } else {
+      std::vector<std::pair<uint64_t, uint32_t>> order(n);  // (key, position in the range)
+      for (uint32_t i = 0; i < n; ++i) order[i] = {cfg_.duplicate_key(refs[begin + i].id()), i};
+      std::sort(order.begin(), order.end(), [&](const auto& x, const auto& y) {
+        return x.first != y.first ? x.first < y.first
+                                  : refs[begin + x.second].id() < refs[begin + y.second].id();
+      });
+      std::vector<uint32_t> kept;  // ids kept with the current key
+      for (uint32_t i = 0; i < n;) {
+        uint32_t j = i;
+        kept.clear();
+        for (; j < n && order[j].first == order[i].first; ++j) {
+          const uint32_t id = refs[begin + order[j].second].id();
+          bool dup = false;
+          for (size_t k = 0; k < kept.size() && !dup; ++k) dup = cfg_.same_primitive(kept[k], id);
+          if (dup)
+            keep[order[j].second] = 0;
+          else
+            kept.push_back(id);
+        }
+        i = j;
+      }
+    }
+    // Kept refs first (in their order in the range), dropped ones behind them.
     std::vector<Ref> kept, dropped;
     kept.reserve(n);
-    for (uint32_t i = 0; i < n;) {
-      uint32_t j = i;
-      const size_t group = kept.size();  // kept refs with this key start here
-      for (; j < n && order[j].first == order[i].first; ++j) {
-        const Ref& r = refs[order[j].second];
-        bool dup = false;
-        for (size_t k = group; k < kept.size() && !dup; ++k)
-          dup = cfg_.same_primitive(kept[k].id(), r.id());
-        (dup ? dropped : kept).push_back(r);
-      }
-      i = j;
-    }
+    for (uint32_t i = 0; i < n; ++i) (keep[i] ? kept : dropped).push_back(refs[begin + i]);
     std::copy(kept.begin(), kept.end(), refs + begin);
     std::copy(dropped.begin(), dropped.end(), refs + begin + kept.size());
     if (!dropped.empty()) {

@@ -47,13 +47,20 @@ struct Bvh2BuildConfig {
   // out of every leaf (Bvh2::dropped). Duplicates elsewhere stay.
   std::function<uint64_t(uint32_t id)> duplicate_key;
   std::function<bool(uint32_t a, uint32_t b)> same_primitive;
+  // Optional, for primitives that hold several triangles (pairs), where a primitive can be a
+  // duplicate in part: called where the two above would be (a node larger than a leaf whose
+  // references share one centroid) and instead of them, with the ids of that node's primitives.
+  // It clears keep[i] for each primitive ids[i] to leave out (to Bvh2::dropped) and may rewrite
+  // the kept ones to hold fewer triangles (their references keep their boxes, which still bound
+  // them). Called from several threads at once, on disjoint sets of ids.
+  std::function<void(const uint32_t* ids, uint32_t n, uint8_t* keep)> thin_stack;
 };
 
 struct Bvh2 {
   LargeArray<Bvh2Node> nodes;     // nodes[0] is the root (if any primitive)
   LargeArray<uint32_t> prim_ids;  // primitive ids in leaf order (dropped ones outside every leaf)
   int depth = 0;
-  std::vector<uint32_t> dropped;  // ids left out as duplicates (Bvh2BuildConfig::duplicate_key)
+  std::vector<uint32_t> dropped;  // ids left out as duplicates (duplicate_key or thin_stack)
 };
 
 // Writes the references of primitives begin..end-1 to out[0 .. end - begin). Called in parallel

@@ -620,6 +620,17 @@ struct ClusterLeaf {
     return triangle_key(s.vertices[v[0]], s.vertices[v[1]], s.vertices[v[2]], s.geom_ids[t],
                         s.prim_ids[t]);
   }
+  // Exact duplicates at the positions the clusters store (TriangleSourceOps::duplicate_key),
+  // which the BVH2 builder may drop from stacks of coincident triangles.
+  static TriangleSource triangles(const ClusterSource& s) {
+    return {s.vertices, s.tris, s.geom_ids, s.prim_ids};
+  }
+  static uint64_t duplicate_key(const ClusterSource& s, uint32_t t) {
+    return TriangleSourceOps::duplicate_key(triangles(s), t);
+  }
+  static bool same_surface(const ClusterSource& s, uint32_t a, uint32_t b) {
+    return TriangleSourceOps::same_surface(triangles(s), a, b);
+  }
   static std::vector<uint8_t> encode_multileaf(const ClusterSource& s, const uint32_t* const* prims,
                                                const uint32_t* counts, int k) {
     if (s.encoded) {

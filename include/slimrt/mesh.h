@@ -1,7 +1,10 @@
 // slimrt input meshes: PolyMesh, the loaders and the procedural scenes.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
+#include <iterator>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -38,10 +41,95 @@ struct PolyMesh {
   Box3f bounds() const;  // over finite positions only
 };
 
+// The corners of each face of a MeshView: an array with one size per face, or one size shared by
+// every face (3 for an array of triangles, which then needs no array of sizes at all).
+class FaceSizes {
+ public:
+  FaceSizes() = default;
+  // One size per face, read from `sizes` (not copied). A null array with a nonzero size reads as
+  // faces of 0 corners, which check_mesh refuses.
+  FaceSizes(std::span<const uint32_t> sizes)
+      : sizes_(sizes.data()), count_(sizes.size()), uniform_(0) {}
+  // `face_count` faces of `corners` corners each.
+  static FaceSizes uniform(uint32_t corners, size_t face_count) {
+    FaceSizes s;
+    s.uniform_ = corners;
+    s.count_ = face_count;
+    return s;
+  }
+
+  uint32_t operator[](size_t f) const { return sizes_ ? sizes_[f] : uniform_; }
+  size_t size() const { return count_; }
+  bool empty() const { return count_ == 0; }
+  // The array of sizes, or nullptr when every face has uniform_size() corners.
+  const uint32_t* data() const { return sizes_; }
+  uint32_t uniform_size() const { return sizes_ ? 0 : uniform_; }
+
+  class iterator {
+   public:
+    using iterator_category = std::input_iterator_tag;
+    using value_type = uint32_t;
+    using difference_type = std::ptrdiff_t;
+    using pointer = void;
+    using reference = uint32_t;
+    iterator(const FaceSizes* s, size_t f) : s_(s), f_(f) {}
+    uint32_t operator*() const { return (*s_)[f_]; }
+    iterator& operator++() {
+      ++f_;
+      return *this;
+    }
+    bool operator==(const iterator& o) const { return f_ == o.f_; }
+
+   private:
+    const FaceSizes* s_;
+    size_t f_;
+  };
+  iterator begin() const { return {this, 0}; }
+  iterator end() const { return {this, count_}; }
+
+ private:
+  const uint32_t* sizes_ = nullptr;
+  size_t count_ = 0;
+  uint32_t uniform_ = 3;
+};
+
+// A mesh read in place from arrays its owner keeps (a PolyMesh, numpy arrays, a memory-mapped
+// file): the fields of PolyMesh as spans, nothing copied. Scene::build reads it only while it
+// builds; the scene keeps nothing of it. Built from a PolyMesh it is that mesh exactly.
+struct MeshView {
+  std::string name;                        // in error messages ("" reads "mesh")
+  std::span<const Vec3f> positions;        // float3 positions
+  FaceSizes face_sizes;                    // corners per face (an array or one size for all)
+  std::span<const uint32_t> face_indices;  // corner -> position index, all faces concatenated
+  // Optional attributes, as in PolyMesh.
+  std::span<const Vec3f> normals;
+  std::span<const uint32_t> normal_indices;
+  std::span<const Vec2f> uvs;
+  std::span<const uint32_t> uv_indices;
+  std::span<const uint32_t> face_object;
+  std::span<const std::string> object_names;
+
+  MeshView() = default;
+  // Every field of `mesh`, read in place: the mesh must outlive the view.
+  MeshView(const PolyMesh& mesh);
+  // `triangle_count` triangles, 3 indices each in `indices`, over `vertex_count` positions.
+  static MeshView triangles(const Vec3f* positions, size_t vertex_count, const uint32_t* indices,
+                            size_t triangle_count, std::string name = {});
+
+  size_t face_count() const { return face_sizes.size(); }
+  size_t vertex_count() const { return positions.size(); }
+  // As PolyMesh's.
+  uint64_t fan_triangle_count() const;
+  std::vector<uint64_t> face_offsets() const;
+  Box3f bounds() const;
+};
+
 // Throws slim::Error (naming the mesh, the face and the problem) if the mesh is malformed:
-// fewer than 3 corners in a face, an index out of range, array sizes that do not agree.
-// NaN/Inf positions are not an error here (see MeshSummary::nonfinite_vertices).
+// fewer than 3 corners in a face, an index out of range, array sizes that do not agree (for a
+// view also a null array with a nonzero size). NaN/Inf positions are not an error here (see
+// MeshSummary::nonfinite_vertices).
 void check_mesh(const PolyMesh& mesh);
+void check_mesh(const MeshView& mesh);
 
 struct MeshSummary {
   uint64_t vertices = 0, faces = 0, triangles = 0, quads = 0, ngons = 0;

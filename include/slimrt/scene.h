@@ -7,7 +7,8 @@
 //   bool blocked = scene.occluded(ray);
 //   slim::MemoryStats m = scene.memory();     // everything the scene keeps
 //
-// The input meshes may be freed after build(): the scene owns all it needs.
+// The input meshes (PolyMesh, or MeshView over the caller's arrays) may be freed after build(): the
+// scene owns all it needs.
 #pragma once
 
 #include <cstdint>
@@ -164,6 +165,7 @@ struct ConfigInfo {
   // vertices within that bound of the input ones, so every hit lies within it of the input
   // surface. Throws slim::Error for a null or malformed mesh (check_mesh).
   double promised_error(const std::vector<const PolyMesh*>& meshes) const;
+  double promised_error(const std::vector<const MeshView*>& meshes) const;
 };
 // Every configuration, triangles first (costa: its 16 letter combinations last).
 const std::vector<ConfigInfo>& configs();
@@ -249,6 +251,11 @@ class Scene {
   static Scene build(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt = {});
   static Scene build(const std::vector<PolyMesh>& meshes, const BuildOptions& opt = {});
   static Scene build(const PolyMesh& mesh, const BuildOptions& opt = {});
+  // The same build from arrays the caller keeps (MeshView, slimrt/mesh.h): read in place, not
+  // copied into a PolyMesh first; the same scene as the build of a PolyMesh holding those arrays.
+  // The arrays must stay unchanged until build() returns, and may go after.
+  static Scene build(const std::vector<const MeshView*>& meshes, const BuildOptions& opt = {});
+  static Scene build(const MeshView& mesh, const BuildOptions& opt = {});
   // Builds a mesh file or procedural scene (the names slim::load takes, glTF excepted; also
   // "subdiv:LEVELS:MESH", README "Inputs larger than memory") chunk by chunk within
   // chunking.memory_budget (ChunkedBuildOptions above): one scene (geomID 0, primID

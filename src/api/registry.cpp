@@ -276,11 +276,11 @@ void BuildOptions::check() const {
                   " is not a finite box (leave it empty for the meshes' own bounds)");
 }
 
-Box3f lattice_box_of(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
+Box3f lattice_box_of(const MeshList& meshes, const BuildOptions& opt) {
   const Box3f& b = opt.lattice_box;
   if (b.empty()) return Box3f();
   for (size_t mi = 0; mi < meshes.size(); ++mi) {
-    const PolyMesh& m = *meshes[mi];
+    const MeshView& m = *meshes[mi];
     for (size_t v = 0; v < m.positions.size(); ++v) {
       const Vec3f p = m.positions[v];
       if (is_finite(p) && !b.contains(p))
@@ -309,8 +309,12 @@ ConfigInfo describe(const BuildOptions& opt) {
 }
 
 double ConfigInfo::promised_error(const std::vector<const PolyMesh*>& meshes) const {
+  return promised_error(MeshList(meshes).pointers());
+}
+
+double ConfigInfo::promised_error(const std::vector<const MeshView*>& meshes) const {
   Box3f bounds;  // the finite positions of every mesh
-  for (const PolyMesh* m : meshes) {
+  for (const MeshView* m : meshes) {
     if (!m) throw Error("promised_error: null mesh");
     check_mesh(*m);
     const Box3f b = m->bounds();
@@ -358,7 +362,7 @@ double ConfigInfo::promised_error(const std::vector<const PolyMesh*>& meshes) co
       // farthest corner of its 5x5 sub-grid, 8 cell edges: 0.06 x 8 x L, L the largest distance
       // between two vertices of one input face.
       double L = 0;
-      for (const PolyMesh* m : meshes) {
+      for (const MeshView* m : meshes) {
         uint64_t c = 0;
         for (uint32_t n : m->face_sizes) {
           for (uint32_t i = 0; i < n; ++i)

@@ -10,7 +10,7 @@
 
 namespace slim {
 
-using SceneBuilder = std::unique_ptr<Scene::Impl> (*)(const std::vector<const PolyMesh*>& meshes,
+using SceneBuilder = std::unique_ptr<Scene::Impl> (*)(const MeshList& meshes,
                                                       const BuildOptions& opt);
 using EmptySceneMaker = std::unique_ptr<Scene::Impl> (*)(const BuildOptions& opt);
 struct SceneFormat {
@@ -27,6 +27,6 @@ bool is_registered_leaf(uint8_t value);
 // given (the format then derives its scene-wide quantities from the meshes), else the box, after
 // checking that it contains every finite vertex of the meshes (slim::Error naming the mesh, the
 // vertex and the box otherwise: a vertex outside would fall off the lattice).
-Box3f lattice_box_of(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt);
+Box3f lattice_box_of(const MeshList& meshes, const BuildOptions& opt);
 
 }  // namespace slim

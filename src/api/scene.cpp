@@ -37,10 +37,10 @@ std::string fmt_g(double x) {
 
 // The range of slimrt/scene.h (kMaxCoordinate, kMinExtent), over the vertices of finite faces
 // (faces with a NaN/Inf vertex are skipped by every builder, unused vertices are ignored).
-void check_coordinate_range(const std::vector<const PolyMesh*>& meshes) {
+void check_coordinate_range(const MeshList& meshes) {
   Box3f box;
   for (size_t mi = 0; mi < meshes.size(); ++mi) {
-    const PolyMesh& m = *meshes[mi];
+    const MeshView& m = *meshes[mi];
     const size_t nv = m.positions.size();
     // One byte per vertex (kFinite, kBeyond) so that the faces gather bytes, not positions
     // (fg_terrain_hawaii: 1 MB instead of 12 MB of random reads); the faces mark the vertices
@@ -106,11 +106,10 @@ void check_coordinate_range(const std::vector<const PolyMesh*>& meshes) {
 
 }  // namespace
 
-std::unique_ptr<Scene::Impl> build_scene_impl(const std::vector<const PolyMesh*>& meshes,
-                                              const BuildOptions& opt) {
+std::unique_ptr<Scene::Impl> build_scene_impl(const MeshList& meshes, const BuildOptions& opt) {
   // The format's builder ends "prepare" when its BVH build starts (api/bvh_scene.h).
   if (opt.progress) report_progress(opt.progress, "prepare", 0, 1);
-  for (const PolyMesh* m : meshes) {
+  for (const MeshView* m : meshes) {
     if (!m) throw Error("Scene::build: null mesh");
     check_mesh(*m);
   }
@@ -123,10 +122,12 @@ std::unique_ptr<Scene::Impl> build_scene_impl(const std::vector<const PolyMesh*>
   return impl;
 }
 
-Scene Scene::build(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
+namespace {
+
+std::unique_ptr<Scene::Impl> build_timed(const MeshList& meshes, const BuildOptions& opt) {
   check_cpu_isa();
   const auto t0 = std::chrono::steady_clock::now();
-  std::unique_ptr<Impl> impl;
+  std::unique_ptr<Scene::Impl> impl;
   // Every parallel step of the build (checks, triangulation, pairing, grids, BVH) runs on
   // opt.threads threads, the figure `slimrt bench --threads` compares with Embree's.
   if (opt.threads > 0) {
@@ -137,19 +138,42 @@ Scene Scene::build(const std::vector<const PolyMesh*>& meshes, const BuildOption
   }
   impl->stats.build_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return impl;
+}
+
+}  // namespace
+
+Scene Scene::build(const std::vector<const MeshView*>& meshes, const BuildOptions& opt) {
   Scene s;
-  s.impl_ = std::move(impl);
+  s.impl_ = build_timed(meshes, opt);
+  return s;
+}
+
+Scene Scene::build(const MeshView& mesh, const BuildOptions& opt) {
+  Scene s;
+  s.impl_ = build_timed({&mesh}, opt);
+  return s;
+}
+
+// The PolyMesh builds read their meshes through views (MeshList): nothing is copied.
+Scene Scene::build(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
+  Scene s;
+  s.impl_ = build_timed(meshes, opt);
   return s;
 }
 
 Scene Scene::build(const std::vector<PolyMesh>& meshes, const BuildOptions& opt) {
   std::vector<const PolyMesh*> ptrs;
   for (const PolyMesh& m : meshes) ptrs.push_back(&m);
-  return build(ptrs, opt);
+  Scene s;
+  s.impl_ = build_timed(ptrs, opt);
+  return s;
 }
 
 Scene Scene::build(const PolyMesh& mesh, const BuildOptions& opt) {
-  return build(std::vector<const PolyMesh*>{&mesh}, opt);
+  Scene s;
+  s.impl_ = build_timed({&mesh}, opt);
+  return s;
 }
 
 Hit Scene::intersect(const Ray& ray) const {

@@ -355,8 +355,7 @@ std::unique_ptr<Scene::Impl> empty_cluster_scene(const BuildOptions& opt) {
   return std::make_unique<ClusterScene<false>>();
 }
 
-std::unique_ptr<Scene::Impl> build_cluster_scene(const std::vector<const PolyMesh*>& meshes,
-                                                 const BuildOptions& opt) {
+std::unique_ptr<Scene::Impl> build_cluster_scene(const MeshList& meshes, const BuildOptions& opt) {
   const Box3f lattice_box = opt.leaf == Leaf::Clusters ? lattice_box_of(meshes, opt) : Box3f();
   TriangleMesh tm = triangulate_fan(meshes);
   std::unique_ptr<Scene::Impl> s = opt.leaf == Leaf::LosslessClusters

@@ -423,8 +423,7 @@ std::unique_ptr<Scene::Impl> empty_costa_scene(const BuildOptions& opt) {
   }
 }
 
-std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*>& meshes,
-                                               const BuildOptions& opt) {
+std::unique_ptr<Scene::Impl> build_costa_scene(const MeshList& meshes, const BuildOptions& opt) {
   const CostaFlags flags = CostaFlags::parse(opt.costa);
   // V: one quantization box for every scene built with the same lattice_box (chunks).
   const Box3f lattice_box = flags.V ? lattice_box_of(meshes, opt) : Box3f();

@@ -78,7 +78,7 @@ struct Prepared {
 // a stack of coincident triangles is one sub-grid and not a subtree that every ray through it
 // walks to the bottom (the sub-grid BVH has no duplicate test of its own; Tri4v leaves have).
 // Returns the number dropped. Sorts the leftovers' keys: only on this non-default path.
-uint64_t drop_duplicate_leftovers(GridSet& gs, const std::vector<const PolyMesh*>& meshes) {
+uint64_t drop_duplicate_leftovers(GridSet& gs, const MeshList& meshes) {
   std::vector<LeftoverTriangle>& tris = gs.triangles;
   auto rotation = [&](const LeftoverTriangle& t, int r) {
     std::array<uint32_t, 9> w;
@@ -126,7 +126,7 @@ uint64_t drop_duplicate_leftovers(GridSet& gs, const std::vector<const PolyMesh*
   return dropped;
 }
 
-Prepared prepare(const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
+Prepared prepare(const MeshList& meshes, const BuildOptions& opt) {
   const Layout layout = layout_of(opt);
   auto t0 = Clock::now();
   Prepared p;
@@ -493,8 +493,8 @@ class GridScene final : public BvhScene<Leaf> {
   }
 };
 
-std::unique_ptr<BvhScene<Tri4v>> build_leftover_triangles(
-    const GridSet& gs, const std::vector<const PolyMesh*>& meshes, const BuildOptions& opt) {
+std::unique_ptr<BvhScene<Tri4v>> build_leftover_triangles(const GridSet& gs, const MeshList& meshes,
+                                                          const BuildOptions& opt) {
   const uint64_t n = gs.triangles.size();
   if (n == 0) return nullptr;
   if (3 * n >= 0xffffffffull) throw Error("grids: too many leftover triangles");
@@ -539,7 +539,7 @@ struct Extract {
 
 // Appends the triangles of every sub-grid (decoded by `decode`) and the leftover triangles.
 template <class Decode>
-void extract_triangles(const Prepared& p, const std::vector<const PolyMesh*>& meshes,
+void extract_triangles(const Prepared& p, const MeshList& meshes,
                        const std::vector<GridInfo>& table, const uint32_t* faces, Decode&& decode,
                        GridTriangles& out) {
   for (size_t gi = 0; gi < p.gs.grids.size(); ++gi) {
@@ -605,9 +605,8 @@ void for_each_subgrid(const Prepared& p, F&& fn) {
 }
 
 // The original vertices of a sub-grid and, for the lossy formats, its exact-vertex indices.
-void gather_subgrid(const Prepared& p, const std::vector<const PolyMesh*>& meshes,
-                    const ExactPositions* ex, size_t gi, uint32_t sx, uint32_t sy,
-                    SubGridInput& in) {
+void gather_subgrid(const Prepared& p, const MeshList& meshes, const ExactPositions* ex, size_t gi,
+                    uint32_t sx, uint32_t sy, SubGridInput& in) {
   const VertexGrid& g = p.gs.grids[gi];
   const uint32_t gx = kSubGridCells * sx, gy = kSubGridCells * sy;
   in.res_x = std::min(kSubGridRes, g.res_x - gx);
@@ -686,7 +685,7 @@ void add_grid_details(const Prepared& p, SceneStatsAndDetails& st, double encode
 }
 
 template <class Leaf>
-void finish_scene(GridScene<Leaf>& s, const Prepared& p, const std::vector<const PolyMesh*>& meshes,
+void finish_scene(GridScene<Leaf>& s, const Prepared& p, const MeshList& meshes,
                   const BuildOptions& opt) {
   s.tris = build_leftover_triangles(p.gs, meshes, opt);
   // Exact duplicates among the leftover triangles, dropped by their BVH or before they became
@@ -717,8 +716,7 @@ BuildOptions subgrid_bvh_options(const BuildOptions& opt) {
   return o;
 }
 
-std::unique_ptr<Scene::Impl> build_uncompressed(Prepared& p,
-                                                const std::vector<const PolyMesh*>& meshes,
+std::unique_ptr<Scene::Impl> build_uncompressed(Prepared& p, const MeshList& meshes,
                                                 const BuildOptions& opt,
                                                 Extract* extract = nullptr) {
   auto t0 = Clock::now();
@@ -776,7 +774,7 @@ std::unique_ptr<Scene::Impl> build_uncompressed(Prepared& p,
 
 // Lossy formats: the exact vertices, the blocks, their bounds and the error figures.
 template <class Leaf, class Block>
-std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const PolyMesh*>& meshes,
+std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const MeshList& meshes,
                                          const BuildOptions& opt, int enc, bool shared_corners,
                                          Extract* extract) {
   auto t0 = Clock::now();
@@ -788,7 +786,7 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
   const Box3f lattice_box = lattice_box_of(meshes, opt);
   Box3f scene_box = lattice_box;
   if (lattice_box.empty())
-    for (const PolyMesh* m : meshes) scene_box.extend(m->bounds());
+    for (const MeshView* m : meshes) scene_box.extend(m->bounds());
   const int bias = displacement_bias(scene_box.empty() ? 1.0f : length(scene_box.size()));
   const ExactPositions ex = find_exact_positions(gs, meshes, !lattice_box.empty());
   grid_tables(p, s->grid_table, s->hot, s->face_table, s->flips);
@@ -920,8 +918,7 @@ std::unique_ptr<Scene::Impl> build_lossy(Prepared& p, const std::vector<const Po
   return s;
 }
 
-std::unique_ptr<Scene::Impl> build_lossy_any(Prepared& p,
-                                             const std::vector<const PolyMesh*>& meshes,
+std::unique_ptr<Scene::Impl> build_lossy_any(Prepared& p, const MeshList& meshes,
                                              const BuildOptions& opt, int enc, Layout layout,
                                              Extract* extract = nullptr) {
   if (layout == Layout::Shared)
@@ -946,17 +943,16 @@ std::unique_ptr<Scene::Impl> empty_grid_scene(const BuildOptions& opt) {
             : std::make_unique<GridScene<LossyGridLeaf<2>>>();
 }
 
-std::unique_ptr<Scene::Impl> build_grid_scene(const std::vector<const PolyMesh*>& meshes,
-                                              const BuildOptions& opt) {
+std::unique_ptr<Scene::Impl> build_grid_scene(const MeshList& meshes, const BuildOptions& opt) {
   const Layout layout = layout_of(opt);
   Prepared p = prepare(meshes, opt);
   if (layout == Layout::Uncompressed) return build_uncompressed(p, meshes, opt);
   return build_lossy_any(p, meshes, opt, int(opt.grid_encoding), layout);
 }
 
-GridErrorStats extract_grid_scene(const std::vector<const PolyMesh*>& meshes,
-                                  const BuildOptions& opt, DecodedTriangles* triangles) {
-  for (const PolyMesh* m : meshes) {
+GridErrorStats extract_grid_scene(const MeshList& meshes, const BuildOptions& opt,
+                                  DecodedTriangles* triangles) {
+  for (const MeshView* m : meshes) {
     if (!m) throw Error("grid statistics: null mesh");
     check_mesh(*m);
   }

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "mesh/mesh_list.h"
 #include "slimrt/decoded.h"
 #include "slimrt/grids.h"
 #include "slimrt/mesh.h"
@@ -14,10 +15,9 @@
 
 namespace slim {
 
-
 // Runs the grid build of `opt` (a grid configuration, else slim::Error) over the meshes; fills
 // `triangles` with the decoded triangles when given; returns the error figures (paper Table 3).
-GridErrorStats extract_grid_scene(const std::vector<const PolyMesh*>& meshes,
-                                  const BuildOptions& opt, DecodedTriangles* triangles);
+GridErrorStats extract_grid_scene(const MeshList& meshes, const BuildOptions& opt,
+                                  DecodedTriangles* triangles);
 
 }  // namespace slim

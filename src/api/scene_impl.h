@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/ray.h"
+#include "mesh/mesh_list.h"
 #include "slimrt/decoded.h"
 #include "slimrt/scene.h"
 
@@ -80,19 +81,18 @@ std::unique_ptr<Scene::Impl> empty_cluster_scene(const BuildOptions& opt);
 
 // Checks the meshes (check_mesh, coordinate range) and options, then builds with the format's
 // builder; ray_setup set, build time not (Scene::build, the chunks of a joined scene).
-std::unique_ptr<Scene::Impl> build_scene_impl(const std::vector<const PolyMesh*>& meshes,
-                                              const BuildOptions& opt);
+std::unique_ptr<Scene::Impl> build_scene_impl(const MeshList& meshes, const BuildOptions& opt);
 
 // Format builders (one per file under api/). Each fills stats/mem/bounds except build time.
-std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMesh*>& meshes,
+std::unique_ptr<Scene::Impl> build_triangle_scene(const MeshList& meshes,
                                                   const BuildOptions& opt);  // scene_triangles.cpp
-std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>& meshes,
+std::unique_ptr<Scene::Impl> build_pair_scene(const MeshList& meshes,
                                               const BuildOptions& opt);  // scene_pairs.cpp
-std::unique_ptr<Scene::Impl> build_grid_scene(const std::vector<const PolyMesh*>& meshes,
+std::unique_ptr<Scene::Impl> build_grid_scene(const MeshList& meshes,
                                               const BuildOptions& opt);  // scene_grids.cpp
-std::unique_ptr<Scene::Impl> build_costa_scene(const std::vector<const PolyMesh*>& meshes,
+std::unique_ptr<Scene::Impl> build_costa_scene(const MeshList& meshes,
                                                const BuildOptions& opt);  // scene_costa.cpp
-std::unique_ptr<Scene::Impl> build_cluster_scene(const std::vector<const PolyMesh*>& meshes,
+std::unique_ptr<Scene::Impl> build_cluster_scene(const MeshList& meshes,
                                                  const BuildOptions& opt);  // scene_clusters.cpp
 
 }  // namespace slim

@@ -117,8 +117,7 @@ std::unique_ptr<Scene::Impl> empty_pair_scene(const BuildOptions&) {
   return std::make_unique<BvhScene<Pair4>>();
 }
 
-std::unique_ptr<Scene::Impl> build_pair_scene(const std::vector<const PolyMesh*>& meshes,
-                                              const BuildOptions& opt) {
+std::unique_ptr<Scene::Impl> build_pair_scene(const MeshList& meshes, const BuildOptions& opt) {
   TriangleMesh tm = triangulate_fan(meshes);
   PairingInput in{tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(),
                   tm.geom_ids.data()};

@@ -33,8 +33,7 @@ std::unique_ptr<Scene::Impl> empty_triangle_scene(const BuildOptions& opt) {
   return std::make_unique<BvhScene<Tri4v>>();
 }
 
-std::unique_ptr<Scene::Impl> build_triangle_scene(const std::vector<const PolyMesh*>& meshes,
-                                                  const BuildOptions& opt) {
+std::unique_ptr<Scene::Impl> build_triangle_scene(const MeshList& meshes, const BuildOptions& opt) {
   TriangleMesh tm = triangulate_fan(meshes);
   std::unique_ptr<Scene::Impl> s;
   if (opt.leaf == Leaf::CompactTriangles)

@@ -34,7 +34,7 @@ struct Cells {
     uint32_t face_a, face_b;  // faces of (c0,c1,c2) and (c0,c2,c3)
     bool pair;                // a triangle pair: its diagonal is the shared edge, never flipped
   };
-  const PolyMesh* mesh = nullptr;
+  const MeshView* mesh = nullptr;
   bool identity_quads = false;       // quad cell c is face c
   bool all_quads = false;            // face f's corners are 4f..4f+3
   std::vector<uint32_t> quad_faces;  // otherwise: quad cell -> face
@@ -62,7 +62,7 @@ struct Cells {
 };
 
 // Two corners of the same vertex carry the same attributes (no uv/normal seam between them).
-SLIM_INLINE bool same_attributes(const PolyMesh& m, uint64_t c1, uint64_t c2) {
+SLIM_INLINE bool same_attributes(const MeshView& m, uint64_t c1, uint64_t c2) {
   if (!m.uv_indices.empty() && m.uv_indices[c1] != m.uv_indices[c2]) return false;
   if (!m.normal_indices.empty() && m.normal_indices[c1] != m.normal_indices[c2]) return false;
   return true;
@@ -72,7 +72,7 @@ SLIM_INLINE bool same_attributes(const PolyMesh& m, uint64_t c1, uint64_t c2) {
 // k'+1) is edge k of c reversed, or kNone (mesh border, non-manifold or inconsistently oriented
 // edge, attribute seam).
 std::vector<uint32_t> cell_adjacency(const Cells& cells, uint64_t vertex_count) {
-  const PolyMesh& m = *cells.mesh;
+  const MeshView& m = *cells.mesh;
   const uint32_t n = cells.count();
   // Vertex -> (cell, corner) table.
   std::vector<uint32_t> start(vertex_count + 1, 0);
@@ -250,7 +250,7 @@ class GridGrower {
 };
 
 // Collects the cells of one mesh; triangles that form no cell go to `leftover`.
-void collect_cells(const PolyMesh& m, uint32_t geom, const GridBuildOptions& opt, Cells& cells,
+void collect_cells(const MeshView& m, uint32_t geom, const GridBuildOptions& opt, Cells& cells,
                    std::vector<LeftoverTriangle>& leftover, GridConversionFigures& fig) {
   cells.mesh = &m;
   const size_t nf = m.face_count();
@@ -372,7 +372,7 @@ void collect_cells(const PolyMesh& m, uint32_t geom, const GridBuildOptions& opt
 
 }  // namespace
 
-GridSet make_grids(const std::vector<const PolyMesh*>& meshes, const GridBuildOptions& opt) {
+GridSet make_grids(const MeshList& meshes, const GridBuildOptions& opt) {
   auto t0 = std::chrono::steady_clock::now();
   GridSet gs;
   GridConversionFigures& fig = gs.figures;
@@ -385,7 +385,7 @@ GridSet make_grids(const std::vector<const PolyMesh*>& meshes, const GridBuildOp
   };
   std::vector<Single> singles;
   for (uint32_t g = 0; g < meshes.size(); ++g) {
-    const PolyMesh& m = *meshes[g];
+    const MeshView& m = *meshes[g];
     fig.input_faces += m.face_count();
     Cells cells;
     collect_cells(m, g, opt, cells, gs.triangles, fig);
@@ -522,7 +522,7 @@ PositionKind classify(const GridSet& gs, const VertexGrid& g, uint32_t x, uint32
 
 }  // namespace
 
-ExactPositions find_exact_positions(const GridSet& gs, const std::vector<const PolyMesh*>& meshes,
+ExactPositions find_exact_positions(const GridSet& gs, const MeshList& meshes,
                                     bool escape_boundary) {
   std::vector<uint64_t> base(meshes.size() + 1, 0);
   for (size_t g = 0; g < meshes.size(); ++g) base[g + 1] = base[g] + meshes[g]->positions.size();

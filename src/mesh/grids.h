@@ -28,6 +28,7 @@
 #include <string>
 #include <vector>
 
+#include "mesh/mesh_list.h"
 #include "slimrt/mesh.h"
 
 namespace slim {
@@ -103,7 +104,7 @@ struct GridSet {
 
 // Converts the meshes (mesh i = geom i) to grids. Faces with a NaN/Inf vertex are skipped.
 // Throws slim::Error if a mesh has 2^30 cells or more.
-GridSet make_grids(const std::vector<const PolyMesh*>& meshes, const GridBuildOptions& opt = {});
+GridSet make_grids(const MeshList& meshes, const GridBuildOptions& opt = {});
 
 // Sub-grid lattice (section 3, 5x5 sub-grids): grid column x is a sub-grid border iff x is a
 // multiple of 4 or the grid's last column; likewise for rows.
@@ -128,7 +129,7 @@ struct ExactPositions {
   std::vector<uint32_t> pos;
   uint64_t count(size_t grid) const { return start[grid + 1] - start[grid]; }
 };
-ExactPositions find_exact_positions(const GridSet& gs, const std::vector<const PolyMesh*>& meshes,
+ExactPositions find_exact_positions(const GridSet& gs, const MeshList& meshes,
                                     bool escape_boundary = false);
 
 // Appends the leftover triangles of gs as 2x2 grids (a, b / c, c): A = (a, b, c), B = (a, c, c)

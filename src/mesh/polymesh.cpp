@@ -1,40 +1,74 @@
-// PolyMesh helpers: offsets, bounds, validation (check_mesh) and statistics (summarize).
+// PolyMesh and MeshView helpers: offsets, bounds, validation (check_mesh) and statistics
+// (summarize).
 #include <algorithm>
 
 #include "slimrt/mesh.h"
 
 namespace slim {
 
-uint64_t PolyMesh::fan_triangle_count() const {
+MeshView::MeshView(const PolyMesh& m)
+    : name(m.name),
+      positions(m.positions),
+      face_sizes(std::span<const uint32_t>(m.face_sizes)),
+      face_indices(m.face_indices),
+      normals(m.normals),
+      normal_indices(m.normal_indices),
+      uvs(m.uvs),
+      uv_indices(m.uv_indices),
+      face_object(m.face_object),
+      object_names(m.object_names) {}
+
+MeshView MeshView::triangles(const Vec3f* positions, size_t vertex_count, const uint32_t* indices,
+                             size_t triangle_count, std::string name) {
+  MeshView v;
+  v.name = std::move(name);
+  v.positions = {positions, vertex_count};
+  v.face_sizes = FaceSizes::uniform(3, triangle_count);
+  v.face_indices = {indices, 3 * triangle_count};
+  return v;
+}
+
+uint64_t MeshView::fan_triangle_count() const {
+  if (!face_sizes.data()) {
+    const uint32_t s = face_sizes.uniform_size();
+    return s >= 3 ? uint64_t(s - 2) * face_sizes.size() : 0;
+  }
   uint64_t n = 0;
   for (uint32_t s : face_sizes) n += s >= 3 ? s - 2 : 0;
   return n;
 }
 
-std::vector<uint64_t> PolyMesh::face_offsets() const {
+std::vector<uint64_t> MeshView::face_offsets() const {
   std::vector<uint64_t> off(face_sizes.size() + 1, 0);
   for (size_t i = 0; i < face_sizes.size(); ++i) off[i + 1] = off[i] + face_sizes[i];
   return off;
 }
 
-Box3f PolyMesh::bounds() const {
+Box3f MeshView::bounds() const {
   Box3f b;
   for (const Vec3f& p : positions)
     if (is_finite(p)) b.extend(p);
   return b;
 }
 
+uint64_t PolyMesh::fan_triangle_count() const { return MeshView(*this).fan_triangle_count(); }
+
+std::vector<uint64_t> PolyMesh::face_offsets() const { return MeshView(*this).face_offsets(); }
+
+Box3f PolyMesh::bounds() const { return MeshView(*this).bounds(); }
+
 namespace {
 
-std::string label(const PolyMesh& m) { return m.name.empty() ? std::string("mesh") : m.name; }
+std::string label(const std::string& name) { return name.empty() ? std::string("mesh") : name; }
+std::string label(const MeshView& m) { return label(m.name); }
 
-[[noreturn]] void bad_face(const PolyMesh& m, uint64_t f, const std::string& what) {
+[[noreturn]] void bad_face(const MeshView& m, uint64_t f, const std::string& what) {
   throw Error(label(m) + ": face " + std::to_string(f) + ": " + what);
 }
 
 // The first corner c of `index` with index[c] >= limit, or index.size(). A plain linear scan (no
 // per-face offsets array: the check runs on every build and is a stream over the corners).
-uint64_t first_out_of_range(const std::vector<uint32_t>& index, size_t limit) {
+uint64_t first_out_of_range(std::span<const uint32_t> index, size_t limit) {
   const uint32_t* p = index.data();
   const uint64_t n = index.size();
   if (limit > 0xffffffffull) return n;  // every uint32 index is in range
@@ -52,7 +86,9 @@ uint64_t first_out_of_range(const std::vector<uint32_t>& index, size_t limit) {
 }
 
 // The face of corner c (face sizes add up to the corner count).
-uint64_t face_of_corner(const PolyMesh& m, uint64_t c) {
+uint64_t face_of_corner(const MeshView& m, uint64_t c) {
+  if (const uint32_t s = m.face_sizes.uniform_size())
+    return std::min<uint64_t>(c / s, m.face_sizes.size());
   uint64_t k = 0;
   for (size_t f = 0; f < m.face_sizes.size(); ++f) {
     k += m.face_sizes[f];
@@ -62,8 +98,8 @@ uint64_t face_of_corner(const PolyMesh& m, uint64_t c) {
 }
 
 // Checks a per-corner attribute: either index array parallel to face_indices, or per vertex.
-void check_attribute(const PolyMesh& m, const char* attr, size_t attr_count,
-                     const std::vector<uint32_t>& index) {
+void check_attribute(const MeshView& m, const char* attr, size_t attr_count,
+                     std::span<const uint32_t> index) {
   const std::string name = attr;
   if (index.empty()) {
     if (attr_count != 0 && attr_count != m.positions.size())
@@ -83,9 +119,25 @@ void check_attribute(const PolyMesh& m, const char* attr, size_t attr_count,
                  std::to_string(attr_count) + " " + name + ")");
 }
 
+// A view's array that claims entries but has no data (a PolyMesh's never does).
+void check_not_null(const MeshView& m, const char* field, const void* data, size_t n) {
+  if (!data && n)
+    throw Error(label(m) + ": " + field + " is null but has " + std::to_string(n) + " entries");
+}
+
 }  // namespace
 
-void check_mesh(const PolyMesh& m) {
+void check_mesh(const PolyMesh& m) { check_mesh(MeshView(m)); }
+
+void check_mesh(const MeshView& m) {
+  check_not_null(m, "positions", m.positions.data(), m.positions.size());
+  check_not_null(m, "face_indices", m.face_indices.data(), m.face_indices.size());
+  check_not_null(m, "normals", m.normals.data(), m.normals.size());
+  check_not_null(m, "normal_indices", m.normal_indices.data(), m.normal_indices.size());
+  check_not_null(m, "uvs", m.uvs.data(), m.uvs.size());
+  check_not_null(m, "uv_indices", m.uv_indices.data(), m.uv_indices.size());
+  check_not_null(m, "face_object", m.face_object.data(), m.face_object.size());
+  check_not_null(m, "object_names", m.object_names.data(), m.object_names.size());
   uint64_t corners = 0;
   for (size_t f = 0; f < m.face_sizes.size(); ++f) {
     if (m.face_sizes[f] < 3)

@@ -264,11 +264,11 @@ struct Loader {
 
 }  // namespace
 
-NgonMesh load_ngon_mesh(const std::vector<const PolyMesh*>& meshes) {
+NgonMesh load_ngon_mesh(const MeshList& meshes) {
   NgonMesh m;
   Loader L{m};
   uint64_t nv = 0;
-  for (const PolyMesh* p : meshes) {
+  for (const MeshView* p : meshes) {
     nv += p->positions.size();
     m.input_faces += p->face_count();
     m.input_triangles += p->fan_triangle_count();
@@ -283,8 +283,8 @@ NgonMesh load_ngon_mesh(const std::vector<const PolyMesh*>& meshes) {
   Tessellation t;
   std::vector<uint32_t> gidx;
   uint32_t face_id = 0;
-  for (const PolyMesh* p : meshes) {
-    const PolyMesh& pm = *p;
+  for (const MeshView* p : meshes) {
+    const MeshView& pm = *p;
     const uint32_t base = uint32_t(m.vertices.size());
     m.face_base.push_back(face_id);
     m.vertices.insert(m.vertices.end(), pm.positions.begin(), pm.positions.end());

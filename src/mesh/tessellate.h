@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "mesh/mesh_list.h"
 #include "prim/quantized_mesh.h"
 #include "slimrt/mesh.h"
 
@@ -121,7 +122,7 @@ struct NgonMesh {
 // Loads the meshes as the paper's section 3.1 does (see the top of this file). Faces with a
 // non-finite vertex are skipped and counted. Throws slim::Error if the scene exceeds 2^31 - 1
 // vertices or face entries (the face array stores vertex << 1 | flag in 32 bits).
-NgonMesh load_ngon_mesh(const std::vector<const PolyMesh*>& meshes);
+NgonMesh load_ngon_mesh(const MeshList& meshes);
 
 // Option T of the paper: every primitive becomes its triangles (fans (c, v_j, v_j+1); strips
 // keep their orientation: odd triangles are (v_t+1, v_t, v_t+2)), one triangle primitive each.

@@ -8,7 +8,7 @@
 
 namespace slim {
 
-FaceChunks face_chunks(const PolyMesh& m) {
+FaceChunks face_chunks(const MeshView& m) {
   const size_t nf = m.face_sizes.size();
   const size_t nc = (nf + FaceChunks::kFaces - 1) / FaceChunks::kFaces;
   FaceChunks fc;
@@ -36,10 +36,10 @@ struct MeshPlan {
 
 }  // namespace
 
-TriangleMesh triangulate_fan(const std::vector<const PolyMesh*>& meshes) {
+TriangleMesh triangulate_fan(const MeshList& meshes) {
   TriangleMesh out;
   uint64_t nv = 0, nt = 0;
-  for (const PolyMesh* m : meshes) {
+  for (const MeshView* m : meshes) {
     nv += m->positions.size();
     nt += m->fan_triangle_count();
     out.input_faces += m->face_count();
@@ -53,7 +53,7 @@ TriangleMesh triangulate_fan(const std::vector<const PolyMesh*>& meshes) {
   std::vector<MeshPlan> plan(meshes.size());
   uint64_t tri_total = 0;
   for (size_t g = 0; g < meshes.size(); ++g) {
-    const PolyMesh& m = *meshes[g];
+    const MeshView& m = *meshes[g];
     MeshPlan& p = plan[g];
     const size_t nvm = m.positions.size();
     p.finite = LargeArray<uint8_t>(nvm);
@@ -94,7 +94,7 @@ TriangleMesh triangulate_fan(const std::vector<const PolyMesh*>& meshes) {
   out.prim_ids.resize(tri_total);
   uint64_t vbase = 0;
   for (uint32_t g = 0; g < meshes.size(); ++g) {
-    const PolyMesh& m = *meshes[g];
+    const MeshView& m = *meshes[g];
     const MeshPlan& p = plan[g];
     const uint32_t base = uint32_t(vbase);
     out.vertex_base.push_back(base);

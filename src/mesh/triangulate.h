@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/large_array.h"
+#include "mesh/mesh_list.h"
 #include "slimrt/mesh.h"
 
 namespace slim {
@@ -32,12 +33,12 @@ struct FaceChunks {
   std::vector<uint64_t> corner;  // corner[k] = first corner of chunk k; one more at the end
   size_t count() const { return corner.empty() ? 0 : corner.size() - 1; }
 };
-FaceChunks face_chunks(const PolyMesh& m);
+FaceChunks face_chunks(const MeshView& m);
 
 // fn(chunk, f0, f1, corners) for each chunk of fc, in parallel (TBB): the chunk's faces are
 // [f0, f1) and `corners` points at face f0's first corner in m.face_indices.
 template <class Fn>
-void for_each_face_chunk(const PolyMesh& m, const FaceChunks& fc, Fn&& fn) {
+void for_each_face_chunk(const MeshView& m, const FaceChunks& fc, Fn&& fn) {
   tbb::parallel_for(size_t(0), fc.count(), [&](size_t ch) {
     const size_t f0 = ch * FaceChunks::kFaces;
     fn(ch, f0, std::min(m.face_sizes.size(), f0 + FaceChunks::kFaces),
@@ -55,6 +56,6 @@ inline bool face_finite(const uint8_t* finite, const uint32_t* idx, uint32_t n) 
 // Face (v0, v1, ..., vk) becomes (v0, v1, v2), (v0, v2, v3), ... Throws slim::Error if the
 // meshes hold more than 2^32 - 1 vertices or triangles in total. Runs in parallel (TBB), with the
 // same output as a serial loop over the faces.
-TriangleMesh triangulate_fan(const std::vector<const PolyMesh*>& meshes);
+TriangleMesh triangulate_fan(const MeshList& meshes);
 
 }  // namespace slim

@@ -604,29 +604,24 @@ class RaycastingScene {
           });
           return go_on;
         };
-      // The arrays of add_triangles become meshes for the time of the build only.
-      std::vector<slim::PolyMesh> views;
-      std::vector<const slim::PolyMesh*> meshes;
-      views.reserve(geometries_.size());
+      // The build reads the arrays of add_triangles in place, as views (3 corners per face: no
+      // face size array), and the loaded meshes through views of them.
+      std::vector<slim::MeshView> views;
+      views.reserve(geometries_.size() + 1);
       for (size_t i = 0; i < geometries_.size(); ++i) {
         const Geometry& g = geometries_[i];
         if (g.mesh) {
-          meshes.push_back(g.mesh.get());
+          views.emplace_back(*g.mesh);
           continue;
         }
-        slim::PolyMesh& m = views.emplace_back();
-        m.name = "geometry " + std::to_string(i);
-        m.positions.resize(g.vertex_count);
         static_assert(sizeof(slim::Vec3f) == 3 * sizeof(float));
-        if (g.vertex_count)
-          std::memcpy(static_cast<void*>(m.positions.data()), g.positions,
-                      g.vertex_count * sizeof(slim::Vec3f));
-        m.face_indices.assign(g.indices, g.indices + 3 * g.triangle_count);
-        m.face_sizes.assign(g.triangle_count, 3);
-        meshes.push_back(&m);
+        views.push_back(slim::MeshView::triangles(reinterpret_cast<const slim::Vec3f*>(g.positions),
+                                                  g.vertex_count, g.indices, g.triangle_count,
+                                                  "geometry " + std::to_string(i)));
       }
-      slim::PolyMesh empty;
-      if (meshes.empty()) meshes.push_back(&empty);
+      if (views.empty()) views.emplace_back();  // a scene without geometry: one empty mesh
+      std::vector<const slim::MeshView*> meshes;
+      for (const slim::MeshView& v : views) meshes.push_back(&v);
       try {
         scene_ = std::make_shared<const slim::Scene>(slim::Scene::build(meshes, opt));
       } catch (const slim::Cancelled&) {

@@ -102,26 +102,39 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   std::vector<uint32_t> child_step(k + 1, 0);  // first step of each child
   for (int c = 0, first = 0; c < k; first += int(counts[c]), ++c) {
     const uint32_t n = counts[c];
+    // cont[a][b]: how triangle b of the child continues triangle a (p = 3: it does not). Every
+    // start tries the same pairs, so each pair is tested once here (8 x 8 tests, not up to
+    // 8 x 8 x 8).
+    uint8_t cont_p[8][8], cont_e[8][8];
+    for (uint32_t a = 0; a < n; ++a)
+      for (uint32_t b = 0; b < n; ++b) {
+        cont_p[a][b] = 3;
+        cont_e[a][b] = 0;
+        if (a != b) continues(uint32_t(first) + a, uint32_t(first) + b, cont_p[a][b], cont_e[a][b]);
+      }
     Step best[8], cur[8];
     uint32_t best_restarts = ~0u;
     for (uint32_t start = 0; start < n; ++start) {
       bool used[8] = {};
       uint32_t restarts = 0;
+      uint32_t last = start;  // the child's index of cur[j - 1]
       cur[0] = {uint32_t(first) + start, 3, 0};
       used[start] = true;
       for (uint32_t j = 1; j < n; ++j) {
         Step next{0, 3, 0};
         bool found = false;
         for (uint32_t q = 0; q < n && !found; ++q)
-          if (!used[q] && continues(cur[j - 1].i, uint32_t(first) + q, next.p, next.e)) {
-            next.i = uint32_t(first) + q;
+          if (!used[q] && cont_p[last][q] != 3) {
+            next = {uint32_t(first) + q, cont_p[last][q], cont_e[last][q]};
             used[q] = found = true;
+            last = q;
           }
         if (!found) {
           for (uint32_t q = 0; q < n; ++q)
             if (!used[q]) {
               next = {uint32_t(first) + q, 3, 0};
               used[q] = true;
+              last = q;
               break;
             }
           restarts++;

@@ -102,44 +102,37 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   std::vector<uint32_t> child_step(k + 1, 0);  // first step of each child
   for (int c = 0, first = 0; c < k; first += int(counts[c]), ++c) {
     const uint32_t n = counts[c];
-    // cont[a][b]: how triangle b of the child continues triangle a (p = 3: it does not). Every
-    // start tries the same pairs, so each pair is tested once here (8 x 8 tests, not up to
-    // 8 x 8 x 8).
+    // How triangle b of the child continues triangle a: bit b of cont[a], with p and e in
+    // cont_p[a][b], cont_e[a][b]. Every start tries the same pairs, so each pair is tested once
+    // here (8 x 8 tests, not up to 8 x 8 x 8), and the search takes the lowest unused triangle
+    // that continues (else the lowest unused) as a bit scan.
+    uint32_t cont[8] = {};
     uint8_t cont_p[8][8], cont_e[8][8];
     for (uint32_t a = 0; a < n; ++a)
-      for (uint32_t b = 0; b < n; ++b) {
-        cont_p[a][b] = 3;
-        cont_e[a][b] = 0;
-        if (a != b) continues(uint32_t(first) + a, uint32_t(first) + b, cont_p[a][b], cont_e[a][b]);
-      }
+      for (uint32_t b = 0; b < n; ++b)
+        if (a != b &&
+            continues(uint32_t(first) + a, uint32_t(first) + b, cont_p[a][b], cont_e[a][b]))
+          cont[a] |= 1u << b;
+    const uint32_t all = (1u << n) - 1;
     Step best[8], cur[8];
     uint32_t best_restarts = ~0u;
     for (uint32_t start = 0; start < n; ++start) {
-      bool used[8] = {};
+      uint32_t used = 1u << start;
       uint32_t restarts = 0;
       uint32_t last = start;  // the child's index of cur[j - 1]
       cur[0] = {uint32_t(first) + start, 3, 0};
-      used[start] = true;
       for (uint32_t j = 1; j < n; ++j) {
-        Step next{0, 3, 0};
-        bool found = false;
-        for (uint32_t q = 0; q < n && !found; ++q)
-          if (!used[q] && cont_p[last][q] != 3) {
-            next = {uint32_t(first) + q, cont_p[last][q], cont_e[last][q]};
-            used[q] = found = true;
-            last = q;
-          }
-        if (!found) {
-          for (uint32_t q = 0; q < n; ++q)
-            if (!used[q]) {
-              next = {uint32_t(first) + q, 3, 0};
-              used[q] = true;
-              last = q;
-              break;
-            }
+        const uint32_t go = cont[last] & ~used;
+        if (go) {
+          const uint32_t q = uint32_t(__builtin_ctz(go));
+          cur[j] = {uint32_t(first) + q, cont_p[last][q], cont_e[last][q]};
+          last = q;
+        } else {
+          last = uint32_t(__builtin_ctz(all & ~used));
+          cur[j] = {uint32_t(first) + last, 3, 0};
           restarts++;
         }
-        cur[j] = next;
+        used |= 1u << last;
       }
       if (restarts < best_restarts) {
         best_restarts = restarts;
@@ -229,19 +222,28 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       if (starts.empty() || uint64_t(id - starts.back()) >= (uint64_t(1) << ob))
         starts.push_back(id);
   };
-  std::vector<uint32_t> starts;
+  // The sizing pass counts the runs and finds the last start without storing them. Once one run
+  // takes every id, a wider ob costs ntris bits more each and cannot win: the search stops there.
   uint64_t best_bits = ~uint64_t(0);
   uint32_t best_ob = 0;
   for (uint32_t ob = 0; ob <= 32; ++ob) {
-    runs_of(ob, starts);
-    if (starts.size() > 255) continue;
-    const uint64_t bits = starts.size() * uint64_t(bit_width(starts.back() - prim_base)) +
-                          ntris * uint64_t(bit_width(uint32_t(starts.size()) - 1) + ob);
+    uint64_t nstarts = 0;
+    uint32_t last = 0;
+    for (uint32_t id : ids)
+      if (nstarts == 0 || uint64_t(id - last) >= (uint64_t(1) << ob)) {
+        last = id;
+        nstarts++;
+      }
+    if (nstarts > 255) continue;
+    const uint64_t bits = nstarts * uint64_t(bit_width(last - prim_base)) +
+                          ntris * uint64_t(bit_width(uint32_t(nstarts) - 1) + ob);
     if (bits < best_bits) {
       best_bits = bits;
       best_ob = ob;
     }
+    if (nstarts == 1) break;
   }
+  std::vector<uint32_t> starts;
   runs_of(best_ob, starts);
   h.nruns = uint8_t(starts.size());
   h.ob = uint8_t(best_ob);

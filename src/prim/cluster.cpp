@@ -45,9 +45,13 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // Distinct vertex codes in order of first sight (duplicated input vertices with the same code
   // are one vertex), found through a small open-addressing table: the triangles' corners as
   // these provisional numbers, in child order.
+  // Capacities for the whole cluster up front: no vector here grows.
   std::vector<uint32_t> pcodes;  // 3 per provisional vertex
   std::vector<std::array<uint8_t, 3>> corners;
   std::vector<uint32_t> tris;  // input triangles in child order
+  pcodes.reserve(9 * size_t(ntris));
+  corners.reserve(ntris);
+  tris.reserve(ntris);
   uint16_t table[1024];
   std::fill(std::begin(table), std::end(table), uint16_t(0xffff));
   for (int c = 0; c < k; ++c)
@@ -99,6 +103,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     return false;
   };
   std::vector<Step> steps;
+  steps.reserve(ntris);
   std::vector<uint32_t> child_step(k + 1, 0);  // first step of each child
   for (int c = 0, first = 0; c < k; first += int(counts[c]), ++c) {
     const uint32_t n = counts[c];
@@ -148,6 +153,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   std::vector<int> number(nv, -1);
   std::vector<uint32_t> codes;  // 3 per vertex, final numbering
   std::vector<int32_t> refs;    // per reference: -1 new, else the distance back
+  codes.reserve(3 * size_t(nv));
+  refs.reserve(3 * size_t(ntris));
   std::vector<uint32_t> child_cnt(k, 0), child_refs(k + 1, 0);
   uint32_t cnt = 0, max_back = 0;
   auto reference = [&](uint8_t v) {
@@ -200,9 +207,11 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       if (anchor[a] >> 24) throw std::logic_error("cluster: lattice code beyond 24 bits");
   // Triangles in decode order, their ids.
   std::vector<uint32_t> order;
+  order.reserve(ntris);
   for (const Step& st : steps) order.push_back(tris[st.i]);
   uint32_t glo = ~0u, ghi = 0;
   std::vector<uint32_t> ids;
+  ids.reserve(ntris);
   for (uint32_t t : order) {
     ids.push_back(s.prim_ids[t]);
     glo = std::min(glo, s.geom_ids[t]);
@@ -244,6 +253,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     if (nstarts == 1) break;
   }
   std::vector<uint32_t> starts;
+  starts.reserve(ntris);
   runs_of(best_ob, starts);
   h.nruns = uint8_t(starts.size());
   h.ob = uint8_t(best_ob);

@@ -49,6 +49,7 @@ class ClusterReshaper {
     tbb::parallel_for(size_t(0), roots_.size(), [&](size_t c) {
       Local& l = local[c];
       std::vector<uint32_t> v;
+      v.reserve(count_[roots_[c].in]);
       collect(roots_[c].in, v);
       std::vector<Item> items(v.size());
       std::vector<Key> keys(v.size());
@@ -58,6 +59,8 @@ class ClusterReshaper {
         Item& x = items[k];
         x = {{b.lo.x, b.lo.y, b.lo.z, 0.0f}, {b.hi.x, b.hi.y, b.hi.z, 0.0f}, {m.x, m.y, m.z}, v[k]};
       }
+      l.nodes.reserve(2 * v.size());  // at most one leaf per triangle
+      l.prims.reserve(v.size());
       l.nodes.push_back({});
       // A whole scene of at most 8 triangles is one leaf (no box test, as the other formats).
       const bool whole = roots_[c].depth == 0 && items.size() <= 8;
@@ -78,7 +81,8 @@ class ClusterReshaper {
         l.block = cluster::encode(src_, prims, counts, k, false);
       }
     });
-    // Append them (serial), moving each block into the source's cache.
+    // Append them (serial), moving each block and its prims into the source's cache.
+    prims_.reserve(in_.prim_ids.size());
     for (size_t c = 0; c < roots_.size(); ++c) {
       Local& l = local[c];
       const uint32_t nbase = uint32_t(nodes_.size()) - 1, pbase = uint32_t(prims_.size());
@@ -90,8 +94,11 @@ class ClusterReshaper {
         else
           nodes_.push_back(n);
       }
-      if (!l.block.empty()) (*src_.encoded)[l.prims[0]] = {l.prims, std::move(l.block)};
       prims_.insert(prims_.end(), l.prims.begin(), l.prims.end());
+      if (!l.block.empty()) {
+        const uint32_t key = l.prims[0];
+        (*src_.encoded)[key] = {std::move(l.prims), std::move(l.block)};
+      }
       depth_ = std::max(depth_, roots_[c].depth + l.depth);
     }
     out.nodes = LargeArray<Bvh2Node>(nodes_.size());

@@ -104,7 +104,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   };
   std::vector<Step> steps;
   steps.reserve(ntris);
-  std::vector<uint32_t> child_step(k + 1, 0);  // first step of each child
+  uint32_t child_step[9] = {};  // first step of each child (k <= 8)
   for (int c = 0, first = 0; c < k; first += int(counts[c]), ++c) {
     const uint32_t n = counts[c];
     // How triangle b of the child continues triangle a: bit b of cont[a], with p and e in
@@ -150,12 +150,13 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   child_step[k] = uint32_t(steps.size());
 
   // Vertex numbers in order of first reference; each reference new or a distance back.
-  std::vector<int> number(nv, -1);
+  int number[255];  // nv <= 255
+  std::fill(number, number + nv, -1);
   std::vector<uint32_t> codes;  // 3 per vertex, final numbering
   std::vector<int32_t> refs;    // per reference: -1 new, else the distance back
   codes.reserve(3 * size_t(nv));
   refs.reserve(3 * size_t(ntris));
-  std::vector<uint32_t> child_cnt(k, 0), child_refs(k + 1, 0);
+  uint32_t child_cnt[8] = {}, child_refs[9] = {};
   uint32_t cnt = 0, max_back = 0;
   auto reference = [&](uint8_t v) {
     if (number[v] < 0) {
@@ -182,7 +183,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   child_refs[k] = uint32_t(refs.size());
   h.ib = uint8_t(bit_width(max_back));
   // Topology bits per child: 2 bits a restart, 4 a strip step, 1 or 1 + ib a reference.
-  std::vector<uint32_t> child_off(k + 1, 0);
+  uint32_t child_off[9] = {};
   for (int c = 0; c < k; ++c) {
     uint32_t b = 0;
     for (uint32_t j = child_step[c] + 1; j < child_step[c + 1]; ++j) b += steps[j].p == 3 ? 2 : 4;

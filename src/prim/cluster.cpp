@@ -111,13 +111,25 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     // cont_p[a][b], cont_e[a][b]. Every start tries the same pairs, so each pair is tested once
     // here (8 x 8 tests, not up to 8 x 8 x 8), and the search takes the lowest unused triangle
     // that continues (else the lowest unused) as a bit scan.
+    // A pair shares an edge only if two corners of b are corners of a. With each corner as bit
+    // (vertex mod 64) of a mask, a triangle b whose three bits differ shares two corners with a
+    // only if its mask and a's have two bits in common: other pairs skip the test.
+    uint64_t mask[8];
+    for (uint32_t a = 0; a < n; ++a) {
+      const auto& T = corners[uint32_t(first) + a];
+      mask[a] = (uint64_t(1) << (T[0] & 63)) | (uint64_t(1) << (T[1] & 63)) |
+                (uint64_t(1) << (T[2] & 63));
+    }
     uint32_t cont[8] = {};
     uint8_t cont_p[8][8], cont_e[8][8];
     for (uint32_t a = 0; a < n; ++a)
-      for (uint32_t b = 0; b < n; ++b)
-        if (a != b &&
-            continues(uint32_t(first) + a, uint32_t(first) + b, cont_p[a][b], cont_e[a][b]))
+      for (uint32_t b = 0; b < n; ++b) {
+        if (a == b) continue;
+        if (__builtin_popcountll(mask[b]) == 3 && __builtin_popcountll(mask[a] & mask[b]) < 2)
+          continue;
+        if (continues(uint32_t(first) + a, uint32_t(first) + b, cont_p[a][b], cont_e[a][b]))
           cont[a] |= 1u << b;
+      }
     const uint32_t all = (1u << n) - 1;
     Step best[8], cur[8];
     uint32_t best_restarts = ~0u;
@@ -239,11 +251,11 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   for (uint32_t ob = 0; ob <= 32; ++ob) {
     uint64_t nstarts = 0;
     uint32_t last = 0;
-    for (uint32_t id : ids)
-      if (nstarts == 0 || uint64_t(id - last) >= (uint64_t(1) << ob)) {
-        last = id;
-        nstarts++;
-      }
+    for (uint32_t id : ids) {
+      const bool start = nstarts == 0 || uint64_t(id - last) >= (uint64_t(1) << ob);
+      last = start ? id : last;
+      nstarts += start;
+    }
     if (nstarts > 255) continue;
     const uint64_t bits = nstarts * uint64_t(bit_width(last - prim_base)) +
                           ntris * uint64_t(bit_width(uint32_t(nstarts) - 1) + ob);

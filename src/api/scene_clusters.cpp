@@ -20,6 +20,7 @@
 
 #include "api/bvh_scene.h"
 #include "api/registry.h"
+#include "core/simd.h"
 #include "mesh/triangulate.h"
 #include "prim/cluster.h"
 #include "slimrt/clusters.h"
@@ -48,17 +49,22 @@ class ClusterReshaper {
     tbb::parallel_for(size_t(0), roots_.size(), [&](size_t c) {
       Local& l = local[c];
       std::vector<uint32_t> v;
+      v.reserve(count_[roots_[c].in]);
       collect(roots_[c].in, v);
       std::vector<Item> items(v.size());
+      std::vector<Key> keys(v.size());
       for (size_t k = 0; k < v.size(); ++k) {
-        items[k].prim = v[k];
-        items[k].box = tri_box(v[k]);
-        items[k].c = items[k].box.center();
+        const Box3f b = tri_box(v[k]);
+        const Vec3f m = b.center();
+        Item& x = items[k];
+        x = {{b.lo.x, b.lo.y, b.lo.z, 0.0f}, {b.hi.x, b.hi.y, b.hi.z, 0.0f}, {m.x, m.y, m.z}, v[k]};
       }
+      l.nodes.reserve(2 * v.size());  // at most one leaf per triangle
+      l.prims.reserve(v.size());
       l.nodes.push_back({});
       // A whole scene of at most 8 triangles is one leaf (no box test, as the other formats).
       const bool whole = roots_[c].depth == 0 && items.size() <= 8;
-      l.depth = split(l, items, 0, uint32_t(items.size()), 0, !whole);
+      l.depth = split(l, items, keys, 0, uint32_t(items.size()), 0, !whole);
       if (l.nodes.size() > 1) {  // a multi-leaf: its block, keyed by its first triangle
         // Children in depth-first order (the collapse's order): their prims are consecutive.
         const uint32_t* prims[8];
@@ -75,7 +81,8 @@ class ClusterReshaper {
         l.block = cluster::encode(src_, prims, counts, k, false);
       }
     });
-    // Append them (serial), moving each block into the source's cache.
+    // Append them (serial), moving each block and its prims into the source's cache.
+    prims_.reserve(in_.prim_ids.size());
     for (size_t c = 0; c < roots_.size(); ++c) {
       Local& l = local[c];
       const uint32_t nbase = uint32_t(nodes_.size()) - 1, pbase = uint32_t(prims_.size());
@@ -87,8 +94,11 @@ class ClusterReshaper {
         else
           nodes_.push_back(n);
       }
-      if (!l.block.empty()) (*src_.encoded)[l.prims[0]] = {l.prims, std::move(l.block)};
       prims_.insert(prims_.end(), l.prims.begin(), l.prims.end());
+      if (!l.block.empty()) {
+        const uint32_t key = l.prims[0];
+        (*src_.encoded)[key] = {std::move(l.prims), std::move(l.block)};
+      }
       depth_ = std::max(depth_, roots_[c].depth + l.depth);
     }
     out.nodes = LargeArray<Bvh2Node>(nodes_.size());
@@ -100,10 +110,33 @@ class ClusterReshaper {
   }
 
  private:
+  // A triangle of a cluster: its box as two 4-wide rows (lane 3 = 0) and its center.
   struct Item {
+    float lo[4], hi[4];
+    float c[3];
     uint32_t prim;
-    Box3f box;
-    Vec3f c;
+  };
+  // What the SAH sorts: an item's center and its index in the cluster's items. std::sort runs
+  // the same comparisons and moves whatever it sorts, so sorting these 16-byte keys and then
+  // moving the items once permutes them as sorting the items themselves would (ties included).
+  struct Key {
+    float c[3];
+    uint32_t i;
+  };
+  // A box grown item by item: min/max with the item first, the operand order of
+  // Box3f::extend's std::min/std::max (the same result for equal values, signed zeros too).
+  struct Box4 {
+    simd::vfloat4 lo{kInf}, hi{-kInf};
+    SLIM_INLINE void extend(const Item& x) {
+      lo = simd::min(simd::vfloat4::loadu(x.lo), lo);
+      hi = simd::max(simd::vfloat4::loadu(x.hi), hi);
+    }
+    SLIM_INLINE Box3f box3() const {
+      float l4[4], h4[4];
+      lo.storeu(l4);
+      hi.storeu(h4);
+      return Box3f({l4[0], l4[1], l4[2]}, {h4[0], h4[1], h4[2]});
+    }
   };
   struct Local {
     std::vector<Bvh2Node> nodes;
@@ -159,11 +192,12 @@ class ClusterReshaper {
   }
 
   // Items [b, e) of one cluster into local node idx; returns the subtree depth.
-  int split(Local& l, std::vector<Item>& it, uint32_t b, uint32_t e, uint32_t idx,
-            bool root) const {
+  int split(Local& l, std::vector<Item>& it, std::vector<Key>& keys, uint32_t b, uint32_t e,
+            uint32_t idx, bool root) const {
     const uint32_t n = e - b;
-    Box3f box;
-    for (uint32_t k = b; k < e; ++k) box.extend(it[k].box);
+    Box4 grown;
+    for (uint32_t k = b; k < e; ++k) grown.extend(it[k]);
+    const Box3f box = grown.box3();
     if (n == 1 || (n <= 8 && !root)) {
       l.nodes[idx] = {box, uint32_t(l.prims.size()), n};
       for (uint32_t k = b; k < e; ++k) l.prims.push_back(it[k].prim);
@@ -175,22 +209,26 @@ class ClusterReshaper {
     float best = kInf;
     int best_axis = 0;
     uint32_t best_left = unit;
-    Box3f right[kClusterMax + 1];
+    // right[nl / unit]: the box of the sorted items nl..n-1, for the left sizes nl allowed.
+    Box3f right[9];
+    Key* key = keys.data() + b;
+    for (uint32_t k = 0; k < n; ++k)
+      key[k] = {{it[b + k].c[0], it[b + k].c[1], it[b + k].c[2]}, b + k};
     for (int a = 0; a < 3; ++a) {
-      std::sort(it.begin() + b, it.begin() + e,
-                [a](const Item& x, const Item& y) { return x.c[a] < y.c[a]; });
-      right[n] = Box3f();
-      for (uint32_t k = n; k-- > 0;) {
-        right[k] = right[k + 1];
-        right[k].extend(it[b + k].box);
+      std::sort(key, key + n, [a](const Key& x, const Key& y) { return x.c[a] < y.c[a]; });
+      Box4 r;
+      for (uint32_t k = n; k-- > 1;) {
+        r.extend(it[key[k].i]);
+        if (k % unit == 0) right[k / unit] = r.box3();
       }
-      Box3f left;
+      Box4 grown_left;
       for (uint32_t k = 0; k + 1 < n; ++k) {
-        left.extend(it[b + k].box);
+        grown_left.extend(it[key[k].i]);
         const uint32_t nl = k + 1;
         if (nl % unit) continue;
+        const Box3f left = grown_left.box3();
         const float cost = left.half_area() * float((nl + 7) / 8) +
-                           right[nl].half_area() * float((n - nl + 7) / 8);
+                           right[nl / unit].half_area() * float((n - nl + 7) / 8);
         if (cost < best) {
           best = cost;
           best_axis = a;
@@ -198,14 +236,16 @@ class ClusterReshaper {
         }
       }
     }
-    std::sort(it.begin() + b, it.begin() + e, [best_axis](const Item& x, const Item& y) {
-      return x.c[best_axis] < y.c[best_axis];
-    });
+    std::sort(key, key + n,
+              [best_axis](const Key& x, const Key& y) { return x.c[best_axis] < y.c[best_axis]; });
+    Item sorted[kClusterMax];
+    for (uint32_t k = 0; k < n; ++k) sorted[k] = it[key[k].i];
+    std::copy(sorted, sorted + n, it.begin() + b);
     const uint32_t c = uint32_t(l.nodes.size());
     l.nodes[idx] = {box, c, 0};
     l.nodes.resize(c + 2);
-    const int d0 = split(l, it, b, b + best_left, c, false);
-    const int d1 = split(l, it, b + best_left, e, c + 1, false);
+    const int d0 = split(l, it, keys, b, b + best_left, c, false);
+    const int d1 = split(l, it, keys, b + best_left, e, c + 1, false);
     return 1 + std::max(d0, d1);
   }
 };

@@ -45,9 +45,13 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // Distinct vertex codes in order of first sight (duplicated input vertices with the same code
   // are one vertex), found through a small open-addressing table: the triangles' corners as
   // these provisional numbers, in child order.
+  // Capacities for the whole cluster up front: no vector here grows.
   std::vector<uint32_t> pcodes;  // 3 per provisional vertex
   std::vector<std::array<uint8_t, 3>> corners;
   std::vector<uint32_t> tris;  // input triangles in child order
+  pcodes.reserve(9 * size_t(ntris));
+  corners.reserve(ntris);
+  tris.reserve(ntris);
   uint16_t table[1024];
   std::fill(std::begin(table), std::end(table), uint16_t(0xffff));
   for (int c = 0; c < k; ++c)
@@ -99,34 +103,53 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     return false;
   };
   std::vector<Step> steps;
-  std::vector<uint32_t> child_step(k + 1, 0);  // first step of each child
+  steps.reserve(ntris);
+  uint32_t child_step[9] = {};  // first step of each child (k <= 8)
   for (int c = 0, first = 0; c < k; first += int(counts[c]), ++c) {
     const uint32_t n = counts[c];
+    // How triangle b of the child continues triangle a: bit b of cont[a], with p and e in
+    // cont_p[a][b], cont_e[a][b]. Every start tries the same pairs, so each pair is tested once
+    // here (8 x 8 tests, not up to 8 x 8 x 8), and the search takes the lowest unused triangle
+    // that continues (else the lowest unused) as a bit scan.
+    // A pair shares an edge only if two corners of b are corners of a. With each corner as bit
+    // (vertex mod 64) of a mask, a triangle b whose three bits differ shares two corners with a
+    // only if its mask and a's have two bits in common: other pairs skip the test.
+    uint64_t mask[8];
+    for (uint32_t a = 0; a < n; ++a) {
+      const auto& T = corners[uint32_t(first) + a];
+      mask[a] = (uint64_t(1) << (T[0] & 63)) | (uint64_t(1) << (T[1] & 63)) |
+                (uint64_t(1) << (T[2] & 63));
+    }
+    uint32_t cont[8] = {};
+    uint8_t cont_p[8][8], cont_e[8][8];
+    for (uint32_t a = 0; a < n; ++a)
+      for (uint32_t b = 0; b < n; ++b) {
+        if (a == b) continue;
+        if (__builtin_popcountll(mask[b]) == 3 && __builtin_popcountll(mask[a] & mask[b]) < 2)
+          continue;
+        if (continues(uint32_t(first) + a, uint32_t(first) + b, cont_p[a][b], cont_e[a][b]))
+          cont[a] |= 1u << b;
+      }
+    const uint32_t all = (1u << n) - 1;
     Step best[8], cur[8];
     uint32_t best_restarts = ~0u;
     for (uint32_t start = 0; start < n; ++start) {
-      bool used[8] = {};
+      uint32_t used = 1u << start;
       uint32_t restarts = 0;
+      uint32_t last = start;  // the child's index of cur[j - 1]
       cur[0] = {uint32_t(first) + start, 3, 0};
-      used[start] = true;
       for (uint32_t j = 1; j < n; ++j) {
-        Step next{0, 3, 0};
-        bool found = false;
-        for (uint32_t q = 0; q < n && !found; ++q)
-          if (!used[q] && continues(cur[j - 1].i, uint32_t(first) + q, next.p, next.e)) {
-            next.i = uint32_t(first) + q;
-            used[q] = found = true;
-          }
-        if (!found) {
-          for (uint32_t q = 0; q < n; ++q)
-            if (!used[q]) {
-              next = {uint32_t(first) + q, 3, 0};
-              used[q] = true;
-              break;
-            }
+        const uint32_t go = cont[last] & ~used;
+        if (go) {
+          const uint32_t q = uint32_t(__builtin_ctz(go));
+          cur[j] = {uint32_t(first) + q, cont_p[last][q], cont_e[last][q]};
+          last = q;
+        } else {
+          last = uint32_t(__builtin_ctz(all & ~used));
+          cur[j] = {uint32_t(first) + last, 3, 0};
           restarts++;
         }
-        cur[j] = next;
+        used |= 1u << last;
       }
       if (restarts < best_restarts) {
         best_restarts = restarts;
@@ -139,10 +162,13 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   child_step[k] = uint32_t(steps.size());
 
   // Vertex numbers in order of first reference; each reference new or a distance back.
-  std::vector<int> number(nv, -1);
+  int number[255];  // nv <= 255
+  std::fill(number, number + nv, -1);
   std::vector<uint32_t> codes;  // 3 per vertex, final numbering
   std::vector<int32_t> refs;    // per reference: -1 new, else the distance back
-  std::vector<uint32_t> child_cnt(k, 0), child_refs(k + 1, 0);
+  codes.reserve(3 * size_t(nv));
+  refs.reserve(3 * size_t(ntris));
+  uint32_t child_cnt[8] = {}, child_refs[9] = {};
   uint32_t cnt = 0, max_back = 0;
   auto reference = [&](uint8_t v) {
     if (number[v] < 0) {
@@ -169,7 +195,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   child_refs[k] = uint32_t(refs.size());
   h.ib = uint8_t(bit_width(max_back));
   // Topology bits per child: 2 bits a restart, 4 a strip step, 1 or 1 + ib a reference.
-  std::vector<uint32_t> child_off(k + 1, 0);
+  uint32_t child_off[9] = {};
   for (int c = 0; c < k; ++c) {
     uint32_t b = 0;
     for (uint32_t j = child_step[c] + 1; j < child_step[c + 1]; ++j) b += steps[j].p == 3 ? 2 : 4;
@@ -194,9 +220,11 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       if (anchor[a] >> 24) throw std::logic_error("cluster: lattice code beyond 24 bits");
   // Triangles in decode order, their ids.
   std::vector<uint32_t> order;
+  order.reserve(ntris);
   for (const Step& st : steps) order.push_back(tris[st.i]);
   uint32_t glo = ~0u, ghi = 0;
   std::vector<uint32_t> ids;
+  ids.reserve(ntris);
   for (uint32_t t : order) {
     ids.push_back(s.prim_ids[t]);
     glo = std::min(glo, s.geom_ids[t]);
@@ -216,19 +244,29 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       if (starts.empty() || uint64_t(id - starts.back()) >= (uint64_t(1) << ob))
         starts.push_back(id);
   };
-  std::vector<uint32_t> starts;
+  // The sizing pass counts the runs and finds the last start without storing them. Once one run
+  // takes every id, a wider ob costs ntris bits more each and cannot win: the search stops there.
   uint64_t best_bits = ~uint64_t(0);
   uint32_t best_ob = 0;
   for (uint32_t ob = 0; ob <= 32; ++ob) {
-    runs_of(ob, starts);
-    if (starts.size() > 255) continue;
-    const uint64_t bits = starts.size() * uint64_t(bit_width(starts.back() - prim_base)) +
-                          ntris * uint64_t(bit_width(uint32_t(starts.size()) - 1) + ob);
+    uint64_t nstarts = 0;
+    uint32_t last = 0;
+    for (uint32_t id : ids) {
+      const bool start = nstarts == 0 || uint64_t(id - last) >= (uint64_t(1) << ob);
+      last = start ? id : last;
+      nstarts += start;
+    }
+    if (nstarts > 255) continue;
+    const uint64_t bits = nstarts * uint64_t(bit_width(last - prim_base)) +
+                          ntris * uint64_t(bit_width(uint32_t(nstarts) - 1) + ob);
     if (bits < best_bits) {
       best_bits = bits;
       best_ob = ob;
     }
+    if (nstarts == 1) break;
   }
+  std::vector<uint32_t> starts;
+  starts.reserve(ntris);
   runs_of(best_ob, starts);
   h.nruns = uint8_t(starts.size());
   h.ob = uint8_t(best_ob);

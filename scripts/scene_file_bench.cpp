@@ -1,4 +1,4 @@
-// Scene file timings (issue 27, item 1): open time, time to the first hit, and MRays/s of the
+// Scene file timings: open time, time to the first hit, and MRays/s of the
 // mapped scene against the same scene built in memory, interleaved in one process.
 //
 //   g++ -O2 -std=c++20 -mavx2 -mfma -Iinclude scripts/scene_file_bench.cpp build/libslimrt.a \

@@ -1,4 +1,4 @@
-// Generated chunk sources (mesh/chunk_sources.h, issue 27 items 2 and 3): procedural tiles give
+// Generated chunk sources (mesh/chunk_sources.h): procedural tiles give
 // exactly the in-memory mesh's faces; subdivided meshes give every base triangle's 4^levels
 // triangles once, with the documented face ids, the base area, and a closed surface over a
 // closed base mesh (displaced or not).

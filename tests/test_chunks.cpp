@@ -1,4 +1,4 @@
-// Face streams (io/face_stream.h) and the spatial chunking (mesh/chunks.h) of issue 27 item 2:
+// Face streams (io/face_stream.h) and the spatial chunking (mesh/chunks.h):
 // every face of the in-memory load comes out of the stream, and lands in exactly one chunk, with
 // its face id and positions bit for bit; bad files give the same errors as slim::load.
 #include <gtest/gtest.h>

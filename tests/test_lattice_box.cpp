@@ -1,4 +1,4 @@
-// BuildOptions::lattice_box (issue 27 item 2, "one quantization lattice for the whole scene"): a
+// BuildOptions::lattice_box ("one quantization lattice for the whole scene"): a
 // mesh cut into spatial pieces whose pieces are built apart, each with the whole mesh's box, must
 // meet without a crack. For every lossy configuration of the registry and three meshes (torus:64,
 // terrain:64 and a closed quad scan from ../shared/data), cut into 4 pieces along staircase cuts:

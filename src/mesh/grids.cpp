@@ -91,18 +91,24 @@ std::vector<uint32_t> cell_adjacency(const Cells& cells, uint64_t vertex_count) 
     for (uint32_t c = r.begin(); c != r.end(); ++c) {
       for (int k = 0; k < 4; ++k) {
         const uint32_t a = cells.vertex(c, k), b = cells.vertex(c, (k + 1) & 3);
+        // The other cells with edge b -> a (opposite) or a -> b (same), found in the shorter of
+        // a's and b's lists (a cell's four vertices are distinct, so it stands once in each),
+        // stopping as soon as the edge cannot be an interior grid edge: a stack of coincident
+        // cells or a vertex of high valence costs one pass over the short list, not valence^2.
         uint32_t found = kNone;
         int opposite = 0, same = 0;
-        for (uint32_t e = start[b]; e < start[b + 1]; ++e) {  // edges b -> a of other cells
-          uint32_t c2 = entries[e] >> 2, k2 = entries[e] & 3;
-          if (c2 != c && cells.vertex(c2, int((k2 + 1) & 3)) == a) {
+        const bool from_b = start[b + 1] - start[b] <= start[a + 1] - start[a];
+        const uint32_t v = from_b ? b : a;
+        for (uint32_t e = start[v]; e < start[v + 1] && opposite <= 1 && same == 0; ++e) {
+          const uint32_t c2 = entries[e] >> 2, k2 = entries[e] & 3;
+          if (c2 == c) continue;
+          const uint32_t next = cells.vertex(c2, int((k2 + 1) & 3));
+          const uint32_t prev = cells.vertex(c2, int((k2 + 3) & 3));
+          if (from_b ? next == a : prev == b) {  // b -> a in c2: b is corner (k2 or k2 - 1)
             opposite++;
-            found = entries[e];
+            found = from_b ? entries[e] : 4 * c2 + ((k2 + 3) & 3);
           }
-        }
-        for (uint32_t e = start[a]; e < start[a + 1]; ++e) {  // edges a -> b of other cells
-          uint32_t c2 = entries[e] >> 2, k2 = entries[e] & 3;
-          if (c2 != c && cells.vertex(c2, int((k2 + 1) & 3)) == b) same++;
+          if (from_b ? prev == a : next == b) same++;  // a -> b in c2
         }
         if (opposite != 1 || same != 0) continue;
         const uint32_t c2 = found >> 2, k2 = found & 3;

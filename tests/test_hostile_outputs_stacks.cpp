@@ -404,6 +404,56 @@ TEST(HostileOutputsStacks, EveryConfigurationTracesAStackInBoundedTime) {
   }
 }
 
+// `n` quads on the unit square (the same vertices, and every other one through another vertex
+// with the same position), plus one quad below it at z = -1 that is no duplicate.
+PolyMesh coincident_quads(uint32_t n) {
+  PolyMesh m;
+  m.positions = {{0, 0, 0},  {1, 0, 0},  {1, 1, 0},  {0, 1, 0}, {0, 1, 0},
+                 {0, 0, -1}, {1, 0, -1}, {1, 1, -1}, {0, 1, -1}};
+  const uint32_t faces[2][4] = {{0, 1, 2, 3}, {0, 1, 2, 4}};
+  for (uint32_t i = 0; i < n; ++i) {
+    m.face_sizes.push_back(4);
+    m.face_indices.insert(m.face_indices.end(), faces[i % 2], faces[i % 2] + 4);
+  }
+  m.face_sizes.push_back(4);
+  m.face_indices.insert(m.face_indices.end(), {5, 6, 7, 8});
+  return m;
+}
+
+// The grid formats on a stack of coincident quads: with the leftovers as 2x2 sub-grids, the
+// 1-cell grids with the same corners are one sub-grid (the lowest face kept), as the leftover
+// triangles are; as triangles, the triangle formats' rule drops them. The quad below stays.
+TEST(HostileOutputsStacks, GridFormatsTraceAQuadStackInBoundedTime) {
+  const uint32_t n = 10000;
+  const PolyMesh stack = coincident_quads(n);
+  for (const ConfigInfo& c : configs()) {
+    const Leaf leaf = c.options.leaf;
+    if (leaf != Leaf::Grids && leaf != Leaf::LossyGrids && leaf != Leaf::SharedLossyGrids) continue;
+    for (const GridLeftovers lo : {GridLeftovers::Auto, GridLeftovers::Grids}) {
+      SCOPED_TRACE(c.name + (lo == GridLeftovers::Grids ? " --grid-leftovers grids" : ""));
+      BuildOptions opt = c.options;
+      opt.grid_leftovers = lo;
+      const Scene s = Scene::build(stack, opt);
+      EXPECT_EQ(detail_of(s, "duplicate_triangles"), double(2 * (n - 1)));
+      std::string why;
+      EXPECT_TRUE(s.validate(&why)) << why;
+      Ray ray;
+      ray.org = {0.25f, 0.75f, 1.0f};
+      ray.dir = {0, 0, -1};
+      TraversalCounters counters;
+      const Hit h = intersect_counted(s, ray, counters);
+      ASSERT_TRUE(h.valid());
+      EXPECT_FLOAT_EQ(h.t, 1.0f);
+      EXPECT_EQ(h.primID, 0u);
+      EXPECT_LE(counters.prim_tests, 64u);
+      ray.org = {0.25f, 0.75f, -0.5f};  // below the stack: the quad at z = -1
+      const Hit below = s.intersect(ray);
+      ASSERT_TRUE(below.valid());
+      EXPECT_EQ(below.primID, n);
+    }
+  }
+}
+
 // The CLI's summary line says that input was left out.
 TEST(HostileOutputsStacks, CliSummaryShowsDroppedDuplicates) {
   TempDir d{"slim_outputs"};

@@ -69,7 +69,8 @@ struct Prepared {
   bool tri_leaves = false;          // leftovers as Tri4v leaves (else as 2x2 sub-grids)
   std::vector<uint64_t> sub_start;  // per grid: first sub-grid (grids.size() + 1 entries)
   uint64_t leftover_cells = 0, leftover_tris = 0;
-  uint64_t duplicates = 0;  // leftover triangles dropped before they became 2x2 sub-grids
+  uint64_t duplicates = 0;  // leftover triangles (and 1-cell grids' triangles) dropped before
+                            // they became 2x2 sub-grids
   double seconds = 0;
 };
 
@@ -126,6 +127,87 @@ uint64_t drop_duplicate_leftovers(GridSet& gs, const MeshList& meshes) {
   return dropped;
 }
 
+// 1-cell grids about to become 2x2 sub-grids: a cell with exactly the corner positions (c00, c10,
+// c11, c01, in that order) and the diagonal of one kept before it is dropped, the one of the
+// lowest (mesh, face of A) kept, unless the dropped one's face of B were lower (then both stay),
+// so that a stack of coincident quads is one sub-grid, as drop_duplicate_leftovers does for
+// triangles. Compacts the 1-cell grids' vertices, corners, faces and flips (they are the last
+// grids of the set). Returns the number of triangles dropped (two per cell).
+uint64_t drop_duplicate_cells(GridSet& gs, const MeshList& meshes) {
+  const size_t first = gs.multi_cell_grids, n = gs.grids.size() - first;
+  if (n < 2) return 0;
+  auto corners = [&](const VertexGrid& g) {
+    std::array<uint32_t, 13> w;
+    const uint32_t v[4] = {gs.vertex(g, 0, 0), gs.vertex(g, 1, 0), gs.vertex(g, 1, 1),
+                           gs.vertex(g, 0, 1)};
+    for (int k = 0; k < 4; ++k) std::memcpy(&w[3 * k], &meshes[g.geom]->positions[v[k]], 12);
+    w[12] = gs.flipped(g, 0, 0) ? 1 : 0;
+    return w;
+  };
+  std::vector<std::pair<uint64_t, uint32_t>> order(n);  // (key, grid - first)
+  for (size_t i = 0; i < n; ++i) {
+    const std::array<uint32_t, 13> w = corners(gs.grids[first + i]);
+    order[i] = {nh_key(w.data(), sizeof(w)), uint32_t(i)};
+  }
+  auto face = [&](uint32_t i, int tri) {
+    const VertexGrid& g = gs.grids[first + i];
+    return std::pair{g.geom, gs.cell_face(g, 0, 0, tri)};
+  };
+  std::sort(order.begin(), order.end(), [&](const auto& x, const auto& y) {
+    return x.first != y.first ? x.first < y.first : face(x.second, 0) < face(y.second, 0);
+  });
+  std::vector<uint8_t> gone(n, 0);
+  std::vector<std::pair<std::array<uint32_t, 13>, uint32_t>> kept;  // corners, grid - first
+  uint64_t dropped = 0;
+  for (size_t i = 0; i < order.size();) {
+    size_t j = i;
+    kept.clear();
+    for (; j < order.size() && order[j].first == order[i].first; ++j) {
+      const uint32_t c = order[j].second;
+      const std::array<uint32_t, 13> w = corners(gs.grids[first + c]);
+      auto same =
+          std::find_if(kept.begin(), kept.end(), [&](const auto& k) { return k.first == w; });
+      if (same != kept.end() && face(c, 1) >= face(same->second, 1)) {
+        gone[c] = 1;
+        dropped += 2;
+      } else if (same == kept.end()) {
+        kept.emplace_back(w, c);
+      }
+    }
+    i = j;
+  }
+  if (!dropped) return 0;
+  // Rebuild the tail of the set from the kept 1-cell grids (4 vertices and 1 cell each).
+  const std::vector<VertexGrid> tail(gs.grids.begin() + first, gs.grids.end());
+  const uint64_t v0 = tail.front().vertex_offset, c0 = tail.front().cell_offset;
+  const std::vector<uint32_t> verts(gs.vertices.begin() + v0, gs.vertices.end());
+  const std::vector<uint32_t> corner_of(
+      gs.corner_of_vertex.empty() ? gs.corner_of_vertex.end() : gs.corner_of_vertex.begin() + v0,
+      gs.corner_of_vertex.end());
+  const std::vector<uint32_t> faces(gs.cell_faces.begin() + 2 * c0, gs.cell_faces.end());
+  const std::vector<uint8_t> flips(gs.cell_flip.begin() + c0, gs.cell_flip.end());
+  gs.grids.resize(first);
+  gs.vertices.resize(v0);
+  if (!gs.corner_of_vertex.empty()) gs.corner_of_vertex.resize(v0);
+  gs.cell_faces.resize(2 * c0);
+  gs.cell_flip.resize(c0);
+  for (size_t i = 0; i < n; ++i) {
+    if (gone[i]) continue;
+    VertexGrid g = tail[i];
+    const uint64_t vo = g.vertex_offset - v0, co = g.cell_offset - c0;
+    g.vertex_offset = gs.vertices.size();
+    g.cell_offset = gs.cell_flip.size();
+    gs.vertices.insert(gs.vertices.end(), verts.begin() + vo, verts.begin() + vo + 4);
+    if (!corner_of.empty())
+      gs.corner_of_vertex.insert(gs.corner_of_vertex.end(), corner_of.begin() + vo,
+                                 corner_of.begin() + vo + 4);
+    gs.cell_faces.insert(gs.cell_faces.end(), faces.begin() + 2 * co, faces.begin() + 2 * co + 2);
+    gs.cell_flip.push_back(flips[co]);
+    gs.grids.push_back(g);
+  }
+  return dropped;
+}
+
 Prepared prepare(const MeshList& meshes, const BuildOptions& opt) {
   const Layout layout = layout_of(opt);
   auto t0 = Clock::now();
@@ -162,7 +244,7 @@ Prepared prepare(const MeshList& meshes, const BuildOptions& opt) {
       gs.grids.resize(gs.multi_cell_grids);
     }
   } else {
-    p.duplicates = drop_duplicate_leftovers(gs, meshes);
+    p.duplicates = drop_duplicate_cells(gs, meshes) + drop_duplicate_leftovers(gs, meshes);
     append_triangle_grids(gs, /*with_corners=*/false);
     gs.triangles.clear();
   }

@@ -330,6 +330,21 @@ double detail_of(const Scene& s, const std::string& name) {
   return -1;
 }
 
+// The build left out `dropped` duplicate triangles and its structure is valid.
+void expect_dropped_and_valid(const Scene& s, double dropped) {
+  EXPECT_EQ(detail_of(s, "duplicate_triangles"), dropped);
+  std::string why;
+  EXPECT_TRUE(s.validate(&why)) << why;
+}
+
+// A ray straight down (-z) from (x, y, 1), counted.
+Hit down_from(const Scene& s, float x, float y, TraversalCounters& counters) {
+  Ray ray;
+  ray.org = {x, y, 1.0f};
+  ray.dir = {0, 0, -1};
+  return intersect_counted(s, ray, counters);
+}
+
 // The triangle formats keep one triangle of each group of exact duplicates (the one of the
 // lowest face index), so a ray through a stack of 10^5 tests a few triangles instead of all,
 // and its hit is the first face of the stack at the same t. A triangle facing the other way is
@@ -380,14 +395,9 @@ TEST(HostileOutputsStacks, EveryConfigurationTracesAStackInBoundedTime) {
     for (const bool mirror : {false, true}) {
       SCOPED_TRACE(name + (mirror ? " with a mirrored triangle" : ""));
       const Scene s = Scene::build(mirror ? mirrored : stack, opt);
-      EXPECT_EQ(detail_of(s, "duplicate_triangles"), double(n - 1));
-      std::string why;
-      EXPECT_TRUE(s.validate(&why)) << why;
-      Ray ray;
-      ray.org = {0.25f, 0.25f, 1.0f};
-      ray.dir = {0, 0, -1};
+      expect_dropped_and_valid(s, double(n - 1));
       TraversalCounters hit_counters;
-      const Hit h = intersect_counted(s, ray, hit_counters);
+      const Hit h = down_from(s, 0.25f, 0.25f, hit_counters);
       ASSERT_TRUE(h.valid());
       EXPECT_FLOAT_EQ(h.t, 1.0f);
       if (mirror)
@@ -396,9 +406,8 @@ TEST(HostileOutputsStacks, EveryConfigurationTracesAStackInBoundedTime) {
         EXPECT_EQ(h.primID, 0u);
       EXPECT_LE(hit_counters.prim_tests, 16u);
       // Inside the stack's box, beside the triangle: a miss after the same leaves.
-      ray.org = {0.75f, 0.75f, 1.0f};
       TraversalCounters miss_counters;
-      EXPECT_FALSE(intersect_counted(s, ray, miss_counters).valid());
+      EXPECT_FALSE(down_from(s, 0.75f, 0.75f, miss_counters).valid());
       EXPECT_LE(miss_counters.prim_tests, 16u);
     }
   }
@@ -434,19 +443,16 @@ TEST(HostileOutputsStacks, GridFormatsTraceAQuadStackInBoundedTime) {
       BuildOptions opt = c.options;
       opt.grid_leftovers = lo;
       const Scene s = Scene::build(stack, opt);
-      EXPECT_EQ(detail_of(s, "duplicate_triangles"), double(2 * (n - 1)));
-      std::string why;
-      EXPECT_TRUE(s.validate(&why)) << why;
-      Ray ray;
-      ray.org = {0.25f, 0.75f, 1.0f};
-      ray.dir = {0, 0, -1};
+      expect_dropped_and_valid(s, double(2 * (n - 1)));
       TraversalCounters counters;
-      const Hit h = intersect_counted(s, ray, counters);
+      const Hit h = down_from(s, 0.25f, 0.75f, counters);
       ASSERT_TRUE(h.valid());
       EXPECT_FLOAT_EQ(h.t, 1.0f);
       EXPECT_EQ(h.primID, 0u);
       EXPECT_LE(counters.prim_tests, 64u);
-      ray.org = {0.25f, 0.75f, -0.5f};  // below the stack: the quad at z = -1
+      Ray ray;  // below the stack: the quad at z = -1
+      ray.org = {0.25f, 0.75f, -0.5f};
+      ray.dir = {0, 0, -1};
       const Hit below = s.intersect(ray);
       ASSERT_TRUE(below.valid());
       EXPECT_EQ(below.primID, n);

@@ -74,6 +74,43 @@ struct Prepared {
   double seconds = 0;
 };
 
+// Marks the exact duplicates among n items: items are grouped by their key (key_of(i), a
+// std::array of words, compared exactly after grouping by its hash) and visited in the order
+// `before` within a group; an item whose key equals a kept item k's is marked gone when
+// dominated(i, k) (else it stays, and is no reference for later ones); other items are kept.
+// Returns one flag per item (1 = gone).
+template <class KeyOf, class Before, class Dominated>
+std::vector<uint8_t> exact_duplicates(size_t n, KeyOf&& key_of, Before&& before,
+                                      Dominated&& dominated) {
+  using Key = decltype(key_of(uint32_t(0)));
+  std::vector<std::pair<uint64_t, uint32_t>> order(n);  // (hash of the key, item)
+  for (size_t i = 0; i < n; ++i) {
+    const Key w = key_of(uint32_t(i));
+    order[i] = {nh_key(w.data(), sizeof(w)), uint32_t(i)};
+  }
+  std::sort(order.begin(), order.end(), [&](const auto& x, const auto& y) {
+    return x.first != y.first ? x.first < y.first : before(x.second, y.second);
+  });
+  std::vector<uint8_t> gone(n, 0);
+  std::vector<std::pair<Key, uint32_t>> kept;  // keys kept with the current hash, and their item
+  for (size_t i = 0; i < order.size();) {
+    size_t j = i;
+    kept.clear();
+    for (; j < order.size() && order[j].first == order[i].first; ++j) {
+      const uint32_t c = order[j].second;
+      const Key w = key_of(c);
+      auto same =
+          std::find_if(kept.begin(), kept.end(), [&](const auto& k) { return k.first == w; });
+      if (same == kept.end())
+        kept.emplace_back(w, c);
+      else if (dominated(c, same->second))
+        gone[c] = 1;
+    }
+    i = j;
+  }
+  return gone;
+}
+
 // Leftover triangles about to become 2x2 sub-grids: exact duplicates (the same positions in any
 // rotation, as TriangleSourceOps) are dropped, the one of the lowest (mesh, face) kept, so that
 // a stack of coincident triangles is one sub-grid and not a subtree that every ray through it
@@ -87,43 +124,19 @@ uint64_t drop_duplicate_leftovers(GridSet& gs, const MeshList& meshes) {
       std::memcpy(&w[3 * k], &meshes[t.geom]->positions[t.v[(k + r) % 3]], 12);
     return w;
   };
-  auto canonical = [&](const LeftoverTriangle& t) {
-    return std::min({rotation(t, 0), rotation(t, 1), rotation(t, 2)});
+  auto canonical = [&](uint32_t i) {
+    return std::min({rotation(tris[i], 0), rotation(tris[i], 1), rotation(tris[i], 2)});
   };
-  std::vector<std::pair<uint64_t, uint32_t>> order(tris.size());  // (key, index)
-  for (size_t i = 0; i < tris.size(); ++i) {
-    const std::array<uint32_t, 9> w = canonical(tris[i]);
-    order[i] = {nh_key(w.data(), sizeof(w)), uint32_t(i)};
-  }
   auto lower_face = [&](uint32_t a, uint32_t b) {
     return tris[a].geom != tris[b].geom ? tris[a].geom < tris[b].geom : tris[a].face < tris[b].face;
   };
-  std::sort(order.begin(), order.end(), [&](const auto& x, const auto& y) {
-    return x.first != y.first ? x.first < y.first : lower_face(x.second, y.second);
-  });
-  std::vector<uint8_t> gone(tris.size(), 0);
-  std::vector<std::array<uint32_t, 9>> kept;  // canonical positions kept with the current key
-  uint64_t dropped = 0;
-  for (size_t i = 0; i < order.size();) {
-    size_t j = i;
-    kept.clear();
-    for (; j < order.size() && order[j].first == order[i].first; ++j) {
-      const std::array<uint32_t, 9> w = canonical(tris[order[j].second]);
-      if (std::find(kept.begin(), kept.end(), w) != kept.end()) {
-        gone[order[j].second] = 1;
-        ++dropped;
-      } else {
-        kept.push_back(w);
-      }
-    }
-    i = j;
-  }
-  if (dropped) {
-    size_t out = 0;
-    for (size_t i = 0; i < tris.size(); ++i)
-      if (!gone[i]) tris[out++] = tris[i];
-    tris.resize(out);
-  }
+  const std::vector<uint8_t> gone =
+      exact_duplicates(tris.size(), canonical, lower_face, [](uint32_t, uint32_t) { return true; });
+  size_t out = 0;
+  for (size_t i = 0; i < tris.size(); ++i)
+    if (!gone[i]) tris[out++] = tris[i];
+  const uint64_t dropped = tris.size() - out;
+  tris.resize(out);
   return dropped;
 }
 
@@ -136,7 +149,8 @@ uint64_t drop_duplicate_leftovers(GridSet& gs, const MeshList& meshes) {
 uint64_t drop_duplicate_cells(GridSet& gs, const MeshList& meshes) {
   const size_t first = gs.multi_cell_grids, n = gs.grids.size() - first;
   if (n < 2) return 0;
-  auto corners = [&](const VertexGrid& g) {
+  auto corners = [&](uint32_t i) {
+    const VertexGrid& g = gs.grids[first + i];
     std::array<uint32_t, 13> w;
     const uint32_t v[4] = {gs.vertex(g, 0, 0), gs.vertex(g, 1, 0), gs.vertex(g, 1, 1),
                            gs.vertex(g, 0, 1)};
@@ -144,38 +158,14 @@ uint64_t drop_duplicate_cells(GridSet& gs, const MeshList& meshes) {
     w[12] = gs.flipped(g, 0, 0) ? 1 : 0;
     return w;
   };
-  std::vector<std::pair<uint64_t, uint32_t>> order(n);  // (key, grid - first)
-  for (size_t i = 0; i < n; ++i) {
-    const std::array<uint32_t, 13> w = corners(gs.grids[first + i]);
-    order[i] = {nh_key(w.data(), sizeof(w)), uint32_t(i)};
-  }
   auto face = [&](uint32_t i, int tri) {
     const VertexGrid& g = gs.grids[first + i];
     return std::pair{g.geom, gs.cell_face(g, 0, 0, tri)};
   };
-  std::sort(order.begin(), order.end(), [&](const auto& x, const auto& y) {
-    return x.first != y.first ? x.first < y.first : face(x.second, 0) < face(y.second, 0);
-  });
-  std::vector<uint8_t> gone(n, 0);
-  std::vector<std::pair<std::array<uint32_t, 13>, uint32_t>> kept;  // corners, grid - first
-  uint64_t dropped = 0;
-  for (size_t i = 0; i < order.size();) {
-    size_t j = i;
-    kept.clear();
-    for (; j < order.size() && order[j].first == order[i].first; ++j) {
-      const uint32_t c = order[j].second;
-      const std::array<uint32_t, 13> w = corners(gs.grids[first + c]);
-      auto same =
-          std::find_if(kept.begin(), kept.end(), [&](const auto& k) { return k.first == w; });
-      if (same != kept.end() && face(c, 1) >= face(same->second, 1)) {
-        gone[c] = 1;
-        dropped += 2;
-      } else if (same == kept.end()) {
-        kept.emplace_back(w, c);
-      }
-    }
-    i = j;
-  }
+  const std::vector<uint8_t> gone = exact_duplicates(
+      n, corners, [&](uint32_t a, uint32_t b) { return face(a, 0) < face(b, 0); },
+      [&](uint32_t c, uint32_t k) { return face(c, 1) >= face(k, 1); });
+  const uint64_t dropped = 2 * uint64_t(std::count(gone.begin(), gone.end(), uint8_t(1)));
   if (!dropped) return 0;
   // Rebuild the tail of the set from the kept 1-cell grids (4 vertices and 1 cell each).
   const std::vector<VertexGrid> tail(gs.grids.begin() + first, gs.grids.end());

@@ -324,15 +324,9 @@ PolyMesh coincident_stack(uint32_t n, bool mirrored) {
   return m;
 }
 
-double detail_of(const Scene& s, const std::string& name) {
-  for (const auto& [k, v] : stat_details(s))
-    if (k == name) return v;
-  return -1;
-}
-
 // The build left out `dropped` duplicate triangles and its structure is valid.
 void expect_dropped_and_valid(const Scene& s, double dropped) {
-  EXPECT_EQ(detail_of(s, "duplicate_triangles"), dropped);
+  EXPECT_EQ(stat_detail(s, "duplicate_triangles").value_or(-1), dropped);
   std::string why;
   EXPECT_TRUE(s.validate(&why)) << why;
 }
@@ -356,7 +350,7 @@ TEST(HostileOutputsStacks, CoincidentTrianglesAreTracedInBoundedTime) {
     SCOPED_TRACE(config);
     const BuildOptions opt = BuildOptions::from_config(config);
     const Scene s = Scene::build(stack, opt);
-    EXPECT_EQ(detail_of(s, "duplicate_triangles"), double(n - 1));
+    EXPECT_EQ(stat_detail(s, "duplicate_triangles").value_or(-1), double(n - 1));
     std::string why;
     EXPECT_TRUE(s.validate(&why)) << why;
     TraversalCounters c;
@@ -369,7 +363,7 @@ TEST(HostileOutputsStacks, CoincidentTrianglesAreTracedInBoundedTime) {
     EXPECT_EQ(h.primID, 0u);
     EXPECT_LE(c.prim_tests, 8u);
     const Scene sm = Scene::build(mirrored, opt);
-    EXPECT_EQ(detail_of(sm, "duplicate_triangles"), double(n - 1));
+    EXPECT_EQ(stat_detail(sm, "duplicate_triangles").value_or(-1), double(n - 1));
     EXPECT_TRUE(sm.validate(&why)) << why;
   }
 }

@@ -11,6 +11,7 @@
 #include <numeric>
 #include <optional>
 #include <random>
+#include <thread>
 
 #include "mesh/triangulate.h"
 #include "prim/cluster.h"
@@ -460,4 +461,50 @@ TEST(ClusterScene, DecodesItsOwnTrianglesRealMesh) {
   EXPECT_EQ(rows(*mine), rows(*rebuilt));
   // cluster-lossless intersects the input triangles: no geometry of its own to give.
   EXPECT_FALSE(Scene::build(m, BuildOptions::from_config("cluster-lossless")).decoded_triangles());
+}
+
+// The per-thread decode cache (cluster::DecodeCache) is keyed by the scene as well as by the
+// child's address: a scene built where a destroyed one was (the same sizes, so the allocator
+// hands out the same addresses) answers on a thread that traced the first as it answers on a
+// thread that never traced anything.
+TEST(ClusterScene, DecodeCacheNeverAnswersForAnotherScene) {
+  const PolyMesh first = load("torus:64");
+  PolyMesh second = first;
+  for (Vec3f& p : second.positions) p = p + Vec3f(0.3f, 0.0f, 0.0f);
+  const Box3f box = [&] {
+    Box3f b;
+    for (const PolyMesh* m : {&first, static_cast<const PolyMesh*>(&second)})
+      for (const Vec3f& p : m->positions) b.extend(p);
+    return b;
+  }();
+  std::vector<Ray> rays;
+  Rng rng(17);
+  for (int i = 0; i < 4000; ++i) rays.push_back(random_ray(rng, box));
+  for (const char* config : {"cluster", "cluster-lossless"}) {
+    SCOPED_TRACE(config);
+    const BuildOptions opt = BuildOptions::from_config(config);
+    auto trace = [&](const Scene& s) {
+      std::vector<Hit> h;
+      for (const Ray& r : rays) h.push_back(s.intersect(r));
+      return h;
+    };
+    std::vector<Hit> after;  // the second scene, traced right after the first on this thread
+    {
+      const Scene a = Scene::build(std::vector<const PolyMesh*>{&first}, opt);
+      trace(a);
+    }
+    const Scene b = Scene::build(std::vector<const PolyMesh*>{&second}, opt);
+    after = trace(b);
+    std::vector<Hit> fresh;  // the same scene on a thread that never traced
+    std::thread([&] { fresh = trace(b); }).join();
+    int hits = 0, differ = 0;
+    for (size_t i = 0; i < rays.size(); ++i) {
+      hits += fresh[i].valid();
+      differ += after[i].valid() != fresh[i].valid() ||
+                (fresh[i].valid() && (bits_of(after[i].t) != bits_of(fresh[i].t) ||
+                                      after[i].primID != fresh[i].primID));
+    }
+    EXPECT_GT(hits, 400);
+    EXPECT_EQ(differ, 0);
+  }
 }

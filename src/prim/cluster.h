@@ -481,8 +481,8 @@ struct DecodeCache {
   static constexpr uint32_t kLogEntries = 8;
   struct Entry {
     Decoded8 d;
-    const uint8_t* bits = nullptr;
-    uint64_t tag = 0;  // 0: empty (scene tags start at 1)
+    const uint8_t* bits = nullptr;  // the cluster's data (its header)
+    uint64_t tag = 0;               // 0: empty (scene tags start at 1)
     int child = -1;
   };
   Entry e[1u << kLogEntries];
@@ -679,21 +679,36 @@ struct ClusterLeaf {
   }
 
   // ---- traversal side ----
-  // The cluster's header, layout and anchors, read once per multi-leaf visit (traverse.h,
-  // HasMultiLeafView) for every child the ray enters.
-  using MultiLeafView = cluster::View;
-  static SLIM_INLINE cluster::View multileaf_view(const Context&, const uint8_t* data,
+  // What the children of one multi-leaf share, per visit (traverse.h, HasMultiLeafView): the
+  // thread's decode cache, and the cluster's header, layout and anchors, read at the first child
+  // the cache does not hold (or for the ids of a hit), not at all when it holds every child the
+  // ray enters.
+  struct MultiLeafView {
+    const uint8_t* data;
+    uint32_t children;
+    cluster::DecodeCache* cache;
+    mutable bool read = false;
+    mutable cluster::View v;
+    SLIM_INLINE const cluster::View& get() const {
+      if (!read) {
+        v = cluster::view<kLossless>(data, children);
+        read = true;
+      }
+      return v;
+    }
+  };
+  static SLIM_INLINE MultiLeafView multileaf_view(const Context&, const uint8_t* data,
                                                   uint32_t children) {
-    return cluster::view<kLossless>(data, children);
+    return {data, children, &cluster::decode_cache()};
   }
   template <bool kAny, class Stats>
-  static SLIM_INLINE bool intersect_in_view(const Context& ctx, const cluster::View& view, int i,
+  static SLIM_INLINE bool intersect_in_view(const Context& ctx, const MultiLeafView& view, int i,
                                             TravRay& ray, HitRecord& hit, Stats& st) {
     using namespace simd;
-    cluster::DecodeCache::Entry& en = cluster::decode_cache().slot(view.bits, i);
-    if (en.bits != view.bits || en.child != i || en.tag != ctx.cache_tag) {
-      cluster::decode_child<kLossless>(ctx.lattice, view, i, en.d);
-      en.bits = view.bits;
+    cluster::DecodeCache::Entry& en = view.cache->slot(view.data, i);
+    if (en.bits != view.data || en.child != i || en.tag != ctx.cache_tag) {
+      cluster::decode_child<kLossless>(ctx.lattice, view.get(), i, en.d);
+      en.bits = view.data;
       en.child = i;
       en.tag = ctx.cache_tag;
     }
@@ -718,7 +733,7 @@ struct ClusterLeaf {
       if (tt[j] < tt[l]) l = j;
     }
     uint32_t geom, prim;
-    cluster::decode_ids(view, uint32_t(d.first + l), geom, prim);
+    cluster::decode_ids(view.get(), uint32_t(d.first + l), geom, prim);
     auto p = [&](int k) { return Vec3f(d.v[k][0][l], d.v[k][1][l], d.v[k][2][l]); };
     detail::record_hit(tt[l], u[l], v[l], p(0), p(1), p(2), geom, prim, ray, hit);
     return true;

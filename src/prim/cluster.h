@@ -471,16 +471,68 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const View& v, int chil
     }
 #endif
 }
+// Child `child` of a cluster of `children` children (the multi-leaf's count).
+template <bool kLossless>
+SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, uint32_t children,
+                              int child, Decoded8& d) {
+  decode_child<kLossless>(lat, view<kLossless>(data, children), child, d);
+}
+
+// What the ids of a child's triangles take from the cluster's view (kept with a decoded child in
+// the DecodeCache, so that a hit in a cached child needs no view).
+struct ChildIds {
+  uint64_t ids = 0;   // bit of the child's first triangle's ids
+  uint64_t runs = 0;  // bit of the run starts
+  uint32_t prim_base = 0, geom_base = 0;
+  uint8_t idbits = 0, rb = 0, ob = 0, gb = 0, pb = 0;
+};
+// The ids of the triangles from triangle `first` of the cluster `v` on.
+SLIM_INLINE ChildIds child_ids(const View& v, uint32_t first) {
+  const ClusterHeader& h = v.h;
+  const Layout& L = v.L;
+  ChildIds c;
+  c.ids = L.ids + uint64_t(first) * L.idbits;
+  c.runs = L.runs;
+  c.prim_base = read_bits(v.bits, 3 * L.aw, h.bb);
+  c.geom_base = read_bits(v.bits, 3 * L.aw + h.bb, h.hb);
+  c.idbits = uint8_t(L.idbits);
+  c.rb = uint8_t(L.rb);
+  c.ob = h.ob;
+  c.gb = h.gb;
+  c.pb = h.pb;
+  return c;
+}
+// primID and geomID of triangle `first + l` (bits: the cluster's stream).
+SLIM_INLINE void decode_ids(const uint8_t* bits, const ChildIds& c, uint32_t l, uint32_t& geom,
+                            uint32_t& prim) {
+  const uint64_t pos = c.ids + uint64_t(l) * c.idbits;
+  const uint32_t run = read_bits(bits, pos, c.rb);
+  prim = c.prim_base + read_bits(bits, c.runs + uint64_t(run) * c.pb, c.pb) +
+         read_bits(bits, pos + c.rb, c.ob);
+  geom = c.geom_base + read_bits(bits, pos + c.rb + c.ob, c.gb);
+}
+// primID and geomID of triangle t of the cluster `v`.
+SLIM_INLINE void decode_ids(const View& v, uint32_t t, uint32_t& geom, uint32_t& prim) {
+  decode_ids(v.bits, child_ids(v, t), 0, geom, prim);
+}
+// primID and geomID of triangle t of a cluster of `children` children.
+template <bool kLossless>
+SLIM_INLINE void decode_ids(const uint8_t* data, uint32_t children, uint32_t t, uint32_t& geom,
+                            uint32_t& prim) {
+  decode_ids(view<kLossless>(data, children), t, geom, prim);
+}
+
 // The children a thread decoded last, so that the rays after it that enter the same child (the
 // neighbouring pixels of a tile, a bounce leaving the surface it hit) skip the strip and vertex
 // decoding. Direct-mapped on the child's address; a scene's tag (Context::cache_tag, unique per
 // scene for the process) is part of the key, so a later scene at the same addresses never reads
 // another's entries. One per tracing thread, allocated at its first cluster ray: 256 entries of
-// 352 bytes (88 KiB, within a 512 KiB L2), not scene memory.
+// 384 bytes (96 KiB, within a 512 KiB L2), not scene memory.
 struct DecodeCache {
   static constexpr uint32_t kLogEntries = 8;
   struct Entry {
     Decoded8 d;
+    ChildIds ids;                   // of d's triangles
     const uint8_t* bits = nullptr;  // the cluster's data (its header)
     uint64_t tag = 0;               // 0: empty (scene tags start at 1)
     int child = -1;
@@ -495,32 +547,6 @@ struct DecodeCache {
 DecodeCache& decode_cache();  // this thread's (cluster.cpp)
 // A tag no scene had before (1, 2, ...).
 uint64_t next_cache_tag();
-
-// Child `child` of a cluster of `children` children (the multi-leaf's count).
-template <bool kLossless>
-SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, uint32_t children,
-                              int child, Decoded8& d) {
-  decode_child<kLossless>(lat, view<kLossless>(data, children), child, d);
-}
-
-// primID and geomID of triangle t of the cluster `v`.
-SLIM_INLINE void decode_ids(const View& v, uint32_t t, uint32_t& geom, uint32_t& prim) {
-  const ClusterHeader& h = v.h;
-  const Layout& L = v.L;
-  const uint64_t pos = L.ids + uint64_t(t) * L.idbits;
-  const uint32_t run = read_bits(v.bits, pos, L.rb);
-  const uint32_t prim_base = read_bits(v.bits, 3 * L.aw, h.bb);
-  const uint32_t geom_base = read_bits(v.bits, 3 * L.aw + h.bb, h.hb);
-  prim = prim_base + read_bits(v.bits, L.runs + uint64_t(run) * h.pb, h.pb) +
-         read_bits(v.bits, pos + L.rb, h.ob);
-  geom = geom_base + read_bits(v.bits, pos + L.rb + h.ob, h.gb);
-}
-// primID and geomID of triangle t of a cluster of `children` children.
-template <bool kLossless>
-SLIM_INLINE void decode_ids(const uint8_t* data, uint32_t children, uint32_t t, uint32_t& geom,
-                            uint32_t& prim) {
-  decode_ids(view<kLossless>(data, children), t, geom, prim);
-}
 
 // Checks that `size` bytes at `data` hold a well-formed cluster of `children` children (header
 // fields in range, child sizes covering the triangles, every strip inside the topology stream with
@@ -707,7 +733,9 @@ struct ClusterLeaf {
     using namespace simd;
     cluster::DecodeCache::Entry& en = view.cache->slot(view.data, i);
     if (en.bits != view.data || en.child != i || en.tag != ctx.cache_tag) {
-      cluster::decode_child<kLossless>(ctx.lattice, view.get(), i, en.d);
+      const cluster::View& v = view.get();
+      cluster::decode_child<kLossless>(ctx.lattice, v, i, en.d);
+      en.ids = cluster::child_ids(v, uint32_t(en.d.first));
       en.bits = view.data;
       en.child = i;
       en.tag = ctx.cache_tag;
@@ -733,7 +761,7 @@ struct ClusterLeaf {
       if (tt[j] < tt[l]) l = j;
     }
     uint32_t geom, prim;
-    cluster::decode_ids(view.get(), uint32_t(d.first + l), geom, prim);
+    cluster::decode_ids(view.data + sizeof(ClusterHeader), en.ids, uint32_t(l), geom, prim);
     auto p = [&](int k) { return Vec3f(d.v[k][0][l], d.v[k][1][l], d.v[k][2][l]); };
     detail::record_hit(tt[l], u[l], v[l], p(0), p(1), p(2), geom, prim, ray, hit);
     return true;

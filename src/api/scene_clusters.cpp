@@ -52,7 +52,6 @@ class ClusterReshaper {
       v.reserve(count_[roots_[c].in]);
       collect(roots_[c].in, v);
       std::vector<Item> items(v.size());
-      std::vector<Key> keys(v.size());
       for (size_t k = 0; k < v.size(); ++k) {
         const Box3f b = tri_box(v[k]);
         const Vec3f m = b.center();
@@ -64,7 +63,7 @@ class ClusterReshaper {
       l.nodes.push_back({});
       // A whole scene of at most 8 triangles is one leaf (no box test, as the other formats).
       const bool whole = roots_[c].depth == 0 && items.size() <= 8;
-      l.depth = split(l, items, keys, 0, uint32_t(items.size()), 0, !whole);
+      l.depth = split(l, items, 0, uint32_t(items.size()), 0, !whole);
       if (l.nodes.size() > 1) {  // a multi-leaf: its block, keyed by its first triangle
         // Children in depth-first order (the collapse's order): their prims are consecutive.
         const uint32_t* prims[8];
@@ -116,11 +115,12 @@ class ClusterReshaper {
     float c[3];
     uint32_t prim;
   };
-  // What the SAH sorts: an item's center and its index in the cluster's items. std::sort runs
-  // the same comparisons and moves whatever it sorts, so sorting these 16-byte keys and then
-  // moving the items once permutes them as sorting the items themselves would (ties included).
+  // What the SAH sorts on one axis: an item's center on the axis and its position in the node.
+  // std::sort runs the same comparisons and moves whatever it sorts, so sorting these 8-byte keys
+  // and then moving the items once permutes them as sorting the items themselves would (ties
+  // included).
   struct Key {
-    float c[3];
+    float c;
     uint32_t i;
   };
   // A box grown item by item: min/max with the item first, the operand order of
@@ -191,9 +191,34 @@ class ClusterReshaper {
     upper(n.first + 1, c + 1, depth + 1);
   }
 
+  // The order std::sort gives `order` (positions in a node of n <= 16 items) by `centers` (the
+  // node's centers on one axis, by position): for n <= 16 std::sort is an insertion sort, which
+  // keeps equal centers in their order, so position k goes to its rank in the stable order,
+  // the centers below its own plus the equal ones before it, counted 8 at a time. Returns false
+  // (order unchanged) if the ranks are not 0..n-1 once each (a NaN center).
+  static bool stable_order(const float* centers, uint8_t* order, uint32_t n) {
+    alignas(32) float w[16] = {};  // the centers in `order`'s order, padded to 16
+    for (uint32_t k = 0; k < n; ++k) w[k] = centers[order[k]];
+    const simd::vfloat8 w0 = simd::vfloat8::load(w), w1 = simd::vfloat8::load(w + 8);
+    const uint32_t lanes = (1u << n) - 1;
+    uint8_t out[16];
+    uint32_t seen = 0;
+    for (uint32_t k = 0; k < n; ++k) {
+      const simd::vfloat8 c(w[k]);
+      const uint32_t below = ((w0 < c).mask() | (w1 < c).mask() << 8) & lanes;
+      const uint32_t equal_before = ((w0 == c).mask() | (w1 == c).mask() << 8) & ((1u << k) - 1);
+      const uint32_t r = uint32_t(simd::popcount(below) + simd::popcount(equal_before));
+      out[r & 15] = order[k];
+      seen |= 1u << r;
+    }
+    if (seen != lanes) return false;
+    std::copy(out, out + n, order);
+    return true;
+  }
+
   // Items [b, e) of one cluster into local node idx; returns the subtree depth.
-  int split(Local& l, std::vector<Item>& it, std::vector<Key>& keys, uint32_t b, uint32_t e,
-            uint32_t idx, bool root) const {
+  int split(Local& l, std::vector<Item>& it, uint32_t b, uint32_t e, uint32_t idx,
+            bool root) const {
     const uint32_t n = e - b;
     Box4 grown;
     for (uint32_t k = b; k < e; ++k) grown.extend(it[k]);
@@ -211,19 +236,30 @@ class ClusterReshaper {
     uint32_t best_left = unit;
     // right[nl / unit]: the box of the sorted items nl..n-1, for the left sizes nl allowed.
     Box3f right[9];
-    Key* key = keys.data() + b;
+    // The items are sorted by their centers on axis 0, that order by axis 1, that by axis 2, and
+    // that by the best axis: order[k] = the item (its position in the node) at place k.
+    alignas(32) float centers[3][kClusterMax];
     for (uint32_t k = 0; k < n; ++k)
-      key[k] = {{it[b + k].c[0], it[b + k].c[1], it[b + k].c[2]}, b + k};
+      for (int a = 0; a < 3; ++a) centers[a][k] = it[b + k].c[a];
+    uint8_t order[kClusterMax];
+    std::iota(order, order + n, uint8_t(0));
+    auto sort_by = [&](int a) {
+      if (n <= 16 && stable_order(centers[a], order, n)) return;
+      Key key[kClusterMax];
+      for (uint32_t k = 0; k < n; ++k) key[k] = {centers[a][order[k]], order[k]};
+      std::sort(key, key + n, [](const Key& x, const Key& y) { return x.c < y.c; });
+      for (uint32_t k = 0; k < n; ++k) order[k] = uint8_t(key[k].i);
+    };
     for (int a = 0; a < 3; ++a) {
-      std::sort(key, key + n, [a](const Key& x, const Key& y) { return x.c[a] < y.c[a]; });
+      sort_by(a);
       Box4 r;
       for (uint32_t k = n; k-- > 1;) {
-        r.extend(it[key[k].i]);
+        r.extend(it[b + order[k]]);
         if (k % unit == 0) right[k / unit] = r.box3();
       }
       Box4 grown_left;
       for (uint32_t k = 0; k + 1 < n; ++k) {
-        grown_left.extend(it[key[k].i]);
+        grown_left.extend(it[b + order[k]]);
         const uint32_t nl = k + 1;
         if (nl % unit) continue;
         const Box3f left = grown_left.box3();
@@ -236,16 +272,15 @@ class ClusterReshaper {
         }
       }
     }
-    std::sort(key, key + n,
-              [best_axis](const Key& x, const Key& y) { return x.c[best_axis] < y.c[best_axis]; });
+    sort_by(best_axis);
     Item sorted[kClusterMax];
-    for (uint32_t k = 0; k < n; ++k) sorted[k] = it[key[k].i];
+    for (uint32_t k = 0; k < n; ++k) sorted[k] = it[b + order[k]];
     std::copy(sorted, sorted + n, it.begin() + b);
     const uint32_t c = uint32_t(l.nodes.size());
     l.nodes[idx] = {box, c, 0};
     l.nodes.resize(c + 2);
-    const int d0 = split(l, it, keys, b, b + best_left, c, false);
-    const int d1 = split(l, it, keys, b + best_left, e, c + 1, false);
+    const int d0 = split(l, it, b, b + best_left, c, false);
+    const int d1 = split(l, it, b + best_left, e, c + 1, false);
     return 1 + std::max(d0, d1);
   }
 };

@@ -80,30 +80,40 @@ class ClusterReshaper {
         l.block = cluster::encode(src_, prims, counts, k, false);
       }
     });
-    // Append them (serial), moving each block and its prims into the source's cache.
-    prims_.reserve(in_.prim_ids.size());
+    // Where each cluster's nodes (but its root, whose slot upper() left) and prims go: after the
+    // nodes above the clusters and those of the clusters before it, as appending them one by one
+    // would place them. Then each cluster is copied there (in parallel), and its block and prims
+    // move into the source's cache.
+    std::vector<uint32_t> nbase(roots_.size() + 1), pbase(roots_.size() + 1);
+    nbase[0] = uint32_t(nodes_.size());
+    pbase[0] = 0;
+    size_t blocks = 0;
     for (size_t c = 0; c < roots_.size(); ++c) {
-      Local& l = local[c];
-      const uint32_t nbase = uint32_t(nodes_.size()) - 1, pbase = uint32_t(prims_.size());
+      const Local& l = local[c];
+      nbase[c + 1] = nbase[c] + uint32_t(l.nodes.size()) - 1;
+      pbase[c + 1] = pbase[c] + uint32_t(l.prims.size());
+      blocks += !l.block.empty();
+      depth_ = std::max(depth_, roots_[c].depth + l.depth);
+    }
+    out.nodes = LargeArray<Bvh2Node>(nbase.back());
+    std::copy(nodes_.begin(), nodes_.end(), out.nodes.data());
+    out.prim_ids = LargeArray<uint32_t>(pbase.back());
+    tbb::parallel_for(size_t(0), roots_.size(), [&](size_t c) {
+      const Local& l = local[c];
+      const uint32_t node_base = nbase[c] - 1;  // local node k >= 1 goes to node_base + k
       for (size_t k = 0; k < l.nodes.size(); ++k) {
         Bvh2Node n = l.nodes[k];
-        n.first += n.is_leaf() ? pbase : nbase;
-        if (k == 0)
-          nodes_[roots_[c].out] = n;
-        else
-          nodes_.push_back(n);
+        n.first += n.is_leaf() ? pbase[c] : node_base;
+        out.nodes[k == 0 ? roots_[c].out : node_base + k] = n;
       }
-      prims_.insert(prims_.end(), l.prims.begin(), l.prims.end());
+      std::copy(l.prims.begin(), l.prims.end(), out.prim_ids.data() + pbase[c]);
+    });
+    src_.encoded->reserve(src_.encoded->size() + blocks);
+    for (Local& l : local)
       if (!l.block.empty()) {
         const uint32_t key = l.prims[0];
         (*src_.encoded)[key] = {std::move(l.prims), std::move(l.block)};
       }
-      depth_ = std::max(depth_, roots_[c].depth + l.depth);
-    }
-    out.nodes = LargeArray<Bvh2Node>(nodes_.size());
-    std::copy(nodes_.begin(), nodes_.end(), out.nodes.data());
-    out.prim_ids = LargeArray<uint32_t>(prims_.size());
-    std::copy(prims_.begin(), prims_.end(), out.prim_ids.data());
     out.depth = depth_;
     return out;
   }
@@ -151,8 +161,7 @@ class ClusterReshaper {
   const Bvh2& in_;
   ClusterSource& src_;
   std::vector<uint32_t> count_;
-  std::vector<Bvh2Node> nodes_;
-  std::vector<uint32_t> prims_;
+  std::vector<Bvh2Node> nodes_;  // the nodes above the clusters
   std::vector<Root> roots_;
   int depth_ = 0;
 

@@ -3,10 +3,16 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <iterator>
 #include <stdexcept>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "core/large_array.h"
 
 namespace slim::cluster {
 
@@ -379,9 +385,16 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
 Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_t ntris,
                    double rel_error, bool lossless, const Box3f& lattice_box) {
   constexpr uint32_t kLatticeMax = (1u << 24) - 1;
+  constexpr size_t kGrain = 4096;  // vertices or corners a task
   Quantized z;
+  // The marks, the codes and each vertex's error are computed in parallel; the box and the error
+  // sums run in vertex order, as serial loops would give them (bit-identical figures).
   std::vector<uint8_t> used(nv, 0);
-  for (size_t i = 0; i < 3 * ntris; ++i) used[tris[i]] = 1;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, 3 * ntris, kGrain),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t i = r.begin(); i < r.end(); ++i)
+                        std::atomic_ref<uint8_t>(used[tris[i]]).store(1, std::memory_order_relaxed);
+                    });
   const bool given = !lattice_box.empty();
   Box3f box = lattice_box;
   if (!given)
@@ -397,46 +410,54 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
   z.diag = std::sqrt(d2);
   z.codes.assign(3 * nv, 0);
   z.decoded.assign(vertices, vertices + nv);
+  double step = 1.0;
   if (!lossless) {
     if (!(rel_error > 0.0) || !std::isfinite(rel_error))
       throw Error(
           "cluster: the error bound (BuildOptions::cluster_error) must be positive and finite");
     // Rounding to the nearest lattice point moves a vertex by at most step * sqrt(3) / 2.
     const double bound = rel_error * z.diag;
-    double step = bound > 0 ? std::exp2(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) : 1.0;
+    step = bound > 0 ? std::exp2(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) : 1.0;
     while (ext / step > double(kLatticeMax) - 1) {
       step *= 2;
       z.coarsened = true;
     }
     z.lattice.step = float(step);
     for (int a = 0; a < 3; ++a) z.lattice.origin[a] = ntris || given ? box.lo[a] : 0.0f;
-    for (size_t i = 0; i < nv; ++i) {
-      if (!used[i]) continue;
-      for (int a = 0; a < 3; ++a) {
-        const double q =
-            std::nearbyint((double(vertices[i][a]) - double(z.lattice.origin[a])) / step);
-        const uint32_t qi = uint32_t(std::clamp(q, 0.0, double(kLatticeMax)));
-        z.codes[3 * i + a] = qi;
-        z.decoded[i][a] = lattice_coord(z.lattice, a, qi);
-      }
-    }
-  } else {
-    for (size_t i = 0; i < nv; ++i)
-      if (used[i])
-        for (int a = 0; a < 3; ++a) z.codes[3 * i + a] = float_key(vertices[i][a]);
   }
+  // Per used vertex: its distance to its input position, and that squared.
+  LargeArray<double> err(2 * nv);  // huge pages: the first touch of 4 KB pages is slow here
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, nv, kGrain), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          if (!used[i]) continue;
+          for (int a = 0; a < 3; ++a) {
+            if (lossless) {
+              z.codes[3 * i + a] = float_key(vertices[i][a]);
+              continue;
+            }
+            const double q =
+                std::nearbyint((double(vertices[i][a]) - double(z.lattice.origin[a])) / step);
+            const uint32_t qi = uint32_t(std::clamp(q, 0.0, double(kLatticeMax)));
+            z.codes[3 * i + a] = qi;
+            z.decoded[i][a] = lattice_coord(z.lattice, a, qi);
+          }
+          double e2 = 0;
+          for (int a = 0; a < 3; ++a) {
+            const double d = double(z.decoded[i][a]) - double(vertices[i][a]);
+            e2 += d * d;
+          }
+          err[2 * i] = std::sqrt(e2);
+          err[2 * i + 1] = e2;
+        }
+      });
   double sum_sq = 0, sum = 0;
   uint64_t n = 0;
   for (size_t i = 0; i < nv; ++i) {
     if (!used[i]) continue;
-    double e2 = 0;
-    for (int a = 0; a < 3; ++a) {
-      const double d = double(z.decoded[i][a]) - double(vertices[i][a]);
-      e2 += d * d;
-    }
-    z.max_error = std::max(z.max_error, std::sqrt(e2));
-    sum += std::sqrt(e2);
-    sum_sq += e2;
+    z.max_error = std::max(z.max_error, err[2 * i]);
+    sum += err[2 * i];
+    sum_sq += err[2 * i + 1];
     n++;
   }
   z.rms_error = n ? std::sqrt(sum_sq / double(n)) : 0.0;

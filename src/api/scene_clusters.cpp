@@ -78,6 +78,10 @@ class ClusterReshaper {
               break;
             }
         l.block = cluster::encode(src_, prims, counts, k, false);
+      } else if (l.prims.size() == 1 && src_.side_offsets) {  // an isolated triangle
+        const uint32_t* prims = l.prims.data();
+        const uint32_t one = 1;
+        l.record = cluster::encode(src_, &prims, &one, 1, false);
       }
     });
     // Where each cluster's nodes (but its root, whose slot upper() left) and prims go: after the
@@ -109,11 +113,17 @@ class ClusterReshaper {
       std::copy(l.prims.begin(), l.prims.end(), out.prim_ids.data() + pbase[c]);
     });
     src_.encoded->reserve(src_.encoded->size() + blocks);
-    for (Local& l : local)
+    for (Local& l : local) {
+      if (!l.record
+               .empty()) {  // into the side arena in cluster order (ClusterSource::side_offsets)
+        (*src_.side_offsets)[l.prims[0]] = src_.side->size();
+        src_.side->insert(src_.side->end(), l.record.begin(), l.record.end());
+      }
       if (!l.block.empty()) {
         const uint32_t key = l.prims[0];
         (*src_.encoded)[key] = {std::move(l.prims), std::move(l.block)};
       }
+    }
     out.depth = depth_;
     return out;
   }
@@ -152,6 +162,7 @@ class ClusterReshaper {
     std::vector<Bvh2Node> nodes;
     std::vector<uint32_t> prims;
     std::vector<uint8_t> block;
+    std::vector<uint8_t> record;  // an isolated triangle's side-arena record
     int depth = 0;
   };
   struct Root {
@@ -361,6 +372,8 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   src.stats = &est;
   std::unordered_map<uint32_t, std::pair<std::vector<uint32_t>, std::vector<uint8_t>>> encoded;
   src.encoded = &encoded;
+  std::unordered_map<uint32_t, uint64_t> side_offsets;
+  src.side_offsets = &side_offsets;
   BuildOptions o = opt;
   o.nodes = Nodes::CompressedLeaf;
   o.max_leaf_size = 8;

@@ -48,10 +48,11 @@ class ClusterReshaper {
     std::vector<Local> local(roots_.size());
     tbb::parallel_for(size_t(0), roots_.size(), [&](size_t c) {
       Local& l = local[c];
-      std::vector<uint32_t> v;
-      v.reserve(count_[roots_[c].in]);
+      thread_local std::vector<uint32_t> v;  // a thread's own, kept between clusters
+      thread_local std::vector<Item> items;
+      v.clear();
       collect(roots_[c].in, v);
-      std::vector<Item> items(v.size());
+      items.resize(v.size());
       for (size_t k = 0; k < v.size(); ++k) {
         const Box3f b = tri_box(v[k]);
         const Vec3f m = b.center();

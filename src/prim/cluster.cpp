@@ -52,9 +52,13 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // are one vertex), found through a small open-addressing table: the triangles' corners as
   // these provisional numbers, in child order.
   // Capacities for the whole cluster up front: no vector here grows.
-  std::vector<uint32_t> pcodes;  // 3 per provisional vertex
-  std::vector<std::array<uint8_t, 3>> corners;
-  std::vector<uint32_t> tris;  // input triangles in child order
+  // The scratch vectors are a thread's own and kept between calls: no allocation but the first.
+  thread_local std::vector<uint32_t> pcodes;  // 3 per provisional vertex
+  thread_local std::vector<std::array<uint8_t, 3>> corners;
+  thread_local std::vector<uint32_t> tris;  // input triangles in child order
+  pcodes.clear();
+  corners.clear();
+  tris.clear();
   pcodes.reserve(9 * size_t(ntris));
   corners.reserve(ntris);
   tris.reserve(ntris);
@@ -108,7 +112,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
         }
     return false;
   };
-  std::vector<Step> steps;
+  thread_local std::vector<Step> steps;
+  steps.clear();
   steps.reserve(ntris);
   uint32_t child_step[9] = {};  // first step of each child (k <= 8)
   for (int c = 0, first = 0; c < k; first += int(counts[c]), ++c) {
@@ -170,8 +175,10 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // Vertex numbers in order of first reference; each reference new or a distance back.
   int number[255];  // nv <= 255
   std::fill(number, number + nv, -1);
-  std::vector<uint32_t> codes;  // 3 per vertex, final numbering
-  std::vector<int32_t> refs;    // per reference: -1 new, else the distance back
+  thread_local std::vector<uint32_t> codes;  // 3 per vertex, final numbering
+  thread_local std::vector<int32_t> refs;    // per reference: -1 new, else the distance back
+  codes.clear();
+  refs.clear();
   codes.reserve(3 * size_t(nv));
   refs.reserve(3 * size_t(ntris));
   uint32_t child_cnt[8] = {}, child_refs[9] = {};
@@ -225,11 +232,13 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     for (int a = 0; a < 3; ++a)
       if (anchor[a] >> 24) throw std::logic_error("cluster: lattice code beyond 24 bits");
   // Triangles in decode order, their ids.
-  std::vector<uint32_t> order;
+  thread_local std::vector<uint32_t> order;
+  order.clear();
   order.reserve(ntris);
   for (const Step& st : steps) order.push_back(tris[st.i]);
   uint32_t glo = ~0u, ghi = 0;
-  std::vector<uint32_t> ids;
+  thread_local std::vector<uint32_t> ids;
+  ids.clear();
   ids.reserve(ntris);
   for (uint32_t t : order) {
     ids.push_back(s.prim_ids[t]);
@@ -271,7 +280,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     }
     if (nstarts == 1) break;
   }
-  std::vector<uint32_t> starts;
+  thread_local std::vector<uint32_t> starts;
   starts.reserve(ntris);
   runs_of(best_ob, starts);
   h.nruns = uint8_t(starts.size());

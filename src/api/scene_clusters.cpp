@@ -152,6 +152,10 @@ class ClusterReshaper {
       lo = simd::min(simd::vfloat4::loadu(x.lo), lo);
       hi = simd::max(simd::vfloat4::loadu(x.hi), hi);
     }
+    SLIM_INLINE void extend(const Box4& o) {
+      lo = simd::min(o.lo, lo);
+      hi = simd::max(o.hi, hi);
+    }
     SLIM_INLINE Box3f box3() const {
       float l4[4], h4[4];
       lo.storeu(l4);
@@ -273,17 +277,7 @@ class ClusterReshaper {
     };
     for (int a = 0; a < 3; ++a) {
       sort_by(a);
-      Box4 r;
-      for (uint32_t k = n; k-- > 1;) {
-        r.extend(it[b + order[k]]);
-        if (k % unit == 0) right[k / unit] = r.box3();
-      }
-      Box4 grown_left;
-      for (uint32_t k = 0; k + 1 < n; ++k) {
-        grown_left.extend(it[b + order[k]]);
-        const uint32_t nl = k + 1;
-        if (nl % unit) continue;
-        const Box3f left = grown_left.box3();
+      auto consider = [&](uint32_t nl, const Box3f& left) {
         const float cost = left.half_area() * float((nl + 7) / 8) +
                            right[nl / unit].half_area() * float((n - nl + 7) / 8);
         if (cost < best) {
@@ -291,6 +285,35 @@ class ClusterReshaper {
           best_axis = a;
           best_left = nl;
         }
+      };
+      if (unit == 8) {
+        // The left parts and right rests are unions of the boxes of the sorted items by 8s:
+        // min and max do not depend on the order they meet the items in, so these are the
+        // boxes of sweeps item by item (up to the sign of a zero, which no cost compares).
+        const uint32_t nb = (n + 7) / 8;
+        Box4 part[8];
+        for (uint32_t k = 0; k < n; ++k) part[k / 8].extend(it[b + order[k]]);
+        Box4 r;
+        for (uint32_t j = nb; j-- > 1;) {
+          r.extend(part[j]);
+          right[j] = r.box3();
+        }
+        Box4 grown_left;
+        for (uint32_t j = 0; j + 1 < nb; ++j) {
+          grown_left.extend(part[j]);
+          consider(8 * (j + 1), grown_left.box3());
+        }
+        continue;
+      }
+      Box4 r;
+      for (uint32_t k = n; k-- > 1;) {
+        r.extend(it[b + order[k]]);
+        right[k] = r.box3();
+      }
+      Box4 grown_left;
+      for (uint32_t k = 0; k + 1 < n; ++k) {
+        grown_left.extend(it[b + order[k]]);
+        consider(k + 1, grown_left.box3());
       }
     }
     sort_by(best_axis);

@@ -518,3 +518,61 @@ TEST(ClusterScene, DecodeCacheNeverAnswersForAnotherScene) {
     EXPECT_NEAR(t[1], 3.0f, 1e-4f);  // not the first scene's triangle at the same address
   }
 }
+
+// The scene's sections (its file past the header, which holds the options and the build time)
+// do not depend on the build's threads: the isolated one-triangle clusters' records go into the
+// side arena in cluster order, not in the order the collapse's tasks reach them.
+TEST(ClusterScene, SameBytesWithAnyThreadCount) {
+  // Four tori far apart (subtrees large enough for the collapse's parallel tasks), each with
+  // small triangles scattered around it: one-triangle clusters inside each torus's subtree.
+  const PolyMesh torus = load("torus:128");
+  Box3f tb;
+  for (const Vec3f& p : torus.positions) tb.extend(p);
+  const float r = std::max({tb.hi.x - tb.lo.x, tb.hi.y - tb.lo.y, tb.hi.z - tb.lo.z});
+  PolyMesh m;
+  std::mt19937 rng(7);
+  std::normal_distribution<float> g(0.0f, 1.0f);
+  for (int copy = 0; copy < 4; ++copy) {
+    const Vec3f shift(10.0f * r * float(copy), 0, 0);
+    uint32_t base = uint32_t(m.positions.size());
+    for (const Vec3f& p : torus.positions) m.positions.push_back(p + shift);
+    for (uint32_t i : torus.face_indices) m.face_indices.push_back(base + i);
+    m.face_sizes.insert(m.face_sizes.end(), torus.face_sizes.begin(), torus.face_sizes.end());
+    for (int t = 0; t < 12; ++t) {
+      Vec3f d(g(rng), g(rng), g(rng));
+      const float len = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+      const float k = 2.0f * r / std::max(len, 1e-3f);
+      const Vec3f c = shift + Vec3f(d.x * k, d.y * k, d.z * k);
+      base = uint32_t(m.positions.size());
+      m.positions.push_back(c);
+      m.positions.push_back(c + Vec3f(0.001f * r, 0, 0));
+      m.positions.push_back(c + Vec3f(0, 0.001f * r, 0));
+      m.face_indices.insert(m.face_indices.end(), {base, base + 1, base + 2});
+      m.face_sizes.push_back(3);
+    }
+  }
+  auto sections = [&](const char* config, int threads) {
+    BuildOptions opt = BuildOptions::from_config(config);
+    opt.threads = threads;
+    const std::string path = ::testing::TempDir() + "slimrt_cluster_threads.slim";
+    Scene::build(m, opt).save(path);
+    std::FILE* f = std::fopen(path.c_str(), "rb");
+    EXPECT_NE(f, nullptr);
+    std::vector<uint8_t> bytes;
+    uint8_t buf[1 << 16];
+    for (size_t n; f && (n = std::fread(buf, 1, sizeof buf, f)) > 0;)
+      bytes.insert(bytes.end(), buf, buf + n);
+    if (f) std::fclose(f);
+    std::remove(path.c_str());
+    uint64_t header_bytes = 0;  // FileHeader::header_bytes (api/scene_file.cpp), at byte 24
+    if (bytes.size() >= 32) std::memcpy(&header_bytes, bytes.data() + 24, 8);
+    EXPECT_LT(header_bytes, bytes.size());
+    return std::vector<uint8_t>(bytes.begin() + std::min<size_t>(header_bytes, bytes.size()),
+                                bytes.end());
+  };
+  for (const char* config : {"cluster", "cluster-lossless"}) {
+    const std::vector<uint8_t> one = sections(config, 1);
+    EXPECT_FALSE(one.empty());
+    for (int run = 0; run < 4; ++run) EXPECT_EQ(sections(config, 2), one) << config;
+  }
+}

@@ -48,11 +48,11 @@ class ClusterReshaper {
     std::vector<Local> local(roots_.size());
     tbb::parallel_for(size_t(0), roots_.size(), [&](size_t c) {
       Local& l = local[c];
-      std::vector<uint32_t> v;
-      v.reserve(count_[roots_[c].in]);
+      thread_local std::vector<uint32_t> v;  // a thread's own, kept between clusters
+      thread_local std::vector<Item> items;
+      v.clear();
       collect(roots_[c].in, v);
-      std::vector<Item> items(v.size());
-      std::vector<Key> keys(v.size());
+      items.resize(v.size());
       for (size_t k = 0; k < v.size(); ++k) {
         const Box3f b = tri_box(v[k]);
         const Vec3f m = b.center();
@@ -64,7 +64,7 @@ class ClusterReshaper {
       l.nodes.push_back({});
       // A whole scene of at most 8 triangles is one leaf (no box test, as the other formats).
       const bool whole = roots_[c].depth == 0 && items.size() <= 8;
-      l.depth = split(l, items, keys, 0, uint32_t(items.size()), 0, !whole);
+      l.depth = split(l, items, 0, uint32_t(items.size()), 0, !whole);
       if (l.nodes.size() > 1) {  // a multi-leaf: its block, keyed by its first triangle
         // Children in depth-first order (the collapse's order): their prims are consecutive.
         const uint32_t* prims[8];
@@ -79,32 +79,52 @@ class ClusterReshaper {
               break;
             }
         l.block = cluster::encode(src_, prims, counts, k, false);
+      } else if (l.prims.size() == 1 && src_.side_offsets) {  // an isolated triangle
+        const uint32_t* prims = l.prims.data();
+        const uint32_t one = 1;
+        l.record = cluster::encode(src_, &prims, &one, 1, false);
       }
     });
-    // Append them (serial), moving each block and its prims into the source's cache.
-    prims_.reserve(in_.prim_ids.size());
+    // Where each cluster's nodes (but its root, whose slot upper() left) and prims go: after the
+    // nodes above the clusters and those of the clusters before it, as appending them one by one
+    // would place them. Then each cluster is copied there (in parallel), and its block and prims
+    // move into the source's cache.
+    std::vector<uint32_t> nbase(roots_.size() + 1), pbase(roots_.size() + 1);
+    nbase[0] = uint32_t(nodes_.size());
+    pbase[0] = 0;
+    size_t blocks = 0;
     for (size_t c = 0; c < roots_.size(); ++c) {
-      Local& l = local[c];
-      const uint32_t nbase = uint32_t(nodes_.size()) - 1, pbase = uint32_t(prims_.size());
+      const Local& l = local[c];
+      nbase[c + 1] = nbase[c] + uint32_t(l.nodes.size()) - 1;
+      pbase[c + 1] = pbase[c] + uint32_t(l.prims.size());
+      blocks += !l.block.empty();
+      depth_ = std::max(depth_, roots_[c].depth + l.depth);
+    }
+    out.nodes = LargeArray<Bvh2Node>(nbase.back());
+    std::copy(nodes_.begin(), nodes_.end(), out.nodes.data());
+    out.prim_ids = LargeArray<uint32_t>(pbase.back());
+    tbb::parallel_for(size_t(0), roots_.size(), [&](size_t c) {
+      const Local& l = local[c];
+      const uint32_t node_base = nbase[c] - 1;  // local node k >= 1 goes to node_base + k
       for (size_t k = 0; k < l.nodes.size(); ++k) {
         Bvh2Node n = l.nodes[k];
-        n.first += n.is_leaf() ? pbase : nbase;
-        if (k == 0)
-          nodes_[roots_[c].out] = n;
-        else
-          nodes_.push_back(n);
+        n.first += n.is_leaf() ? pbase[c] : node_base;
+        out.nodes[k == 0 ? roots_[c].out : node_base + k] = n;
       }
-      prims_.insert(prims_.end(), l.prims.begin(), l.prims.end());
+      std::copy(l.prims.begin(), l.prims.end(), out.prim_ids.data() + pbase[c]);
+    });
+    src_.encoded->reserve(src_.encoded->size() + blocks);
+    for (Local& l : local) {
+      if (!l.record
+               .empty()) {  // into the side arena in cluster order (ClusterSource::side_offsets)
+        (*src_.side_offsets)[l.prims[0]] = src_.side->size();
+        src_.side->insert(src_.side->end(), l.record.begin(), l.record.end());
+      }
       if (!l.block.empty()) {
         const uint32_t key = l.prims[0];
         (*src_.encoded)[key] = {std::move(l.prims), std::move(l.block)};
       }
-      depth_ = std::max(depth_, roots_[c].depth + l.depth);
     }
-    out.nodes = LargeArray<Bvh2Node>(nodes_.size());
-    std::copy(nodes_.begin(), nodes_.end(), out.nodes.data());
-    out.prim_ids = LargeArray<uint32_t>(prims_.size());
-    std::copy(prims_.begin(), prims_.end(), out.prim_ids.data());
     out.depth = depth_;
     return out;
   }
@@ -116,11 +136,12 @@ class ClusterReshaper {
     float c[3];
     uint32_t prim;
   };
-  // What the SAH sorts: an item's center and its index in the cluster's items. std::sort runs
-  // the same comparisons and moves whatever it sorts, so sorting these 16-byte keys and then
-  // moving the items once permutes them as sorting the items themselves would (ties included).
+  // What the SAH sorts on one axis: an item's center on the axis and its position in the node.
+  // std::sort runs the same comparisons and moves whatever it sorts, so sorting these 8-byte keys
+  // and then moving the items once permutes them as sorting the items themselves would (ties
+  // included).
   struct Key {
-    float c[3];
+    float c;
     uint32_t i;
   };
   // A box grown item by item: min/max with the item first, the operand order of
@@ -130,6 +151,10 @@ class ClusterReshaper {
     SLIM_INLINE void extend(const Item& x) {
       lo = simd::min(simd::vfloat4::loadu(x.lo), lo);
       hi = simd::max(simd::vfloat4::loadu(x.hi), hi);
+    }
+    SLIM_INLINE void extend(const Box4& o) {
+      lo = simd::min(o.lo, lo);
+      hi = simd::max(o.hi, hi);
     }
     SLIM_INLINE Box3f box3() const {
       float l4[4], h4[4];
@@ -142,6 +167,7 @@ class ClusterReshaper {
     std::vector<Bvh2Node> nodes;
     std::vector<uint32_t> prims;
     std::vector<uint8_t> block;
+    std::vector<uint8_t> record;  // an isolated triangle's side-arena record
     int depth = 0;
   };
   struct Root {
@@ -151,8 +177,7 @@ class ClusterReshaper {
   const Bvh2& in_;
   ClusterSource& src_;
   std::vector<uint32_t> count_;
-  std::vector<Bvh2Node> nodes_;
-  std::vector<uint32_t> prims_;
+  std::vector<Bvh2Node> nodes_;  // the nodes above the clusters
   std::vector<Root> roots_;
   int depth_ = 0;
 
@@ -191,9 +216,34 @@ class ClusterReshaper {
     upper(n.first + 1, c + 1, depth + 1);
   }
 
+  // The order std::sort gives `order` (positions in a node of n <= 16 items) by `centers` (the
+  // node's centers on one axis, by position): for n <= 16 std::sort is an insertion sort, which
+  // keeps equal centers in their order, so position k goes to its rank in the stable order,
+  // the centers below its own plus the equal ones before it, counted 8 at a time. Returns false
+  // (order unchanged) if the ranks are not 0..n-1 once each (a NaN center).
+  static bool stable_order(const float* centers, uint8_t* order, uint32_t n) {
+    alignas(32) float w[16] = {};  // the centers in `order`'s order, padded to 16
+    for (uint32_t k = 0; k < n; ++k) w[k] = centers[order[k]];
+    const simd::vfloat8 w0 = simd::vfloat8::load(w), w1 = simd::vfloat8::load(w + 8);
+    const uint32_t lanes = (1u << n) - 1;
+    uint8_t out[16];
+    uint32_t seen = 0;
+    for (uint32_t k = 0; k < n; ++k) {
+      const simd::vfloat8 c(w[k]);
+      const uint32_t below = ((w0 < c).mask() | (w1 < c).mask() << 8) & lanes;
+      const uint32_t equal_before = ((w0 == c).mask() | (w1 == c).mask() << 8) & ((1u << k) - 1);
+      const uint32_t r = uint32_t(simd::popcount(below) + simd::popcount(equal_before));
+      out[r & 15] = order[k];
+      seen |= 1u << r;
+    }
+    if (seen != lanes) return false;
+    std::copy(out, out + n, order);
+    return true;
+  }
+
   // Items [b, e) of one cluster into local node idx; returns the subtree depth.
-  int split(Local& l, std::vector<Item>& it, std::vector<Key>& keys, uint32_t b, uint32_t e,
-            uint32_t idx, bool root) const {
+  int split(Local& l, std::vector<Item>& it, uint32_t b, uint32_t e, uint32_t idx,
+            bool root) const {
     const uint32_t n = e - b;
     Box4 grown;
     for (uint32_t k = b; k < e; ++k) grown.extend(it[k]);
@@ -211,22 +261,23 @@ class ClusterReshaper {
     uint32_t best_left = unit;
     // right[nl / unit]: the box of the sorted items nl..n-1, for the left sizes nl allowed.
     Box3f right[9];
-    Key* key = keys.data() + b;
+    // The items are sorted by their centers on axis 0, that order by axis 1, that by axis 2, and
+    // that by the best axis: order[k] = the item (its position in the node) at place k.
+    alignas(32) float centers[3][kClusterMax];
     for (uint32_t k = 0; k < n; ++k)
-      key[k] = {{it[b + k].c[0], it[b + k].c[1], it[b + k].c[2]}, b + k};
+      for (int a = 0; a < 3; ++a) centers[a][k] = it[b + k].c[a];
+    uint8_t order[kClusterMax];
+    std::iota(order, order + n, uint8_t(0));
+    auto sort_by = [&](int a) {
+      if (n <= 16 && stable_order(centers[a], order, n)) return;
+      Key key[kClusterMax];
+      for (uint32_t k = 0; k < n; ++k) key[k] = {centers[a][order[k]], order[k]};
+      std::sort(key, key + n, [](const Key& x, const Key& y) { return x.c < y.c; });
+      for (uint32_t k = 0; k < n; ++k) order[k] = uint8_t(key[k].i);
+    };
     for (int a = 0; a < 3; ++a) {
-      std::sort(key, key + n, [a](const Key& x, const Key& y) { return x.c[a] < y.c[a]; });
-      Box4 r;
-      for (uint32_t k = n; k-- > 1;) {
-        r.extend(it[key[k].i]);
-        if (k % unit == 0) right[k / unit] = r.box3();
-      }
-      Box4 grown_left;
-      for (uint32_t k = 0; k + 1 < n; ++k) {
-        grown_left.extend(it[key[k].i]);
-        const uint32_t nl = k + 1;
-        if (nl % unit) continue;
-        const Box3f left = grown_left.box3();
+      sort_by(a);
+      auto consider = [&](uint32_t nl, const Box3f& left) {
         const float cost = left.half_area() * float((nl + 7) / 8) +
                            right[nl / unit].half_area() * float((n - nl + 7) / 8);
         if (cost < best) {
@@ -234,18 +285,46 @@ class ClusterReshaper {
           best_axis = a;
           best_left = nl;
         }
+      };
+      if (unit == 8) {
+        // The left parts and right rests are unions of the boxes of the sorted items by 8s:
+        // min and max do not depend on the order they meet the items in, so these are the
+        // boxes of sweeps item by item (up to the sign of a zero, which no cost compares).
+        const uint32_t nb = (n + 7) / 8;
+        Box4 part[8];
+        for (uint32_t k = 0; k < n; ++k) part[k / 8].extend(it[b + order[k]]);
+        Box4 r;
+        for (uint32_t j = nb; j-- > 1;) {
+          r.extend(part[j]);
+          right[j] = r.box3();
+        }
+        Box4 grown_left;
+        for (uint32_t j = 0; j + 1 < nb; ++j) {
+          grown_left.extend(part[j]);
+          consider(8 * (j + 1), grown_left.box3());
+        }
+        continue;
+      }
+      Box4 r;
+      for (uint32_t k = n; k-- > 1;) {
+        r.extend(it[b + order[k]]);
+        right[k] = r.box3();
+      }
+      Box4 grown_left;
+      for (uint32_t k = 0; k + 1 < n; ++k) {
+        grown_left.extend(it[b + order[k]]);
+        consider(k + 1, grown_left.box3());
       }
     }
-    std::sort(key, key + n,
-              [best_axis](const Key& x, const Key& y) { return x.c[best_axis] < y.c[best_axis]; });
+    sort_by(best_axis);
     Item sorted[kClusterMax];
-    for (uint32_t k = 0; k < n; ++k) sorted[k] = it[key[k].i];
+    for (uint32_t k = 0; k < n; ++k) sorted[k] = it[b + order[k]];
     std::copy(sorted, sorted + n, it.begin() + b);
     const uint32_t c = uint32_t(l.nodes.size());
     l.nodes[idx] = {box, c, 0};
     l.nodes.resize(c + 2);
-    const int d0 = split(l, it, keys, b, b + best_left, c, false);
-    const int d1 = split(l, it, keys, b + best_left, e, c + 1, false);
+    const int d0 = split(l, it, b, b + best_left, c, false);
+    const int d1 = split(l, it, b + best_left, e, c + 1, false);
     return 1 + std::max(d0, d1);
   }
 };
@@ -317,6 +396,8 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   src.stats = &est;
   std::unordered_map<uint32_t, std::pair<std::vector<uint32_t>, std::vector<uint8_t>>> encoded;
   src.encoded = &encoded;
+  std::unordered_map<uint32_t, uint64_t> side_offsets;
+  src.side_offsets = &side_offsets;
   BuildOptions o = opt;
   o.nodes = Nodes::CompressedLeaf;
   o.max_leaf_size = 8;

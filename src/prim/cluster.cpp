@@ -10,6 +10,11 @@
 #include <memory>
 #include <stdexcept>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "core/large_array.h"
+
 namespace slim::cluster {
 
 namespace {
@@ -59,9 +64,13 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // are one vertex), found through a small open-addressing table: the triangles' corners as
   // these provisional numbers, in child order.
   // Capacities for the whole cluster up front: no vector here grows.
-  std::vector<uint32_t> pcodes;  // 3 per provisional vertex
-  std::vector<std::array<uint8_t, 3>> corners;
-  std::vector<uint32_t> tris;  // input triangles in child order
+  // The scratch vectors are a thread's own and kept between calls: no allocation but the first.
+  thread_local std::vector<uint32_t> pcodes;  // 3 per provisional vertex
+  thread_local std::vector<std::array<uint8_t, 3>> corners;
+  thread_local std::vector<uint32_t> tris;  // input triangles in child order
+  pcodes.clear();
+  corners.clear();
+  tris.clear();
   pcodes.reserve(9 * size_t(ntris));
   corners.reserve(ntris);
   tris.reserve(ntris);
@@ -115,7 +124,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
         }
     return false;
   };
-  std::vector<Step> steps;
+  thread_local std::vector<Step> steps;
+  steps.clear();
   steps.reserve(ntris);
   uint32_t child_step[9] = {};  // first step of each child (k <= 8)
   for (int c = 0, first = 0; c < k; first += int(counts[c]), ++c) {
@@ -177,8 +187,10 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // Vertex numbers in order of first reference; each reference new or a distance back.
   int number[255];  // nv <= 255
   std::fill(number, number + nv, -1);
-  std::vector<uint32_t> codes;  // 3 per vertex, final numbering
-  std::vector<int32_t> refs;    // per reference: -1 new, else the distance back
+  thread_local std::vector<uint32_t> codes;  // 3 per vertex, final numbering
+  thread_local std::vector<int32_t> refs;    // per reference: -1 new, else the distance back
+  codes.clear();
+  refs.clear();
   codes.reserve(3 * size_t(nv));
   refs.reserve(3 * size_t(ntris));
   uint32_t child_cnt[8] = {}, child_refs[9] = {};
@@ -232,11 +244,13 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     for (int a = 0; a < 3; ++a)
       if (anchor[a] >> 24) throw std::logic_error("cluster: lattice code beyond 24 bits");
   // Triangles in decode order, their ids.
-  std::vector<uint32_t> order;
+  thread_local std::vector<uint32_t> order;
+  order.clear();
   order.reserve(ntris);
   for (const Step& st : steps) order.push_back(tris[st.i]);
   uint32_t glo = ~0u, ghi = 0;
-  std::vector<uint32_t> ids;
+  thread_local std::vector<uint32_t> ids;
+  ids.clear();
   ids.reserve(ntris);
   for (uint32_t t : order) {
     ids.push_back(s.prim_ids[t]);
@@ -278,7 +292,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     }
     if (nstarts == 1) break;
   }
-  std::vector<uint32_t> starts;
+  thread_local std::vector<uint32_t> starts;
   starts.reserve(ntris);
   runs_of(best_ob, starts);
   h.nruns = uint8_t(starts.size());
@@ -392,9 +406,16 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
 Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_t ntris,
                    double rel_error, bool lossless, const Box3f& lattice_box) {
   constexpr uint32_t kLatticeMax = (1u << 24) - 1;
+  constexpr size_t kGrain = 4096;  // vertices or corners a task
   Quantized z;
+  // The marks, the codes and each vertex's error are computed in parallel; the box and the error
+  // sums run in vertex order, as serial loops would give them (bit-identical figures).
   std::vector<uint8_t> used(nv, 0);
-  for (size_t i = 0; i < 3 * ntris; ++i) used[tris[i]] = 1;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, 3 * ntris, kGrain),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t i = r.begin(); i < r.end(); ++i)
+                        std::atomic_ref<uint8_t>(used[tris[i]]).store(1, std::memory_order_relaxed);
+                    });
   const bool given = !lattice_box.empty();
   Box3f box = lattice_box;
   if (!given)
@@ -410,46 +431,54 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
   z.diag = std::sqrt(d2);
   z.codes.assign(3 * nv, 0);
   z.decoded.assign(vertices, vertices + nv);
+  double step = 1.0;
   if (!lossless) {
     if (!(rel_error > 0.0) || !std::isfinite(rel_error))
       throw Error(
           "cluster: the error bound (BuildOptions::cluster_error) must be positive and finite");
     // Rounding to the nearest lattice point moves a vertex by at most step * sqrt(3) / 2.
     const double bound = rel_error * z.diag;
-    double step = bound > 0 ? std::exp2(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) : 1.0;
+    step = bound > 0 ? std::exp2(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) : 1.0;
     while (ext / step > double(kLatticeMax) - 1) {
       step *= 2;
       z.coarsened = true;
     }
     z.lattice.step = float(step);
     for (int a = 0; a < 3; ++a) z.lattice.origin[a] = ntris || given ? box.lo[a] : 0.0f;
-    for (size_t i = 0; i < nv; ++i) {
-      if (!used[i]) continue;
-      for (int a = 0; a < 3; ++a) {
-        const double q =
-            std::nearbyint((double(vertices[i][a]) - double(z.lattice.origin[a])) / step);
-        const uint32_t qi = uint32_t(std::clamp(q, 0.0, double(kLatticeMax)));
-        z.codes[3 * i + a] = qi;
-        z.decoded[i][a] = lattice_coord(z.lattice, a, qi);
-      }
-    }
-  } else {
-    for (size_t i = 0; i < nv; ++i)
-      if (used[i])
-        for (int a = 0; a < 3; ++a) z.codes[3 * i + a] = float_key(vertices[i][a]);
   }
+  // Per used vertex: its distance to its input position, and that squared.
+  LargeArray<double> err(2 * nv);  // huge pages: the first touch of 4 KB pages is slow here
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, nv, kGrain), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          if (!used[i]) continue;
+          for (int a = 0; a < 3; ++a) {
+            if (lossless) {
+              z.codes[3 * i + a] = float_key(vertices[i][a]);
+              continue;
+            }
+            const double q =
+                std::nearbyint((double(vertices[i][a]) - double(z.lattice.origin[a])) / step);
+            const uint32_t qi = uint32_t(std::clamp(q, 0.0, double(kLatticeMax)));
+            z.codes[3 * i + a] = qi;
+            z.decoded[i][a] = lattice_coord(z.lattice, a, qi);
+          }
+          double e2 = 0;
+          for (int a = 0; a < 3; ++a) {
+            const double d = double(z.decoded[i][a]) - double(vertices[i][a]);
+            e2 += d * d;
+          }
+          err[2 * i] = std::sqrt(e2);
+          err[2 * i + 1] = e2;
+        }
+      });
   double sum_sq = 0, sum = 0;
   uint64_t n = 0;
   for (size_t i = 0; i < nv; ++i) {
     if (!used[i]) continue;
-    double e2 = 0;
-    for (int a = 0; a < 3; ++a) {
-      const double d = double(z.decoded[i][a]) - double(vertices[i][a]);
-      e2 += d * d;
-    }
-    z.max_error = std::max(z.max_error, std::sqrt(e2));
-    sum += std::sqrt(e2);
-    sum_sq += e2;
+    z.max_error = std::max(z.max_error, err[2 * i]);
+    sum += err[2 * i];
+    sum_sq += err[2 * i + 1];
     n++;
   }
   z.rms_error = n ? std::sqrt(sum_sq / double(n)) : 0.0;

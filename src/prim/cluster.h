@@ -582,6 +582,9 @@ struct ClusterSource {
   // Each with its triangles in child order.
   std::unordered_map<uint32_t, std::pair<std::vector<uint32_t>, std::vector<uint8_t>>>* encoded =
       nullptr;
+  // Isolated one-triangle leaves' records, placed in `side` ahead (keyed by the triangle) in an
+  // order that does not depend on the threads; encode() takes their offsets.
+  std::unordered_map<uint32_t, uint64_t>* side_offsets = nullptr;
 };
 
 namespace cluster {
@@ -697,6 +700,13 @@ struct ClusterLeaf {
     return cluster::encode(s, prims, counts, k, false);
   }
   static void encode(const ClusterSource& s, const uint32_t* prims, uint32_t n, uint8_t* out) {
+    if (s.side_offsets && n == 1) {
+      const auto it = s.side_offsets->find(prims[0]);
+      if (it != s.side_offsets->end()) {
+        std::memcpy(out, &it->second, 8);
+        return;
+      }
+    }
     std::vector<uint8_t> rec = cluster::encode(s, &prims, &n, 1, false);
     std::lock_guard<std::mutex> lock(*s.side_mutex);
     const uint64_t off = s.side->size();

@@ -51,6 +51,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <mutex>
@@ -118,6 +119,28 @@ SLIM_INLINE float key_float(uint32_t k) {
 // The one decoding of a lossy coordinate (build and traversal use this function only).
 SLIM_INLINE float lattice_coord(const ClusterLattice& lat, int axis, uint32_t q) {
   return lat.origin[axis] + float(q) * lat.step;  // the product is exact (power-of-two step)
+}
+
+// ---- the lossy clusters' multi-leaf boxes (ClusterLeaf<false>, traverse.h HasMultiLeafBoxes) ----
+// A MultiLeaf8 spends 24 of its 72 bytes on a float start and extent per axis. A lossy cluster's
+// lowest vertex lies on the lattice at its anchor (the stream's first field), so its boxes start
+// there, start_a = lattice_coord(anchor_a), and the extent (one of the 255 steps) is one scale
+// byte per axis, e << 3 | m: extent_a = (8 + m) 2^e x step / 8, at most 1/8 above the smallest
+// extent that reaches the cluster's top (a power of two alone would waste up to 2x in looser child
+// boxes). The planes decode as a QNode8's, start + q x extent with one fma, so the traversal tests
+// them with the same instructions; the builder takes the smallest scale whose q = 255 decodes at or
+// above the cluster's box and quantizes the child boxes conservatively in that frame (validate()
+// checks every child box against its decoded triangles).
+struct LatticeBoxes8 {
+  uint8_t q[6][8];   // 48 B: lo_x, hi_x, lo_y, hi_y, lo_z, hi_z (as QuantBoxes8::q)
+  uint8_t scale[3];  // 3 B: per axis e << 3 | m, e <= kMaxBoxScaleExp
+};
+static_assert(sizeof(LatticeBoxes8) == 51, "lossy cluster multi-leaf boxes are 51 bytes");
+constexpr uint32_t kMaxBoxScaleExp = 24;  // (8 + m) << e < 2^28: float exact
+
+// The extent of scale byte `scale` (build and traversal use this function only).
+SLIM_INLINE float box_extent(const ClusterLattice& lat, uint32_t scale) {
+  return float((8u + (scale & 7)) << (scale >> 3)) * (lat.step * 0.125f);
 }
 
 template <bool kLossless>
@@ -497,6 +520,22 @@ SLIM_INLINE void decode_ids(const uint8_t* data, uint32_t children, uint32_t t, 
   decode_ids(view<kLossless>(data, children), t, geom, prim);
 }
 
+// The frame (start, extent per axis) of the LatticeBoxes8 at p, the cluster's data right behind
+// them.
+SLIM_INLINE void box_frame(const ClusterLattice& lat, const uint8_t* p, float* start,
+                           float* extent) {
+  const uint8_t* bits = p + sizeof(LatticeBoxes8) + sizeof(ClusterHeader);
+  for (int a = 0; a < 3; ++a) {
+    start[a] = lattice_coord(lat, a, read_bits(bits, uint64_t(a) * 24, 24));
+    extent[a] = box_extent(lat, p[offsetof(LatticeBoxes8, scale) + a]);
+  }
+}
+// The builder's side: writes the scale bytes into `boxes` for the lossy cluster at `data` whose
+// vertices lie in `box` (decoded), and returns the frame in start and extent. False if no scale
+// reaches the box (coordinates near the float range).
+bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f& box,
+                     LatticeBoxes8& boxes, float* start, float* extent);
+
 // Checks that `size` bytes at `data` hold a well-formed cluster of `children` children (header
 // fields in range, child sizes covering the triangles, every strip inside the topology stream with
 // every vertex index below nverts, every run index below nruns, the stream inside `size`). The
@@ -524,6 +563,7 @@ struct ClusterSource {
   const uint32_t* geom_ids = nullptr;
   const uint32_t* prim_ids = nullptr;
   bool lossless = false;
+  ClusterLattice lattice;                // lossy: the multi-leaf boxes' frames
   std::vector<uint8_t>* side = nullptr;  // isolated leaves' cluster records
   std::mutex* side_mutex = nullptr;
   cluster::EncodeStats* stats = nullptr;
@@ -582,6 +622,11 @@ struct ClusterLeaf {
   // are the decoders' read slack), and the side arena's record an isolated leaf names.
   static std::string check_multileaf(const Context&, const uint8_t* data, uint32_t k,
                                      uint64_t avail) {
+    if constexpr (!kLossless)  // the box scales right before the data (the walk checked them in)
+      for (const uint8_t* sc = data - 3; sc < data; ++sc)
+        if (uint32_t(*sc >> 3) > cluster::kMaxBoxScaleExp)
+          return "multi-leaf box scale exponent " + std::to_string(*sc >> 3) + " beyond " +
+                 std::to_string(cluster::kMaxBoxScaleExp);
     std::string why;
     if (avail < kClusterReadSlack) return "cluster beyond the leaf arena";
     if (!cluster::check(data, avail - kClusterReadSlack, k, kLossless, &why)) return why;
@@ -650,6 +695,23 @@ struct ClusterLeaf {
     const uint64_t off = s.side->size();
     s.side->insert(s.side->end(), rec.begin(), rec.end());
     std::memcpy(out, &off, 8);
+  }
+
+  // Lossy: the multi-leaf boxes are a cluster::LatticeBoxes8 (51 B) instead of a 72-byte
+  // MultiLeaf8 (traverse.h, HasMultiLeafBoxes); lossless keeps the MultiLeaf8.
+  static constexpr bool kMultiLeafBoxes = !kLossless;
+  static constexpr uint32_t kMultiLeafHeaderBytes = sizeof(cluster::LatticeBoxes8);
+  static void write_multileaf_frame(const ClusterSource& s, const uint8_t* data, const Box3f& box,
+                                    uint8_t* header, float* start, float* extent) {
+    auto* b = reinterpret_cast<cluster::LatticeBoxes8*>(header);
+    if (!cluster::write_box_frame(s.lattice, data, box, *b, start, extent))
+      throw Error(
+          "cluster: a cluster's box does not fit its lattice frame (coordinates near the "
+          "float range)");
+  }
+  static SLIM_INLINE void multileaf_frame(const Context& ctx, const uint8_t* p, float* start,
+                                          float* extent) {
+    cluster::box_frame(ctx.lattice, p, start, extent);
   }
 
   // ---- traversal side ----

@@ -85,7 +85,7 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
       std::vector<uint8_t> ml(sizeof(cluster::LatticeBoxes8) + data.size());
       std::memcpy(ml.data() + sizeof(cluster::LatticeBoxes8), data.data(), data.size());
       auto& lb = *reinterpret_cast<cluster::LatticeBoxes8*>(ml.data());
-      float start[3], extent[3], s2[3], e2[3];
+      float start[3], extent[3], s2[4], e2[4];
       ASSERT_TRUE(cluster::write_box_frame(z.lattice, data.data(), all, lb, start, extent));
       quantize_planes(start, extent, boxes, kk, lb.q);
       cluster::box_frame(z.lattice, ml.data(), s2, e2);
@@ -437,6 +437,22 @@ TEST(ClusterScene, StatisticsAndSizes) {
     Scene o = Scene::build(torus, BuildOptions::from_config(config));
     EXPECT_GT(detail(o, "multileaf_count"), 0) << config;
     EXPECT_EQ(detail(o, "multileaf_bytes"), 72.0 * detail(o, "multileaf_count")) << config;
+  }
+}
+
+// The lossy multi-leaf boxes' extent: scale byte e << 3 | m is (8 + m) 2^e lattice steps / 8
+// (computed on the step's float bits), growing with the byte.
+TEST(ClusterCodec, BoxExtentIsTheScaleInSteps) {
+  for (float step : {std::ldexp(1.0f, -20), 1.0f, 0.25f, std::ldexp(1.0f, 40)}) {
+    ClusterLattice lat;
+    lat.step = step;
+    float prev = 0;
+    for (uint32_t sc = 0; (sc >> 3) <= cluster::kMaxBoxScaleExp; ++sc) {
+      const float e = cluster::box_extent(lat, sc);
+      EXPECT_EQ(e, std::ldexp(float(8 + (sc & 7)), int(sc >> 3) - 3) * step) << sc;
+      EXPECT_GT(e, prev);
+      prev = e;
+    }
   }
 }
 

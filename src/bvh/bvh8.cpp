@@ -661,7 +661,7 @@ struct Validator {
           if (multi) {
             Box3f cb;
             if (boxes.frame) {
-              float start[3], extent[3];
+              float start[4], extent[4];
               boxes.frame(p, start, extent);
               cb = dequantize_planes(reinterpret_cast<const uint8_t(*)[8]>(p), start, extent, c);
             } else {

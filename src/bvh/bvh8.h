@@ -230,8 +230,9 @@ using MultiLeafValidator = std::function<bool(const uint8_t* data, uint32_t k, u
 // parent box, offsets stay inside the arenas, and every leaf block passes `leaf`. Returns false
 // and sets `why` on the first violation.
 // The multi-leaf boxes of a layout that stores them itself (LeafEncoder::multileaf_boxes): the
-// header's size, and frame(multileaf, start, extent), the frame its planes q[6][8] (the header's
-// first 48 bytes) are decoded in (traverse.h, HasMultiLeafBoxes). Default: a MultiLeaf8.
+// header's size, and frame(multileaf, start, extent) (4 floats each, the 4th unused), the frame
+// its planes q[6][8] (the header's first 48 bytes) are decoded in (traverse.h, HasMultiLeafBoxes).
+// Default: a MultiLeaf8.
 struct MultiLeafBoxDecoder {
   uint32_t header_bytes = sizeof(MultiLeaf8);
   std::function<void(const uint8_t* multileaf, float* start, float* extent)> frame;

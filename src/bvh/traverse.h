@@ -127,8 +127,8 @@ concept HasMultiLeafView = HasMultiLeafLayout<L> && requires {
 // clusters: the float start and extent of a MultiLeaf8 follow from data the cluster holds anyway):
 // then it provides
 //   L::kMultiLeafBoxes = true, L::kMultiLeafHeaderBytes  the boxes' bytes (the data follows);
-//   static void multileaf_frame(const Context&, const uint8_t* p, float start[3],
-//       float extent[3]);   the multi-leaf at p starts with 8-bit planes q[6][8] (as
+//   static void multileaf_frame(const Context&, const uint8_t* p, float start[4],
+//       float extent[4]);   the multi-leaf at p starts with 8-bit planes q[6][8] (as
 //                            QuantBoxes8::q), decoded as start + q * extent (one fma, as QNode8);
 // and, for the builder (bvh_scene.h), write_multileaf_frame(source, data, box, header, start,
 // extent): the frame of a multi-leaf whose children lie in `box`, written into its header.
@@ -169,7 +169,7 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
   simd::vfloat8 dist;
   uint32_t mask;
   if constexpr (HasMultiLeafBoxes<Leaf>) {
-    alignas(16) float start[3], extent[3];
+    alignas(16) float start[4], extent[4];
     Leaf::multileaf_frame(ctx, p, start, extent);
     mask = detail::intersect_quant_planes(reinterpret_cast<const uint8_t(*)[8]>(p), start, extent,
                                           ray, dist);

@@ -539,7 +539,7 @@ SLIM_INLINE void box_frame(const ClusterLattice& lat, const uint8_t* p, float* s
 #if defined(SLIM_SIMD_AVX2)
   // The 24-bit anchors at stream bytes 0-8 as 32-bit lanes (a 16-byte load: a stream holds the
   // 9 anchor bytes and more, plus kClusterReadSlack).
-  const __m128i raw = _mm_loadu_si128(reinterpret_cast<const __m128i*>(bits));
+  const __m128i raw = _mm_lddqu_si128(reinterpret_cast<const __m128i*>(bits));
   const __m128i q =
       _mm_shuffle_epi8(raw, _mm_setr_epi8(0, 1, 2, -1, 3, 4, 5, -1, 6, 7, 8, -1, -1, -1, -1, -1));
   static_assert(sizeof(ClusterLattice) == 16, "origin[3] then step: one 16-byte load");

@@ -5,9 +5,10 @@
 // runs (a run start per run, a run index and an offset per triangle).
 //
 // A cluster is one multi-leaf of the compressed-leaf BVH (bvh8.h; QBVH8 inner nodes above the
-// multi-leaves, NodeKind::QCompressedLeaf): its 72-byte header holds the quantized boxes of up to
-// 8 children of up to 8 triangles each (one 8-wide watertight test per child); the cluster data
-// follows it:
+// multi-leaves, NodeKind::QCompressedLeaf): its header holds the quantized boxes of up to 8
+// children of up to 8 triangles each (one 8-wide watertight test per child): 51 bytes lossy (a
+// LatticeBoxes8, below: the boxes' frame comes from the cluster's anchors), a 72-byte MultiLeaf8
+// lossless. The cluster data follows it:
 //   ClusterHeader (17 B, packed)
 //   bit stream, LSB first from the byte after the header:
 //     anchors:  3 x aw bits (aw = 24 lossy, 32 lossless)

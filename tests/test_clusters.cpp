@@ -85,12 +85,12 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
       std::vector<uint8_t> ml(sizeof(cluster::LatticeBoxes8) + data.size());
       std::memcpy(ml.data() + sizeof(cluster::LatticeBoxes8), data.data(), data.size());
       auto& lb = *reinterpret_cast<cluster::LatticeBoxes8*>(ml.data());
-      float start[3], extent[3], s2[4], e2[4];
+      float start[4], extent[4], s2[4], e2[4];
       ASSERT_TRUE(cluster::write_box_frame(z.lattice, data.data(), all, lb, start, extent));
       quantize_planes(start, extent, boxes, kk, lb.q);
       cluster::box_frame(z.lattice, ml.data(), s2, e2);
-      ASSERT_EQ(std::memcmp(start, s2, sizeof start), 0);
-      ASSERT_EQ(std::memcmp(extent, e2, sizeof extent), 0);
+      ASSERT_EQ(std::memcmp(start, s2, 3 * sizeof(float)), 0);
+      ASSERT_EQ(std::memcmp(extent, e2, 3 * sizeof(float)), 0);
       for (int a = 0; a < 3; ++a) {
         // At most 1/8 above the smallest extent that reaches the cluster's top (one scale byte).
         const double need = (double(all.hi[a]) - double(start[a])) / 255.0;

@@ -291,7 +291,7 @@ class BvhScene : public Scene::Impl {
       enc.multileaf_boxes = [&](const uint8_t* data, int k, const Box3f* boxes, uint8_t* header) {
         Box3f all;
         for (int c = 0; c < k; ++c) all.extend(boxes[c]);
-        float start[3], extent[3];
+        float start[4], extent[4];
         Leaf::write_multileaf_frame(src, data, all, header, start, extent);
         quantize_planes(start, extent, boxes, k, reinterpret_cast<uint8_t(*)[8]>(header));
       };

@@ -326,9 +326,12 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
 
 bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f& box,
                      LatticeBoxes8& boxes, float* start, float* extent) {
-  const uint8_t* bits = data + sizeof(ClusterHeader);
+  // The anchors in a padded copy: box_start reads 16 bytes (the traversal has the read slack).
+  uint8_t anchors[16] = {};
+  std::memcpy(anchors, data + sizeof(ClusterHeader), 9);
+  box_start(lat, anchors, start);
+  extent[3] = 0.0f;
   for (int a = 0; a < 3; ++a) {
-    start[a] = lattice_coord(lat, a, read_bits(bits, uint64_t(a) * 24, 24));
     if (!(start[a] <= box.lo[a])) return false;
     // The smallest scale (scales grow with the byte) whose q = 255 decodes at or above the top,
     // with the traversal's one fma.

@@ -529,23 +529,36 @@ SLIM_INLINE void decode_ids(const uint8_t* data, uint32_t children, uint32_t t, 
   decode_ids(view<kLossless>(data, children), t, geom, prim);
 }
 
-// The frame (start, extent per axis; 4 floats each, the 4th unused) of the LatticeBoxes8 at p,
-// the cluster's data right behind them. Read on every multi-leaf visit, so the AVX2 path takes
-// the three axes at once (a dozen instructions instead of some 45) with the float operations of
-// lattice_coord and the integer ones of box_extent, lane by lane: the same bits.
-SLIM_INLINE void box_frame(const ClusterLattice& lat, const uint8_t* p, float* start,
-                           float* extent) {
-  const uint8_t* bits = p + sizeof(LatticeBoxes8) + sizeof(ClusterHeader);
-  const uint8_t* scale = p + offsetof(LatticeBoxes8, scale);
+// The boxes' start per axis (4 floats, the 4th unused): the anchor's lattice coordinate, from the
+// 3 x 24-bit anchors in the first 9 of the 16 bytes at `bits` (the stream's start; the builder
+// passes a padded copy). The one computation of it, for the builder and the traversal alike; the
+// AVX2 path takes the three axes at once with one fma (the product is exact: q < 2^24 and a
+// power-of-two step, so it rounds as lattice_coord's sum).
+SLIM_INLINE void box_start(const ClusterLattice& lat, const uint8_t* bits, float* start) {
 #if defined(SLIM_SIMD_AVX2)
-  // The 24-bit anchors at stream bytes 0-8 as 32-bit lanes (a 16-byte load: a stream holds the
-  // 9 anchor bytes and more, plus kClusterReadSlack).
   const __m128i raw = _mm_lddqu_si128(reinterpret_cast<const __m128i*>(bits));
   const __m128i q =
       _mm_shuffle_epi8(raw, _mm_setr_epi8(0, 1, 2, -1, 3, 4, 5, -1, 6, 7, 8, -1, -1, -1, -1, -1));
   static_assert(sizeof(ClusterLattice) == 16, "origin[3] then step: one 16-byte load");
   const __m128 origin = _mm_loadu_ps(lat.origin);  // lane 3: the step (unused)
-  _mm_storeu_ps(start, _mm_add_ps(origin, _mm_mul_ps(_mm_cvtepi32_ps(q), _mm_set1_ps(lat.step))));
+  _mm_storeu_ps(start, _mm_fmadd_ps(_mm_cvtepi32_ps(q), _mm_set1_ps(lat.step), origin));
+#else
+  for (int a = 0; a < 3; ++a)
+    start[a] = lattice_coord(lat, a, read_bits(bits, uint64_t(a) * 24, 24));
+  start[3] = 0.0f;
+#endif
+}
+
+// The frame (start, extent per axis; 4 floats each, the 4th unused) of the LatticeBoxes8 at p,
+// the cluster's data right behind them (its stream holds the 9 anchor bytes and more, plus
+// kClusterReadSlack: 16 bytes to read). Read on every multi-leaf visit: the AVX2 path takes the
+// three axes at once (a dozen instructions instead of some 45), the extents with box_extent's
+// integer operations lane by lane.
+SLIM_INLINE void box_frame(const ClusterLattice& lat, const uint8_t* p, float* start,
+                           float* extent) {
+  const uint8_t* scale = p + offsetof(LatticeBoxes8, scale);
+  box_start(lat, p + sizeof(LatticeBoxes8) + sizeof(ClusterHeader), start);
+#if defined(SLIM_SIMD_AVX2)
   uint32_t sc;
   std::memcpy(&sc, scale, 4);  // the 3 scale bytes and the cluster header's first
   uint32_t step_bits;
@@ -554,15 +567,13 @@ SLIM_INLINE void box_frame(const ClusterLattice& lat, const uint8_t* p, float* s
                                   _mm_set1_epi32(int(step_bits)));
   _mm_storeu_ps(extent, _mm_castsi128_ps(e));
 #else
-  for (int a = 0; a < 3; ++a) {
-    start[a] = lattice_coord(lat, a, read_bits(bits, uint64_t(a) * 24, 24));
-    extent[a] = box_extent(lat, scale[a]);
-  }
+  for (int a = 0; a < 3; ++a) extent[a] = box_extent(lat, scale[a]);
+  extent[3] = 0.0f;
 #endif
 }
 // The builder's side: writes the scale bytes into `boxes` for the lossy cluster at `data` whose
-// vertices lie in `box` (decoded), and returns the frame in start and extent. False if no scale
-// reaches the box (coordinates near the float range).
+// vertices lie in `box` (decoded), and returns the frame in start and extent (4 floats each, as
+// box_frame decodes it). False if no scale reaches the box (coordinates near the float range).
 bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f& box,
                      LatticeBoxes8& boxes, float* start, float* extent);
 

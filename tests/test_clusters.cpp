@@ -540,3 +540,60 @@ TEST(ClusterScene, DecodesItsOwnTrianglesRealMesh) {
   // cluster-lossless intersects the input triangles: no geometry of its own to give.
   EXPECT_FALSE(Scene::build(m, BuildOptions::from_config("cluster-lossless")).decoded_triangles());
 }
+
+// The per-thread decode cache (cluster::DecodeCache) is keyed by the scene's tag as well as by the
+// child's address: a cluster at the address of one a thread traced before, in another scene (a
+// scene built or opened where a destroyed one was), is decoded, not taken from the cache.
+TEST(ClusterScene, DecodeCacheNeverAnswersForAnotherScene) {
+  // One triangle across the ray's path at z = depth.
+  auto one_triangle = [](float depth) {
+    PolyMesh m;
+    m.positions = {Vec3f(-1, -1, depth), Vec3f(1, -1, depth), Vec3f(0, 1, depth)};
+    m.face_indices = {0, 1, 2};
+    m.face_sizes = {3};
+    return triangulate_fan({&m});
+  };
+  for (const bool lossless : {false, true}) {
+    SCOPED_TRACE(lossless ? "lossless" : "lossy");
+    std::vector<uint8_t> at;  // one address for both scenes' cluster
+    std::vector<float> t;
+    for (const float depth : {1.0f, 2.0f}) {
+      const TriangleMesh tm = one_triangle(depth);
+      const cluster::Quantized z = cluster::quantize(tm.vertices.data(), tm.vertices.size(),
+                                                     tm.tris.data(), 1, 1e-5, lossless);
+      ClusterSource src;
+      src.vertices = z.decoded.data();
+      src.codes = z.codes.data();
+      src.tris = tm.tris.data();
+      src.geom_ids = tm.geom_ids.data();
+      src.prim_ids = tm.prim_ids.data();
+      src.lossless = lossless;
+      const uint32_t prim = 0, count = 1;
+      const uint32_t* prims = &prim;
+      const std::vector<uint8_t> data = cluster::encode(src, &prims, &count, 1, true);
+      if (at.empty()) at.resize(data.size() + 64);
+      ASSERT_LE(data.size(), at.size());
+      std::copy(data.begin(), data.end(), at.begin());
+      Ray r;
+      r.org = Vec3f(0, 0, -1);
+      r.dir = Vec3f(0, 0, 1);
+      TravRay tr;
+      ASSERT_TRUE(make_trav_ray(r, RaySetupBounds(Box3f(Vec3f(-1, -1, -1), Vec3f(1, 1, 2))), tr));
+      Hit h;
+      NoStats st;
+      bool hit;
+      if (lossless) {
+        ClusterLeaf<true>::Context ctx;
+        hit = ClusterLeaf<true>::intersect_in_multileaf<false>(ctx, at.data(), 1, 0, tr, h, st);
+      } else {
+        ClusterLeaf<false>::Context ctx;
+        ctx.lattice = z.lattice;
+        hit = ClusterLeaf<false>::intersect_in_multileaf<false>(ctx, at.data(), 1, 0, tr, h, st);
+      }
+      ASSERT_TRUE(hit);
+      t.push_back(h.t);
+    }
+    EXPECT_NEAR(t[0], 2.0f, 1e-4f);
+    EXPECT_NEAR(t[1], 3.0f, 1e-4f);  // not the first scene's triangle at the same address
+  }
+}

@@ -339,6 +339,7 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   s->ctx.lattice = lat;
   s->ctx.side = side->data();
   s->ctx.side_bytes = side->size();
+  s->ctx.cache_tag = cluster::next_cache_tag();  // the arenas no longer move
   s->keepalive = side;
   s->mem.geometry_bytes += side->size();
   s->error_bound = z->max_error;  // Scene::error_bound(); 0 for cluster-lossless

@@ -3,9 +3,11 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <iterator>
+#include <memory>
 #include <stdexcept>
 
 namespace slim::cluster {
@@ -29,6 +31,17 @@ struct BitWriter {
 };
 
 }  // namespace
+
+DecodeCache& decode_cache() {
+  static thread_local std::unique_ptr<DecodeCache> cache;
+  if (!cache) [[unlikely]]
+    cache = std::make_unique<DecodeCache>();
+  return *cache;
+}
+uint64_t next_cache_tag() {
+  static std::atomic<uint64_t> next{1};
+  return next.fetch_add(1, std::memory_order_relaxed);
+}
 
 std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims,
                             const uint32_t* counts, int k, bool slack) {

@@ -510,17 +510,42 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, ui
   decode_child<kLossless>(lat, view<kLossless>(data, children), child, d);
 }
 
-// primID and geomID of triangle t of the cluster `v`.
-SLIM_INLINE void decode_ids(const View& v, uint32_t t, uint32_t& geom, uint32_t& prim) {
+// What the ids of a child's triangles take from the cluster's view (kept with a decoded child in
+// the DecodeCache, so that a hit in a cached child needs no view).
+struct ChildIds {
+  uint64_t ids = 0;   // bit of the child's first triangle's ids
+  uint64_t runs = 0;  // bit of the run starts
+  uint32_t prim_base = 0, geom_base = 0;
+  uint8_t idbits = 0, rb = 0, ob = 0, gb = 0, pb = 0;
+};
+// The ids of the triangles from triangle `first` of the cluster `v` on.
+SLIM_INLINE ChildIds child_ids(const View& v, uint32_t first) {
   const ClusterHeader& h = v.h;
   const Layout& L = v.L;
-  const uint64_t pos = L.ids + uint64_t(t) * L.idbits;
-  const uint32_t run = read_bits(v.bits, pos, L.rb);
-  const uint32_t prim_base = read_bits(v.bits, 3 * L.aw, h.bb);
-  const uint32_t geom_base = read_bits(v.bits, 3 * L.aw + h.bb, h.hb);
-  prim = prim_base + read_bits(v.bits, L.runs + uint64_t(run) * h.pb, h.pb) +
-         read_bits(v.bits, pos + L.rb, h.ob);
-  geom = geom_base + read_bits(v.bits, pos + L.rb + h.ob, h.gb);
+  ChildIds c;
+  c.ids = L.ids + uint64_t(first) * L.idbits;
+  c.runs = L.runs;
+  c.prim_base = read_bits(v.bits, 3 * L.aw, h.bb);
+  c.geom_base = read_bits(v.bits, 3 * L.aw + h.bb, h.hb);
+  c.idbits = uint8_t(L.idbits);
+  c.rb = uint8_t(L.rb);
+  c.ob = h.ob;
+  c.gb = h.gb;
+  c.pb = h.pb;
+  return c;
+}
+// primID and geomID of triangle `first + l` (bits: the cluster's stream).
+SLIM_INLINE void decode_ids(const uint8_t* bits, const ChildIds& c, uint32_t l, uint32_t& geom,
+                            uint32_t& prim) {
+  const uint64_t pos = c.ids + uint64_t(l) * c.idbits;
+  const uint32_t run = read_bits(bits, pos, c.rb);
+  prim = c.prim_base + read_bits(bits, c.runs + uint64_t(run) * c.pb, c.pb) +
+         read_bits(bits, pos + c.rb, c.ob);
+  geom = c.geom_base + read_bits(bits, pos + c.rb + c.ob, c.gb);
+}
+// primID and geomID of triangle t of the cluster `v`.
+SLIM_INLINE void decode_ids(const View& v, uint32_t t, uint32_t& geom, uint32_t& prim) {
+  decode_ids(v.bits, child_ids(v, t), 0, geom, prim);
 }
 // primID and geomID of triangle t of a cluster of `children` children.
 template <bool kLossless>
@@ -576,6 +601,32 @@ SLIM_INLINE void box_frame(const ClusterLattice& lat, const uint8_t* p, float* s
 // box_frame decodes it). False if no scale reaches the box (coordinates near the float range).
 bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f& box,
                      LatticeBoxes8& boxes, float* start, float* extent);
+
+// The children a thread decoded last, so that the rays after it that enter the same child (the
+// neighbouring pixels of a tile, a bounce leaving the surface it hit) skip the strip and vertex
+// decoding. Direct-mapped on the child's address; a scene's tag (Context::cache_tag, unique per
+// scene for the process) is part of the key, so a later scene at the same addresses never reads
+// another's entries. One per tracing thread, allocated at its first cluster ray: 256 entries of
+// 384 bytes (96 KiB, within a 512 KiB L2), not scene memory.
+struct DecodeCache {
+  static constexpr uint32_t kLogEntries = 8;
+  struct Entry {
+    Decoded8 d;
+    ChildIds ids;                   // of d's triangles
+    const uint8_t* bits = nullptr;  // the cluster's data (its header)
+    uint64_t tag = 0;               // 0: empty (scene tags start at 1)
+    int child = -1;
+  };
+  Entry e[1u << kLogEntries];
+  SLIM_INLINE Entry& slot(const uint8_t* bits, int child) {
+    const uint64_t h = (uint64_t(reinterpret_cast<uintptr_t>(bits)) + uint64_t(child)) *
+                       0x9E3779B97F4A7C15ull;  // Fibonacci hashing: the top bits pick the entry
+    return e[h >> (64 - kLogEntries)];
+  }
+};
+DecodeCache& decode_cache();  // this thread's (cluster.cpp)
+// A tag no scene had before (1, 2, ...).
+uint64_t next_cache_tag();
 
 // Checks that `size` bytes at `data` hold a well-formed cluster of `children` children (header
 // fields in range, child sizes covering the triangles, every strip inside the topology stream with
@@ -646,7 +697,8 @@ struct ClusterLeaf {
   struct Context {
     ClusterLattice lattice;
     const uint8_t* side = nullptr;
-    uint64_t side_bytes = 0;  // scene files: the section's size
+    uint64_t side_bytes = 0;                         // scene files: the section's size
+    uint64_t cache_tag = cluster::next_cache_tag();  // this scene's key in cluster::DecodeCache
   };
   // Scene files: the lattice and the side data.
   template <class V>
@@ -756,19 +808,42 @@ struct ClusterLeaf {
   }
 
   // ---- traversal side ----
-  // The cluster's header, layout and anchors, read once per multi-leaf visit (traverse.h,
-  // HasMultiLeafView) for every child the ray enters.
-  using MultiLeafView = cluster::View;
-  static SLIM_INLINE cluster::View multileaf_view(const Context&, const uint8_t* data,
+  // What the children of one multi-leaf share, per visit (traverse.h, HasMultiLeafView): the
+  // thread's decode cache, and the cluster's header, layout and anchors, read at the first child
+  // the cache does not hold (or for the ids of a hit), not at all when it holds every child the
+  // ray enters.
+  struct MultiLeafView {
+    const uint8_t* data;
+    uint32_t children;
+    cluster::DecodeCache* cache;
+    mutable bool read = false;
+    mutable cluster::View v;
+    SLIM_INLINE const cluster::View& get() const {
+      if (!read) {
+        v = cluster::view<kLossless>(data, children);
+        read = true;
+      }
+      return v;
+    }
+  };
+  static SLIM_INLINE MultiLeafView multileaf_view(const Context&, const uint8_t* data,
                                                   uint32_t children) {
-    return cluster::view<kLossless>(data, children);
+    return {data, children, &cluster::decode_cache()};
   }
   template <bool kAny, class Stats>
-  static SLIM_INLINE bool intersect_in_view(const Context& ctx, const cluster::View& view, int i,
+  static SLIM_INLINE bool intersect_in_view(const Context& ctx, const MultiLeafView& view, int i,
                                             TravRay& ray, HitRecord& hit, Stats& st) {
     using namespace simd;
-    cluster::Decoded8 d;
-    cluster::decode_child<kLossless>(ctx.lattice, view, i, d);
+    cluster::DecodeCache::Entry& en = view.cache->slot(view.data, i);
+    if (en.bits != view.data || en.child != i || en.tag != ctx.cache_tag) {
+      const cluster::View& v = view.get();
+      cluster::decode_child<kLossless>(ctx.lattice, v, i, en.d);
+      en.ids = cluster::child_ids(v, uint32_t(en.d.first));
+      en.bits = view.data;
+      en.child = i;
+      en.tag = ctx.cache_tag;
+    }
+    const cluster::Decoded8& d = en.d;
     st.prims(d.n);
     const WatertightRay& r = ray.wt;
     // The coordinates loaded in the ray's axis order (no copies to pick them from).
@@ -789,7 +864,7 @@ struct ClusterLeaf {
       if (tt[j] < tt[l]) l = j;
     }
     uint32_t geom, prim;
-    cluster::decode_ids(view, uint32_t(d.first + l), geom, prim);
+    cluster::decode_ids(view.data + sizeof(ClusterHeader), en.ids, uint32_t(l), geom, prim);
     auto p = [&](int k) { return Vec3f(d.v[k][0][l], d.v[k][1][l], d.v[k][2][l]); };
     detail::record_hit(tt[l], u[l], v[l], p(0), p(1), p(2), geom, prim, ray, hit);
     return true;

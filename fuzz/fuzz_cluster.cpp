@@ -9,8 +9,11 @@
 //      buffer), for every child, with ids of every triangle;
 //   2. round trip: the input bytes as vertex codes and a topology of up to 63 triangles in up to 8
 //      children: encode(), check() accepts it, and every child decodes to its triangles (in the
-//      encoder's strip order), the codes' positions and the ids bit for bit.
+//      encoder's strip order), the codes' positions and the ids bit for bit;
+//   3. lossy: the frame of the multi-leaf boxes on the lattice (cluster::LatticeBoxes8) made for
+//      that cluster decodes as the builder made it and encloses every child's decoded triangles.
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <string>
@@ -45,6 +48,39 @@ void decode_all(const uint8_t* block, uint32_t children) {
           uint64_t(p - prim_base) <= ((uint64_t(1) << h.pb) - 1) + ((uint64_t(1) << h.ob) - 1),
           "prim offset width");
     }
+  }
+}
+
+// 3. Lossy: the frame of the multi-leaf boxes (cluster::LatticeBoxes8) the builder writes ahead of
+// the cluster: box_frame (the traversal's decode) gives the builder's frame bit for bit, and its
+// q = 0 and q = 255 planes (one fma, as the traversal decodes them) enclose every decoded vertex of
+// every child, so the child boxes quantized in it (bvh8.cpp quantize_planes, not linked here)
+// can be conservative.
+void multileaf_boxes(const ClusterLattice& lat, const std::vector<uint8_t>& block,
+                     const std::vector<Vec3f>& decoded, const std::vector<uint32_t>& tris,
+                     const uint32_t* const* prims, const uint32_t* counts, int k) {
+  Box3f all;
+  for (int c = 0; c < k; ++c)
+    for (uint32_t j = 0; j < counts[c]; ++j)
+      for (int q = 0; q < 3; ++q) all.extend(decoded[tris[3 * size_t(prims[c][j]) + q]]);
+  std::vector<uint8_t> ml(sizeof(cluster::LatticeBoxes8) + block.size());
+  std::memcpy(ml.data() + sizeof(cluster::LatticeBoxes8), block.data(), block.size());
+  auto& lb = *reinterpret_cast<cluster::LatticeBoxes8*>(ml.data());
+  float start[4], extent[4], s2[4], e2[4];
+  SLIM_FUZZ_CHECK(cluster::write_box_frame(lat, block.data(), all, lb, start, extent),
+                  "no box frame");
+  cluster::box_frame(lat, ml.data(), s2, e2);
+  SLIM_FUZZ_CHECK(std::memcmp(start, s2, 3 * sizeof(float)) == 0 &&
+                      std::memcmp(extent, e2, 3 * sizeof(float)) == 0,
+                  "box frame decodes differently from the builder's");
+  for (int c = 0; c < k; ++c) {
+    cluster::Decoded8 d;
+    cluster::decode_child<false>(lat, block.data(), uint32_t(k), c, d);
+    for (int l = 0; l < 8; ++l)
+      for (int q = 0; q < 3; ++q)
+        for (int a = 0; a < 3; ++a)
+          SLIM_FUZZ_CHECK(s2[a] <= d.v[q][a][l] && std::fma(255.0f, e2[a], s2[a]) >= d.v[q][a][l],
+                          "box frame misses a decoded vertex");
   }
 }
 
@@ -120,6 +156,7 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
       SLIM_FUZZ_CHECK(found, "decoded triangle (vertex bits and ids) not in its child");
     }
   }
+  if (!lossless) multileaf_boxes(lat, block, decoded, tris, prims, counts, k);
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 #include <optional>
 #include <random>
 
+#include "bvh/bvh8.h"
 #include "mesh/triangulate.h"
 #include "prim/cluster.h"
 #include "slimrt/analysis.h"
@@ -70,6 +71,41 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
     ASSERT_TRUE(
         cluster::check(data.data(), data.size() - kClusterReadSlack, uint32_t(kk), lossless, &why))
         << why;
+    // Lossy: the multi-leaf boxes (cluster::LatticeBoxes8) as the builder writes them, right
+    // ahead of the cluster: every child's box decoded as the traversal decodes it contains the
+    // child's decoded triangles (all 8 lanes, the padding included).
+    if (!lossless) {
+      Box3f boxes[8], all;
+      for (int c = 0; c < kk; ++c) {
+        for (uint32_t j = 0; j < counts[c]; ++j)
+          for (int q = 0; q < 3; ++q)
+            boxes[c].extend(z.decoded[tm.tris[3 * size_t(prims[c][j]) + q]]);
+        all.extend(boxes[c]);
+      }
+      std::vector<uint8_t> ml(sizeof(cluster::LatticeBoxes8) + data.size());
+      std::memcpy(ml.data() + sizeof(cluster::LatticeBoxes8), data.data(), data.size());
+      auto& lb = *reinterpret_cast<cluster::LatticeBoxes8*>(ml.data());
+      float start[4], extent[4], s2[4], e2[4];
+      ASSERT_TRUE(cluster::write_box_frame(z.lattice, data.data(), all, lb, start, extent));
+      quantize_planes(start, extent, boxes, kk, lb.q);
+      cluster::box_frame(z.lattice, ml.data(), s2, e2);
+      ASSERT_EQ(std::memcmp(start, s2, 3 * sizeof(float)), 0);
+      ASSERT_EQ(std::memcmp(extent, e2, 3 * sizeof(float)), 0);
+      for (int a = 0; a < 3; ++a) {
+        // At most 1/8 above the smallest extent that reaches the cluster's top (one scale byte).
+        const double need = (double(all.hi[a]) - double(start[a])) / 255.0;
+        EXPECT_LE(double(extent[a]), std::max(1.125 * need, double(z.lattice.step)) * 1.0001);
+      }
+      for (int c = 0; c < kk; ++c) {
+        const Box3f b = dequantize_planes(lb.q, s2, e2, c);
+        cluster::Decoded8 d;
+        cluster::decode_child<false>(z.lattice, data.data(), uint32_t(kk), c, d);
+        for (int l = 0; l < 8; ++l)
+          for (int q = 0; q < 3; ++q)
+            ASSERT_TRUE(b.contains(Vec3f(d.v[q][0][l], d.v[q][1][l], d.v[q][2][l])))
+                << "child " << c << " lane " << l;
+      }
+    }
     // One view of the cluster serves all its children (as in the traversal).
     const cluster::View view = lossless ? cluster::view<true>(data.data(), uint32_t(kk))
                                         : cluster::view<false>(data.data(), uint32_t(kk));
@@ -388,6 +424,49 @@ TEST(ClusterScene, StatisticsAndSizes) {
   Scene l = Scene::build(torus, BuildOptions::from_config("cluster-lossless"));
   EXPECT_EQ(detail(l, "max_error"), 0);
   EXPECT_GT(l.memory().total(), s.memory().total());
+  // Multi-leaf headers: the lossy clusters' boxes on the lattice (51 B), a MultiLeaf8 (72 B) for
+  // the lossless clusters and the other compressed-leaf formats.
+  EXPECT_GT(detail(s, "multileaf_count"), 0);
+  EXPECT_EQ(detail(s, "multileaf_bytes"),
+            double(sizeof(cluster::LatticeBoxes8)) * detail(s, "multileaf_count"));
+  for (const Scene* o : {&l}) {
+    EXPECT_GT(detail(*o, "multileaf_count"), 0);
+    EXPECT_EQ(detail(*o, "multileaf_bytes"), 72.0 * detail(*o, "multileaf_count"));
+  }
+  for (const char* config : {"clbvh-tri4v", "clbvh-compact"}) {
+    Scene o = Scene::build(torus, BuildOptions::from_config(config));
+    EXPECT_GT(detail(o, "multileaf_count"), 0) << config;
+    EXPECT_EQ(detail(o, "multileaf_bytes"), 72.0 * detail(o, "multileaf_count")) << config;
+  }
+}
+
+// The lossy multi-leaf boxes' extent: scale byte e << 3 | m is (8 + m) 2^e lattice steps / 8
+// (computed on the step's float bits), growing with the byte.
+TEST(ClusterCodec, BoxExtentIsTheScaleInSteps) {
+  for (float step : {std::ldexp(1.0f, -20), 1.0f, 0.25f, std::ldexp(1.0f, 40)}) {
+    ClusterLattice lat;
+    lat.step = step;
+    float prev = 0;
+    for (uint32_t sc = 0; (sc >> 3) <= cluster::kMaxBoxScaleExp; ++sc) {
+      const float e = cluster::box_extent(lat, sc);
+      EXPECT_EQ(e, std::ldexp(float(8 + (sc & 7)), int(sc >> 3) - 3) * step) << sc;
+      EXPECT_GT(e, prev);
+      prev = e;
+    }
+  }
+}
+
+// On a real mesh, every child box of every multi-leaf, decoded as the traversal decodes it (the
+// lossy clusters' lattice frames), contains its decoded triangles: validate() walks them all.
+TEST(ClusterScene, MultiLeafBoxesContainTheirTrianglesRealMesh) {
+  SLIM_REQUIRE_SHARED_DATA();
+  const PolyMesh m = load(shared_data_dir() + "/stanford_bunny.obj.xz");
+  for (const char* config : {"cluster", "cluster-lossless"}) {
+    const Scene s = Scene::build(m, BuildOptions::from_config(config));
+    std::string why;
+    EXPECT_TRUE(s.validate(&why)) << config << ": " << why;
+    EXPECT_GT(detail(s, "multileaf_count"), 100) << config;
+  }
 }
 
 // An error bound finer than 24 lattice bits resolve gets a coarser step (reported), not a failure.

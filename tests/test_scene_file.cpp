@@ -618,12 +618,14 @@ uint64_t first_leaf(const std::string& b, const std::string& prefix) {
   }
   return ref;
 }
-// The file offset of the first block of that leaf (behind the header of a multi-leaf).
-uint64_t first_block(const std::string& b, const std::string& prefix) {
+// The file offset of the first block of that leaf (behind the header of a multi-leaf: a MultiLeaf8,
+// or the lossy clusters' boxes).
+uint64_t first_block(const std::string& b, const std::string& prefix,
+                     uint64_t multileaf_header_bytes = sizeof(MultiLeaf8)) {
   const uint64_t ref = first_leaf(b, prefix);
   EXPECT_TRUE(NodeRef::tag(ref) == kRefLeaf || NodeRef::tag(ref) == kRefMulti);
   return section(b, prefix + "bvh.leaves").offset + NodeRef::offset(ref) +
-         (NodeRef::tag(ref) == kRefMulti ? sizeof(MultiLeaf8) : 0);
+         (NodeRef::tag(ref) == kRefMulti ? multileaf_header_bytes : 0);
 }
 void put32(std::string& s, uint64_t at, uint32_t v) { std::memcpy(s.data() + at, &v, 4); }
 // A child reference of the first node of the BVH under `prefix` (its root), to `ref`.
@@ -634,6 +636,31 @@ void set_root_child(std::string& b, const std::string& prefix, uint64_t ref) {
       section(b, prefix + "bvh.nodes").offset + NodeRef::offset(root) +
       (NodeRef::tag(root) == kRefNode8 ? offsetof(Node8, child) : offsetof(QNode8, child));
   put64(b, child, ref);
+}
+
+// The lossy clusters' multi-leaf boxes (cluster::LatticeBoxes8): a child box shrunk to a point
+// passes the structure check (any 8-bit plane is safe to read) but not validate(), which decodes
+// every child box as the traversal does and checks that it contains the child's triangles.
+TEST(SceneFile, ClusterBoxShrunkIsCaughtByValidate) {
+  const std::string path = temp_path("clbox"), bad = temp_path("clbox_bad");
+  const Scene built = Scene::build(load("torus:64"), BuildOptions::from_config("cluster"));
+  std::string why;
+  ASSERT_TRUE(built.validate(&why)) << why;
+  built.save(path);
+  std::string b = read_all(path);
+  const uint64_t ref = first_leaf(b, "");
+  ASSERT_EQ(NodeRef::tag(ref), kRefMulti);
+  const uint64_t at = section(b, "bvh.leaves").offset + NodeRef::offset(ref);
+  for (int p = 0; p < 6; ++p) b[at + offsetof(cluster::LatticeBoxes8, q) + 8 * p] = 0;
+  write_all(bad, b);
+  OpenOptions oo;
+  oo.verify_checksums = false;
+  oo.check_structure = true;
+  const Scene s = Scene::open(bad, oo);
+  EXPECT_FALSE(s.validate(&why));
+  EXPECT_NE(why.find("primitive outside the box of its leaf"), std::string::npos) << why;
+  std::filesystem::remove(path);
+  std::filesystem::remove(bad);
 }
 
 // For each format, one reference set out of range: the structure check names the section, the
@@ -741,7 +768,17 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
              NodeRef::make(kRefNode8, (section(b, "tris.bvh.nodes").size + 1024) & ~63ull));
        },
        "tris.bvh.nodes", "node outside the node arena"},
-      {"cluster", "cluster header", block_field(0, 0), "bvh.leaves", "cluster"},
+      {"cluster", "cluster header",
+       [](std::string& b) { put32(b, first_block(b, "", sizeof(cluster::LatticeBoxes8)), 0); },
+       "bvh.leaves", "cluster"},
+      {"cluster", "multi-leaf box scale",
+       [](std::string& b) {
+         const uint64_t ref = first_leaf(b, "");
+         ASSERT_EQ(NodeRef::tag(ref), kRefMulti);
+         b[section(b, "bvh.leaves").offset + NodeRef::offset(ref) +
+           offsetof(cluster::LatticeBoxes8, scale) + 1] = char(0xff);
+       },
+       "bvh.leaves", "multi-leaf box scale exponent 31 beyond 24"},
       {"cluster-lossless", "cluster header", block_field(0, 0), "bvh.leaves", "cluster"},
       {"costa", "primitive range", block_field(offsetof(CostaBlock, first), 0xfffffff0u),
        "bvh.leaves", "primitive range beyond the store"},

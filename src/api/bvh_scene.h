@@ -130,7 +130,7 @@ class BvhScene : public Scene::Impl {
         });
         return true;
       };
-    if (!validate_bvh8(bvh, leaf, why, multi)) return false;
+    if (!validate_bvh8(bvh, leaf, why, multi, multileaf_box_decoder())) return false;
     if (!(got == expected)) {
       if (why)
         *why = "primitives in the leaves (" + std::to_string(got.count) +
@@ -139,6 +139,18 @@ class BvhScene : public Scene::Impl {
       return false;
     }
     return true;
+  }
+
+  // How validate_bvh8 decodes the multi-leaf boxes (traverse.h, HasMultiLeafBoxes).
+  MultiLeafBoxDecoder multileaf_box_decoder() const {
+    MultiLeafBoxDecoder d;
+    if constexpr (HasMultiLeafBoxes<Leaf>) {
+      d.header_bytes = Leaf::kMultiLeafHeaderBytes;
+      d.frame = [this](const uint8_t* p, float* start, float* extent) {
+        Leaf::multileaf_frame(ctx, p, start, extent);
+      };
+    }
+    return d;
   }
 
   // Scene files: the BVH's arenas and figures, the source fingerprint and the leaf context's
@@ -180,16 +192,18 @@ class BvhScene : public Scene::Impl {
   // with `deep`, the walk of every reference with the leaf's block checks. Formats whose blocks
   // index side tables check those tables' own fields first (their check_opened).
   void check_bvh(const std::string& p, bool deep) const {
-    check_bvh_root(bvh, p, Leaf::kBlockBytes);
+    constexpr uint32_t hb = multileaf_header_bytes<Leaf>();
+    check_bvh_root(bvh, p, Leaf::kBlockBytes, hb);
     if (!deep) return;
     BvhWalkHooks h;
+    h.multileaf_header_bytes = hb;
     const uint8_t* leaves = bvh.leaves.data();
     h.block = [&](uint64_t off) { return fault_text(Leaf::check_block(ctx, leaves + off)); };
     if constexpr (HasMultiLeafLayout<Leaf>)
       h.multi = [&](uint64_t off, uint32_t k) {
-        // off + 72 <= size: checked by the walk.
-        return fault_text(Leaf::check_multileaf(ctx, leaves + off + sizeof(MultiLeaf8), k,
-                                                bvh.leaves.size() - off - sizeof(MultiLeaf8)));
+        // off + hb <= size: checked by the walk.
+        return fault_text(
+            Leaf::check_multileaf(ctx, leaves + off + hb, k, bvh.leaves.size() - off - hb));
       };
     walk_bvh_checked(bvh, p, h);
   }
@@ -272,6 +286,16 @@ class BvhScene : public Scene::Impl {
       enc.encode_multileaf = [&](const uint32_t* const* prims, const uint32_t* counts, int k) {
         return Leaf::encode_multileaf(src, prims, counts, k);
       };
+    if constexpr (HasMultiLeafBoxes<Leaf>) {
+      enc.multileaf_header_bytes = Leaf::kMultiLeafHeaderBytes;
+      enc.multileaf_boxes = [&](const uint8_t* data, int k, const Box3f* boxes, uint8_t* header) {
+        Box3f all;
+        for (int c = 0; c < k; ++c) all.extend(boxes[c]);
+        float start[4], extent[4];
+        Leaf::write_multileaf_frame(src, data, all, header, start, extent);
+        quantize_planes(start, extent, boxes, k, reinterpret_cast<uint8_t(*)[8]>(header));
+      };
+    }
     if constexpr (HasMultiLeafParts<Leaf>) {
       enc.parts_per_block = Leaf::multileaf_parts(src);
       if (enc.parts_per_block > 1)

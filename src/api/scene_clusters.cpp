@@ -366,7 +366,7 @@ class ClusterScene : public BvhScene<ClusterLeaf<kLossless>> {
       return true;
     };
     std::string why;
-    if (!validate_bvh8(this->bvh, leaf, &why, multi))
+    if (!validate_bvh8(this->bvh, leaf, &why, multi, this->multileaf_box_decoder()))
       throw Error("cluster scene: its leaves do not decode: " + why);
     return out;
   }
@@ -391,6 +391,7 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   src.geom_ids = tm.geom_ids.data();
   src.prim_ids = tm.prim_ids.data();
   src.lossless = kLossless;
+  src.lattice = lat;
   src.side = side.get();
   src.side_mutex = &side_mutex;
   src.stats = &est;

@@ -38,9 +38,10 @@ namespace slim {
 namespace {
 
 constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
-// Version 2. Any change of a section's layout (a node, block or context struct) or of the header
-// needs a new version: the sections are the in-memory structs byte for byte.
-constexpr uint32_t kVersion = 2;
+// Version 3 (the lossy clusters' multi-leaf boxes on the scene's lattice, prim/cluster.h, instead
+// of a 72-byte MultiLeaf8). Any change of a section's layout (a node, block or context struct) or
+// of the header needs a new version: the sections are the in-memory structs byte for byte.
+constexpr uint32_t kVersion = 3;
 constexpr uint32_t kByteOrder = 0x01020304;
 constexpr uint64_t kAlign = 64;
 // Bounds the table before it is read (the header size check then bounds it by the file size): a
@@ -196,7 +197,7 @@ class Opener {
     if (h_.version != kVersion)
       fail(offsetof(FileHeader, version), "",
            "format version " + std::to_string(h_.version) + ", this slimrt reads version " +
-               std::to_string(kVersion));
+               std::to_string(kVersion) + " (rebuild the file with `slimrt build`)");
     if (h_.file_bytes != size_)
       fail(std::min<uint64_t>(size_, h_.file_bytes), "",
            (size_ < h_.file_bytes ? "truncated: " : "trailing bytes: ") + std::to_string(size_) +
@@ -415,7 +416,8 @@ void restore_figures(const SceneFigures& f, Scene::Impl& s) {
 
 // ---- the walk of OpenOptions::check_structure -------------------------------------------------
 
-void check_bvh_root(const Bvh8& bvh, const std::string& p, uint32_t block_bytes) {
+void check_bvh_root(const Bvh8& bvh, const std::string& p, uint32_t block_bytes,
+                    uint32_t multileaf_header_bytes) {
   if (bvh.block_bytes != block_bytes)
     throw SectionFault{p + "bvh.meta", 0,
                        "leaf block size " + std::to_string(bvh.block_bytes) + ", the format's is " +
@@ -440,7 +442,7 @@ void check_bvh_root(const Bvh8& bvh, const std::string& p, uint32_t block_bytes)
       break;
     case kRefMulti:
       ok = NodeRef::blocks(bvh.root) > 0 && off % 4 == 0 && off <= bvh.leaves.size() &&
-           bvh.leaves.size() - off >= sizeof(MultiLeaf8);
+           bvh.leaves.size() - off >= multileaf_header_bytes;
       break;
     default:
       ok = false;
@@ -511,13 +513,13 @@ struct Walker {
         const uint32_t k = NodeRef::blocks(ref);
         if (k == 0 || k > 8) leaves_fault(off, "multi-leaf of " + std::to_string(k) + " children");
         if (off % 4 != 0) leaves_fault(off, "misaligned multi-leaf");
-        if (!fits(off, sizeof(MultiLeaf8), b.leaves.size()))
+        if (!fits(off, h.multileaf_header_bytes, b.leaves.size()))
           leaves_fault(off, "multi-leaf outside the leaf arena");
         if (h.multi) {
           if (std::string e = h.multi(off, k); !e.empty()) leaves_fault(off, e);
         } else {
           for (uint32_t i = 0; i < k; ++i)
-            block(off + sizeof(MultiLeaf8) + uint64_t(i) * b.block_bytes);
+            block(off + h.multileaf_header_bytes + uint64_t(i) * b.block_bytes);
         }
         return;
       }

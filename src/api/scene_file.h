@@ -82,11 +82,13 @@ struct SectionFault {
 // as many references as a tree over the node arena can hold (no shared subtrees or cycles). Leaf
 // blocks are handed to `block(offset)`, multi-leaves of layouts with data of their own to
 // `multi(offset, children)` (offsets into the leaf arena, already checked to hold the block / the
-// 72-byte header). A non-empty answer is what is wrong: the walk throws it as a SectionFault at
-// that offset of the leaf arena. `prefix` names the sections ("" or "tris.").
+// multi-leaf header: multileaf_header_bytes). A non-empty answer is what is wrong: the walk throws
+// it as a SectionFault at that offset of the leaf arena. `prefix` names the sections ("" or
+// "tris.").
 struct BvhWalkHooks {
   std::function<std::string(uint64_t off)> block;
   std::function<std::string(uint64_t off, uint32_t children)> multi;  // layouts with own data
+  uint32_t multileaf_header_bytes = sizeof(MultiLeaf8);  // MultiLeafBoxDecoder::header_bytes
 };
 // A leaf format's check answer as the walk takes it: leaves answer nullptr / an empty string for
 // a good block, else what is wrong.
@@ -94,6 +96,7 @@ inline std::string fault_text(const char* what) { return what ? what : ""; }
 inline std::string fault_text(std::string what) { return what; }
 void walk_bvh_checked(const Bvh8& bvh, const std::string& prefix, const BvhWalkHooks& hooks);
 // The cheap check every open runs: root reference and block size.
-void check_bvh_root(const Bvh8& bvh, const std::string& prefix, uint32_t block_bytes);
+void check_bvh_root(const Bvh8& bvh, const std::string& prefix, uint32_t block_bytes,
+                    uint32_t multileaf_header_bytes = sizeof(MultiLeaf8));
 
 }  // namespace slim

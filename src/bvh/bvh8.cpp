@@ -64,6 +64,30 @@ SLIM_INLINE float decode_q(uint8_t q, float extent, float start) {
 
 }  // namespace
 
+void quantize_planes(const float* start, const float* extent, const Box3f* boxes, int n,
+                     uint8_t (*q)[8]) {
+  for (int a = 0; a < 3; ++a) {
+    const float s = start[a], ext = extent[a];
+    for (int i = 0; i < 8; ++i) {
+      uint8_t qlo = 255, qhi = 0;
+      if (i < n) {
+        float lo = boxes[i].lo[a], up = boxes[i].hi[a];
+        float fl = std::floor((lo - s) / ext);
+        float fu = std::ceil((up - s) / ext);
+        int ql = int(std::clamp(fl, 0.0f, 255.0f));
+        int qu = int(std::clamp(fu, 0.0f, 255.0f));
+        while (ql > 0 && decode_q(uint8_t(ql), ext, s) > lo) --ql;
+        while (qu < 255 && decode_q(uint8_t(qu), ext, s) < up) ++qu;
+        qlo = uint8_t(ql);
+        qhi = uint8_t(qu);
+        SLIM_ASSERT(decode_q(qlo, ext, s) <= lo && decode_q(qhi, ext, s) >= up);
+      }
+      q[2 * a][i] = qlo;
+      q[2 * a + 1][i] = qhi;
+    }
+  }
+}
+
 void quantize_boxes(const Box3f& parent, const Box3f* boxes, int n, QuantBoxes8& out) {
   for (int a = 0; a < 3; ++a) {
     float start = parent.lo[a];
@@ -76,33 +100,21 @@ void quantize_boxes(const Box3f& parent, const Box3f* boxes, int n, QuantBoxes8&
       ext = std::nextafter(ext, kInf) * (1.0f + 1e-7f);
     out.start[a] = start;
     out.extent[a] = ext;
-    for (int i = 0; i < 8; ++i) {
-      uint8_t qlo = 255, qhi = 0;
-      if (i < n) {
-        float lo = boxes[i].lo[a], up = boxes[i].hi[a];
-        float fl = std::floor((lo - start) / ext);
-        float fu = std::ceil((up - start) / ext);
-        int ql = int(std::clamp(fl, 0.0f, 255.0f));
-        int qu = int(std::clamp(fu, 0.0f, 255.0f));
-        while (ql > 0 && decode_q(uint8_t(ql), ext, start) > lo) --ql;
-        while (qu < 255 && decode_q(uint8_t(qu), ext, start) < up) ++qu;
-        qlo = uint8_t(ql);
-        qhi = uint8_t(qu);
-        SLIM_ASSERT(decode_q(qlo, ext, start) <= lo && decode_q(qhi, ext, start) >= up);
-      }
-      out.q[2 * a][i] = qlo;
-      out.q[2 * a + 1][i] = qhi;
-    }
   }
+  quantize_planes(out.start, out.extent, boxes, n, out.q);
+}
+
+Box3f dequantize_planes(const uint8_t (*q)[8], const float* start, const float* extent, int i) {
+  Box3f b;
+  for (int a = 0; a < 3; ++a) {
+    b.lo[a] = decode_q(q[2 * a][i], extent[a], start[a]);
+    b.hi[a] = decode_q(q[2 * a + 1][i], extent[a], start[a]);
+  }
+  return b;
 }
 
 Box3f dequantize_box(const QuantBoxes8& q, int i) {
-  Box3f b;
-  for (int a = 0; a < 3; ++a) {
-    b.lo[a] = decode_q(q.q[2 * a][i], q.extent[a], q.start[a]);
-    b.hi[a] = decode_q(q.q[2 * a + 1][i], q.extent[a], q.start[a]);
-  }
-  return b;
+  return dequantize_planes(q.q, q.start, q.extent, i);
 }
 
 // ---- collapse -------------------------------------------------------------------------------
@@ -434,9 +446,9 @@ class Collapser {
         data = uint64_t(k) * enc_.block_bytes;
       }
       node_size_[i] = 0;
-      leaf_size_[i] = round_multileaf(sizeof(MultiLeaf8) + data);
+      leaf_size_[i] = round_multileaf(enc_.multileaf_header_bytes + data);
       s.leaf_data_bytes += data;
-      s.multileaf_bytes += sizeof(MultiLeaf8);
+      s.multileaf_bytes += enc_.multileaf_header_bytes;
       s.st.multileaf++;
       s.st.leaves_in_multileaf += k;
       s.st.sah_cost += double(n.box.half_area()) / root_area_;
@@ -497,7 +509,7 @@ class Collapser {
       collect_leaves(i, kids, k);
       uint8_t* base = out_.leaves.data() + leaf_off;
       std::memset(base, 0, leaf_size_[i]);
-      uint8_t* data = base + sizeof(MultiLeaf8);
+      uint8_t* data = base + enc_.multileaf_header_bytes;
       if (enc_.encode_multileaf) {
         const std::vector<uint8_t>& d = multi_cache_.at(i);
         std::memcpy(data, d.data(), d.size());
@@ -513,7 +525,10 @@ class Collapser {
       } else {
         for (int c = 0; c < k; ++c) boxes[c] = b2_.nodes[kids[c]].box;
       }
-      quantize_boxes(n.box, boxes, int(parts) * k, *reinterpret_cast<MultiLeaf8*>(base));
+      if (enc_.multileaf_boxes)
+        enc_.multileaf_boxes(data, k, boxes, base);
+      else
+        quantize_boxes(n.box, boxes, int(parts) * k, *reinterpret_cast<MultiLeaf8*>(base));
       // The block count field of a multi-leaf ref holds its number of children.
       return NodeRef::make(kRefMulti, leaf_off, parts * uint32_t(k));
     }
@@ -596,6 +611,7 @@ struct Validator {
   const Bvh8& bvh;
   const LeafValidator& leaf;
   const MultiLeafValidator& multi;
+  const MultiLeafBoxDecoder& boxes;
   std::string* why;
 
   bool fail(const std::string& msg) {
@@ -633,14 +649,24 @@ struct Validator {
         uint64_t off = NodeRef::offset(ref);
         uint32_t k = NodeRef::blocks(ref);
         if (k == 0 || k > 8) return fail("multi-leaf with a bad child count");
-        if (!multi && off + sizeof(MultiLeaf8) + uint64_t(k) * bvh.block_bytes > bvh.leaves.size())
+        const uint64_t hb = boxes.header_bytes;
+        if (off + hb > bvh.leaves.size() ||
+            (!multi && off + hb + uint64_t(k) * bvh.block_bytes > bvh.leaves.size()))
           return fail("multi-leaf outside the leaf arena");
-        const auto* ml = reinterpret_cast<const MultiLeaf8*>(bvh.leaves.data() + off);
+        const uint8_t* p = bvh.leaves.data() + off;
+        const auto* ml = reinterpret_cast<const MultiLeaf8*>(p);
         for (uint32_t c = 0; c < k; ++c) {
-          const uint8_t* data = bvh.leaves.data() + off + sizeof(MultiLeaf8);
+          const uint8_t* data = p + hb;
           Box3f g;
           if (multi) {
-            Box3f cb = dequantize_box(*ml, c);
+            Box3f cb;
+            if (boxes.frame) {
+              float start[4], extent[4];
+              boxes.frame(p, start, extent);
+              cb = dequantize_planes(reinterpret_cast<const uint8_t(*)[8]>(p), start, extent, c);
+            } else {
+              cb = dequantize_box(*ml, c);
+            }
             if (!multi(data, k, c, g, why)) return false;
             if (!cb.contains(g)) return fail("primitive outside the box of its leaf");
           } else if (!check_leaf_block(data + c * bvh.block_bytes, dequantize_box(*ml, c), g)) {
@@ -694,8 +720,8 @@ struct Validator {
 }  // namespace
 
 bool validate_bvh8(const Bvh8& bvh, const LeafValidator& leaf, std::string* why,
-                   const MultiLeafValidator& multi) {
-  Validator v{bvh, leaf, multi, why};
+                   const MultiLeafValidator& multi, const MultiLeafBoxDecoder& boxes) {
+  Validator v{bvh, leaf, multi, boxes, why};
   Box3f geom;
   if (!v.visit(bvh.root, bvh.bounds, 0, geom)) return false;
   if (!geom.empty() && !bvh.bounds.contains(geom)) return v.fail("primitives outside the root box");

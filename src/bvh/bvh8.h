@@ -9,7 +9,8 @@
 //                      Listing 1).
 //   MultiLeaf8   72 B  start/extent + 8 quantized boxes, no refs: the leaf blocks of its (up to)
 //                      8 children follow it in memory (section 4.2 "Introducing Compressed
-//                      Multi-Leaf Nodes").
+//                      Multi-Leaf Nodes"). A leaf layout may store its multi-leaf boxes its own
+//                      way instead (LeafEncoder::multileaf_boxes: the lossy clusters' 51 B).
 #pragma once
 
 #include <cstdint>
@@ -78,6 +79,12 @@ using MultiLeaf8 = QuantBoxes8;  // 72 B; leaf blocks of child i follow at + 72 
 void quantize_boxes(const Box3f& parent, const Box3f* boxes, int n, QuantBoxes8& out);
 // Decodes child i exactly as the traversal does (for validation and tests).
 Box3f dequantize_box(const QuantBoxes8& q, int i);
+// The same in a given frame (start, extent per axis) with the planes q[6][8] stored elsewhere: the
+// frame must decode q = 0 at or below, and q = 255 at or above, every box's bounds (n used boxes,
+// the other slots of the 8 empty).
+void quantize_planes(const float* start, const float* extent, const Box3f* boxes, int n,
+                     uint8_t (*q)[8]);
+Box3f dequantize_planes(const uint8_t (*q)[8], const float* start, const float* extent, int i);
 
 // ---- 64-byte aligned byte arena -------------------------------------------------------------
 class AlignedBytes {
@@ -152,6 +159,14 @@ struct LeafEncoder {
   // child count is blocks x parts_per_block, and the leaf format maps child i to its block.
   uint32_t parts_per_block = 1;
   std::function<void(uint32_t prim, Box3f* boxes)> part_bounds;
+  // Optional (with encode_multileaf): the layout stores a multi-leaf's child boxes itself, in
+  // multileaf_header_bytes bytes ahead of its data, instead of a MultiLeaf8 (the lossy clusters:
+  // 8-bit boxes on the scene's lattice, prim/cluster.h). multileaf_boxes(data, k, boxes, header)
+  // writes them from the encoded data and the k child boxes; each decoded box must contain its
+  // child's box.
+  uint32_t multileaf_header_bytes = sizeof(MultiLeaf8);
+  std::function<void(const uint8_t* data, int k, const Box3f* boxes, uint8_t* header)>
+      multileaf_boxes;
 };
 
 struct Bvh8Stats {
@@ -214,7 +229,17 @@ using MultiLeafValidator = std::function<bool(const uint8_t* data, uint32_t k, u
 // the traversal decodes them) contains all primitives below it, Node8 child boxes lie inside their
 // parent box, offsets stay inside the arenas, and every leaf block passes `leaf`. Returns false
 // and sets `why` on the first violation.
+// The multi-leaf boxes of a layout that stores them itself (LeafEncoder::multileaf_boxes): the
+// header's size, and frame(multileaf, start, extent) (4 floats each, the 4th unused), the frame
+// its planes q[6][8] (the header's first 48 bytes) are decoded in (traverse.h, HasMultiLeafBoxes).
+// Default: a MultiLeaf8.
+struct MultiLeafBoxDecoder {
+  uint32_t header_bytes = sizeof(MultiLeaf8);
+  std::function<void(const uint8_t* multileaf, float* start, float* extent)> frame;
+};
+
 bool validate_bvh8(const Bvh8& bvh, const LeafValidator& leaf, std::string* why,
-                   const MultiLeafValidator& multi = nullptr);
+                   const MultiLeafValidator& multi = nullptr,
+                   const MultiLeafBoxDecoder& boxes = {});
 
 }  // namespace slim

@@ -53,11 +53,14 @@ SLIM_INLINE uint32_t intersect_node8(const Node8* n, const TravRay& r, simd::vfl
   return (tn <= tf).mask();
 }
 
-// 8 quantized boxes (QNode8, MultiLeaf8): decode start + q * extent, then the same slab test.
-SLIM_INLINE uint32_t intersect_quant8(const QuantBoxes8* q, const TravRay& r, simd::vfloat8& dist) {
+// 8 quantized boxes: planes q[6][8] (as QuantBoxes8::q) decoded as start + q * extent, then the
+// same slab test.
+SLIM_INLINE uint32_t intersect_quant_planes(const uint8_t (*q)[8], const float* start,
+                                            const float* extent, const TravRay& r,
+                                            simd::vfloat8& dist) {
   using namespace simd;
   auto plane = [&](uint32_t p, int a) {
-    return fmadd(to_float(vint8::load_u8(q->q[p])), vfloat8(q->extent[a]), vfloat8(q->start[a]));
+    return fmadd(to_float(vint8::load_u8(q[p])), vfloat8(extent[a]), vfloat8(start[a]));
   };
   const uint32_t nx = r.near_plane[0], ny = r.near_plane[1], nz = r.near_plane[2];
   vfloat8 tnx = fmsub(plane(nx, 0), vfloat8(r.rdir.x), vfloat8(r.c_near[0]));
@@ -70,6 +73,11 @@ SLIM_INLINE uint32_t intersect_quant8(const QuantBoxes8* q, const TravRay& r, si
   vfloat8 tf = min(min(tfx, tfy), min(tfz, vfloat8(r.tfar)));
   dist = tn;
   return (tn <= tf).mask();
+}
+
+// 8 quantized boxes (QNode8, MultiLeaf8).
+SLIM_INLINE uint32_t intersect_quant8(const QuantBoxes8* q, const TravRay& r, simd::vfloat8& dist) {
+  return intersect_quant_planes(q->q, q->start, q->extent, r, dist);
 }
 
 }  // namespace detail
@@ -115,6 +123,27 @@ template <class L>
 concept HasMultiLeafView = HasMultiLeafLayout<L> && requires {
   typename L::MultiLeafView;
 };
+// A multi-leaf layout may store its child boxes its own way, ahead of its data (the lossy
+// clusters: the float start and extent of a MultiLeaf8 follow from data the cluster holds anyway):
+// then it provides
+//   L::kMultiLeafBoxes = true, L::kMultiLeafHeaderBytes  the boxes' bytes (the data follows);
+//   static void multileaf_frame(const Context&, const uint8_t* p, float start[4],
+//       float extent[4]);   the multi-leaf at p starts with 8-bit planes q[6][8] (as
+//                            QuantBoxes8::q), decoded as start + q * extent (one fma, as QNode8);
+// and, for the builder (bvh_scene.h), write_multileaf_frame(source, data, box, header, start,
+// extent): the frame of a multi-leaf whose children lie in `box`, written into its header.
+template <class L>
+concept HasMultiLeafBoxes = HasMultiLeafView<L> && requires {
+  requires L::kMultiLeafBoxes;
+};
+// Bytes ahead of a multi-leaf's data (the quantized child boxes).
+template <class L>
+constexpr uint32_t multileaf_header_bytes() {
+  if constexpr (HasMultiLeafBoxes<L>)
+    return L::kMultiLeafHeaderBytes;
+  else
+    return sizeof(MultiLeaf8);
+}
 // Its multi-leaf data is written by L::encode_multileaf (clbvh-compact's vertex dictionary).
 template <class L>
 concept HasMultiLeafEncoder = requires {
@@ -138,11 +167,19 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
                                      uint32_t children, uint32_t block_bytes, TravRay& ray,
                                      HitRecord& hit, Stats& st) {
   simd::vfloat8 dist;
-  const auto* ml = reinterpret_cast<const MultiLeaf8*>(p);
-  uint32_t mask = detail::intersect_quant8(ml, ray, dist) & ((1u << children) - 1);
+  uint32_t mask;
+  if constexpr (HasMultiLeafBoxes<Leaf>) {
+    alignas(16) float start[4], extent[4];
+    Leaf::multileaf_frame(ctx, p, start, extent);
+    mask = detail::intersect_quant_planes(reinterpret_cast<const uint8_t(*)[8]>(p), start, extent,
+                                          ray, dist);
+  } else {
+    mask = detail::intersect_quant8(reinterpret_cast<const MultiLeaf8*>(p), ray, dist);
+  }
+  mask &= (1u << children) - 1;
   st.node(children);
   bool found = false;
-  const uint8_t* blocks = p + sizeof(MultiLeaf8);
+  const uint8_t* blocks = p + multileaf_header_bytes<Leaf>();
   alignas(32) float d[8];
   if constexpr (!kAny) dist.store(d);
   if constexpr (HasMultiLeafView<Leaf>)

@@ -351,6 +351,29 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   return out;
 }
 
+bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f& box,
+                     LatticeBoxes8& boxes, float* start, float* extent) {
+  // The anchors in a padded copy: box_start reads 16 bytes (the traversal has the read slack).
+  uint8_t anchors[16] = {};
+  std::memcpy(anchors, data + sizeof(ClusterHeader), 9);
+  box_start(lat, anchors, start);
+  extent[3] = 0.0f;
+  for (int a = 0; a < 3; ++a) {
+    if (!(start[a] <= box.lo[a])) return false;
+    // The smallest scale (scales grow with the byte) whose q = 255 decodes at or above the top,
+    // with the traversal's one fma.
+    uint32_t sc = 0;
+    for (;; ++sc) {
+      if ((sc >> 3) > kMaxBoxScaleExp) return false;
+      const float e = box_extent(lat, sc);
+      if (e > 0.0f && std::isfinite(e) && std::fma(255.0f, e, start[a]) >= box.hi[a]) break;
+    }
+    boxes.scale[a] = uint8_t(sc);
+    extent[a] = box_extent(lat, sc);
+  }
+  return true;
+}
+
 bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless, std::string* why) {
   auto fail = [&](const std::string& m) {
     if (why) *why = "cluster: " + m;

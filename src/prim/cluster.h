@@ -5,9 +5,10 @@
 // runs (a run start per run, a run index and an offset per triangle).
 //
 // A cluster is one multi-leaf of the compressed-leaf BVH (bvh8.h; QBVH8 inner nodes above the
-// multi-leaves, NodeKind::QCompressedLeaf): its 72-byte header holds the quantized boxes of up to
-// 8 children of up to 8 triangles each (one 8-wide watertight test per child); the cluster data
-// follows it:
+// multi-leaves, NodeKind::QCompressedLeaf): its header holds the quantized boxes of up to 8
+// children of up to 8 triangles each (one 8-wide watertight test per child): 51 bytes lossy (a
+// LatticeBoxes8, below: the boxes' frame comes from the cluster's anchors), a 72-byte MultiLeaf8
+// lossless. The cluster data follows it:
 //   ClusterHeader (17 B, packed)
 //   bit stream, LSB first from the byte after the header:
 //     anchors:  3 x aw bits (aw = 24 lossy, 32 lossless)
@@ -51,6 +52,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <mutex>
@@ -118,6 +120,36 @@ SLIM_INLINE float key_float(uint32_t k) {
 // The one decoding of a lossy coordinate (build and traversal use this function only).
 SLIM_INLINE float lattice_coord(const ClusterLattice& lat, int axis, uint32_t q) {
   return lat.origin[axis] + float(q) * lat.step;  // the product is exact (power-of-two step)
+}
+
+// ---- the lossy clusters' multi-leaf boxes (ClusterLeaf<false>, traverse.h HasMultiLeafBoxes) ----
+// A MultiLeaf8 spends 24 of its 72 bytes on a float start and extent per axis. A lossy cluster's
+// lowest vertex lies on the lattice at its anchor (the stream's first field), so its boxes start
+// there, start_a = lattice_coord(anchor_a), and the extent (one of the 255 steps) is one scale
+// byte per axis, e << 3 | m: extent_a = (8 + m) 2^e x step / 8, at most 1/8 above the smallest
+// extent that reaches the cluster's top (a power of two alone would waste up to 2x in looser child
+// boxes). The planes decode as a QNode8's, start + q x extent with one fma, so the traversal tests
+// them with the same instructions; the builder takes the smallest scale whose q = 255 decodes at or
+// above the cluster's box and quantizes the child boxes conservatively in that frame (validate()
+// checks every child box against its decoded triangles).
+struct LatticeBoxes8 {
+  uint8_t q[6][8];   // 48 B: lo_x, hi_x, lo_y, hi_y, lo_z, hi_z (as QuantBoxes8::q)
+  uint8_t scale[3];  // 3 B: per axis e << 3 | m, e <= kMaxBoxScaleExp
+};
+static_assert(sizeof(LatticeBoxes8) == 51, "lossy cluster multi-leaf boxes are 51 bytes");
+constexpr uint32_t kMaxBoxScaleExp = 24;  // 255 x 2^24 steps span any cluster (< 2^24 steps)
+
+// The extent of scale byte `scale` (build and traversal use this function only): the step (a
+// power of two: mantissa 0) with e added to its exponent and m as its top 3 mantissa bits, which
+// is (8 + m) 2^e x step / 8 while the step and the result are normal floats, in 2 integer
+// instructions.
+SLIM_INLINE float box_extent(const ClusterLattice& lat, uint32_t scale) {
+  uint32_t u;
+  std::memcpy(&u, &lat.step, 4);
+  u += (scale & 0xff) << 20;
+  float f;
+  std::memcpy(&f, &u, 4);
+  return f;
 }
 
 template <bool kLossless>
@@ -522,6 +554,54 @@ SLIM_INLINE void decode_ids(const uint8_t* data, uint32_t children, uint32_t t, 
   decode_ids(view<kLossless>(data, children), t, geom, prim);
 }
 
+// The boxes' start per axis (4 floats, the 4th unused): the anchor's lattice coordinate, from the
+// 3 x 24-bit anchors in the first 9 of the 16 bytes at `bits` (the stream's start; the builder
+// passes a padded copy). The one computation of it, for the builder and the traversal alike; the
+// AVX2 path takes the three axes at once with one fma (the product is exact: q < 2^24 and a
+// power-of-two step, so it rounds as lattice_coord's sum).
+SLIM_INLINE void box_start(const ClusterLattice& lat, const uint8_t* bits, float* start) {
+#if defined(SLIM_SIMD_AVX2)
+  const __m128i raw = _mm_lddqu_si128(reinterpret_cast<const __m128i*>(bits));
+  const __m128i q =
+      _mm_shuffle_epi8(raw, _mm_setr_epi8(0, 1, 2, -1, 3, 4, 5, -1, 6, 7, 8, -1, -1, -1, -1, -1));
+  static_assert(sizeof(ClusterLattice) == 16, "origin[3] then step: one 16-byte load");
+  const __m128 origin = _mm_loadu_ps(lat.origin);  // lane 3: the step (unused)
+  _mm_storeu_ps(start, _mm_fmadd_ps(_mm_cvtepi32_ps(q), _mm_set1_ps(lat.step), origin));
+#else
+  for (int a = 0; a < 3; ++a)
+    start[a] = lattice_coord(lat, a, read_bits(bits, uint64_t(a) * 24, 24));
+  start[3] = 0.0f;
+#endif
+}
+
+// The frame (start, extent per axis; 4 floats each, the 4th unused) of the LatticeBoxes8 at p,
+// the cluster's data right behind them (its stream holds the 9 anchor bytes and more, plus
+// kClusterReadSlack: 16 bytes to read). Read on every multi-leaf visit: the AVX2 path takes the
+// three axes at once (a dozen instructions instead of some 45), the extents with box_extent's
+// integer operations lane by lane.
+SLIM_INLINE void box_frame(const ClusterLattice& lat, const uint8_t* p, float* start,
+                           float* extent) {
+  const uint8_t* scale = p + offsetof(LatticeBoxes8, scale);
+  box_start(lat, p + sizeof(LatticeBoxes8) + sizeof(ClusterHeader), start);
+#if defined(SLIM_SIMD_AVX2)
+  uint32_t sc;
+  std::memcpy(&sc, scale, 4);  // the 3 scale bytes and the cluster header's first
+  uint32_t step_bits;
+  std::memcpy(&step_bits, &lat.step, 4);
+  const __m128i e = _mm_add_epi32(_mm_slli_epi32(_mm_cvtepu8_epi32(_mm_cvtsi32_si128(int(sc))), 20),
+                                  _mm_set1_epi32(int(step_bits)));
+  _mm_storeu_ps(extent, _mm_castsi128_ps(e));
+#else
+  for (int a = 0; a < 3; ++a) extent[a] = box_extent(lat, scale[a]);
+  extent[3] = 0.0f;
+#endif
+}
+// The builder's side: writes the scale bytes into `boxes` for the lossy cluster at `data` whose
+// vertices lie in `box` (decoded), and returns the frame in start and extent (4 floats each, as
+// box_frame decodes it). False if no scale reaches the box (coordinates near the float range).
+bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f& box,
+                     LatticeBoxes8& boxes, float* start, float* extent);
+
 // The children a thread decoded last, so that the rays after it that enter the same child (the
 // neighbouring pixels of a tile, a bounce leaving the surface it hit) skip the strip and vertex
 // decoding. Direct-mapped on the child's address; a scene's tag (Context::cache_tag, unique per
@@ -575,6 +655,7 @@ struct ClusterSource {
   const uint32_t* geom_ids = nullptr;
   const uint32_t* prim_ids = nullptr;
   bool lossless = false;
+  ClusterLattice lattice;                // lossy: the multi-leaf boxes' frames
   std::vector<uint8_t>* side = nullptr;  // isolated leaves' cluster records
   std::mutex* side_mutex = nullptr;
   cluster::EncodeStats* stats = nullptr;
@@ -637,6 +718,11 @@ struct ClusterLeaf {
   // are the decoders' read slack), and the side arena's record an isolated leaf names.
   static std::string check_multileaf(const Context&, const uint8_t* data, uint32_t k,
                                      uint64_t avail) {
+    if constexpr (!kLossless)  // the box scales right before the data (the walk checked them in)
+      for (const uint8_t* sc = data - 3; sc < data; ++sc)
+        if (uint32_t(*sc >> 3) > cluster::kMaxBoxScaleExp)
+          return "multi-leaf box scale exponent " + std::to_string(*sc >> 3) + " beyond " +
+                 std::to_string(cluster::kMaxBoxScaleExp);
     std::string why;
     if (avail < kClusterReadSlack) return "cluster beyond the leaf arena";
     if (!cluster::check(data, avail - kClusterReadSlack, k, kLossless, &why)) return why;
@@ -712,6 +798,23 @@ struct ClusterLeaf {
     const uint64_t off = s.side->size();
     s.side->insert(s.side->end(), rec.begin(), rec.end());
     std::memcpy(out, &off, 8);
+  }
+
+  // Lossy: the multi-leaf boxes are a cluster::LatticeBoxes8 (51 B) instead of a 72-byte
+  // MultiLeaf8 (traverse.h, HasMultiLeafBoxes); lossless keeps the MultiLeaf8.
+  static constexpr bool kMultiLeafBoxes = !kLossless;
+  static constexpr uint32_t kMultiLeafHeaderBytes = sizeof(cluster::LatticeBoxes8);
+  static void write_multileaf_frame(const ClusterSource& s, const uint8_t* data, const Box3f& box,
+                                    uint8_t* header, float* start, float* extent) {
+    auto* b = reinterpret_cast<cluster::LatticeBoxes8*>(header);
+    if (!cluster::write_box_frame(s.lattice, data, box, *b, start, extent))
+      throw Error(
+          "cluster: a cluster's box does not fit its lattice frame (coordinates near the "
+          "float range)");
+  }
+  static SLIM_INLINE void multileaf_frame(const Context& ctx, const uint8_t* p, float* start,
+                                          float* extent) {  // 4 floats each
+    cluster::box_frame(ctx.lattice, p, start, extent);
   }
 
   // ---- traversal side ----

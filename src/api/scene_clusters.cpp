@@ -136,10 +136,8 @@ class ClusterReshaper {
     float c[3];
     uint32_t prim;
   };
-  // What the SAH sorts on one axis: an item's center on the axis and its position in the node.
-  // std::sort runs the same comparisons and moves whatever it sorts, so sorting these 8-byte keys
-  // and then moving the items once permutes them as sorting the items themselves would (ties
-  // included).
+  // What std::sort sorts on one axis where stable_order cannot (a NaN center): an item's center on
+  // the axis and its position in the node.
   struct Key {
     float c;
     uint32_t i;
@@ -216,27 +214,34 @@ class ClusterReshaper {
     upper(n.first + 1, c + 1, depth + 1);
   }
 
-  // The order std::sort gives `order` (positions in a node of n <= 16 items) by `centers` (the
-  // node's centers on one axis, by position): for n <= 16 std::sort is an insertion sort, which
-  // keeps equal centers in their order, so position k goes to its rank in the stable order,
-  // the centers below its own plus the equal ones before it, counted 8 at a time. Returns false
-  // (order unchanged) if the ranks are not 0..n-1 once each (a NaN center).
+  // Sorts `order` (positions in a node of n <= kClusterMax items) stably by `centers` (the node's
+  // centers on one axis, by position): position k goes to its rank, the centers below its own
+  // plus the equal ones before it, counted 8 at a time. Equal centers (neighbouring triangles
+  // often share one) keep their order, so the clusters do not depend on the standard library's
+  // sort. Returns false (order unchanged) if the ranks are not 0..n-1 once each (a NaN center).
   static bool stable_order(const float* centers, uint8_t* order, uint32_t n) {
-    alignas(32) float w[16] = {};  // the centers in `order`'s order, padded to 16
+    constexpr uint32_t kPad = (kClusterMax + 7) / 8 * 8;
+    static_assert(kPad <= 64, "ranks are bits of a 64-bit mask");
+    alignas(32) float w[kPad] = {};  // the centers in `order`'s order, padded
     for (uint32_t k = 0; k < n; ++k) w[k] = centers[order[k]];
-    const simd::vfloat8 w0 = simd::vfloat8::load(w), w1 = simd::vfloat8::load(w + 8);
-    const uint32_t lanes = (1u << n) - 1;
-    uint8_t out[16];
-    uint32_t seen = 0;
+    const uint32_t groups = (n + 7) / 8;
+    uint8_t out[kPad];
+    uint64_t seen = 0;
     for (uint32_t k = 0; k < n; ++k) {
       const simd::vfloat8 c(w[k]);
-      const uint32_t below = ((w0 < c).mask() | (w1 < c).mask() << 8) & lanes;
-      const uint32_t equal_before = ((w0 == c).mask() | (w1 == c).mask() << 8) & ((1u << k) - 1);
-      const uint32_t r = uint32_t(simd::popcount(below) + simd::popcount(equal_before));
-      out[r & 15] = order[k];
-      seen |= 1u << r;
+      uint32_t r = 0;
+      for (uint32_t g = 0; g < groups; ++g) {
+        const simd::vfloat8 x = simd::vfloat8::load(w + 8 * g);
+        const uint32_t lanes = n - 8 * g >= 8 ? 0xFFu : (1u << (n - 8 * g)) - 1;
+        const uint32_t before = k >= 8 * g + 8 ? 0xFFu : k > 8 * g ? (1u << (k - 8 * g)) - 1 : 0u;
+        r += uint32_t(simd::popcount((x < c).mask() & lanes) +
+                      simd::popcount((x == c).mask() & before));
+      }
+      if (r >= n) return false;
+      out[r] = order[k];
+      seen |= uint64_t(1) << r;
     }
-    if (seen != lanes) return false;
+    if (seen != (n == 64 ? ~uint64_t(0) : (uint64_t(1) << n) - 1)) return false;
     std::copy(out, out + n, order);
     return true;
   }
@@ -269,7 +274,7 @@ class ClusterReshaper {
     uint8_t order[kClusterMax];
     std::iota(order, order + n, uint8_t(0));
     auto sort_by = [&](int a) {
-      if (n <= 16 && stable_order(centers[a], order, n)) return;
+      if (stable_order(centers[a], order, n)) return;
       Key key[kClusterMax];
       for (uint32_t k = 0; k < n; ++k) key[k] = {centers[a][order[k]], order[k]};
       std::sort(key, key + n, [](const Key& x, const Key& y) { return x.c < y.c; });

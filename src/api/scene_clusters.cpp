@@ -444,6 +444,9 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   d.emplace_back("topology_bits_per_triangle", double(est.topology_bits) / tris);
   d.emplace_back("id_bits_per_triangle", double(est.id_bits) / tris);
   d.emplace_back("header_bits_per_triangle", double(est.header_bits) / tris);
+  if (kLossless)  // clusters whose coordinates are decimals q x 10^-k (cluster.h, coordinate mode)
+    d.emplace_back("decimal_cluster_fraction",
+                   est.clusters ? double(est.decimal_clusters) / double(est.clusters) : 0.0);
   d.emplace_back("lattice_step", kLossless ? 0.0 : double(lat.step));
   d.emplace_back("lattice_coarsened", z->coarsened ? 1.0 : 0.0);
   d.emplace_back("max_error", z->max_error);

@@ -35,6 +35,36 @@ struct BitWriter {
   }
 };
 
+// The decimal code of f with k digits: q = round(f x 10^k) (two's complement), or kNoDecimal when
+// q is beyond 32 bits or decimal_coord(q, k) is not f bit for bit (f = -0, not finite, or more
+// digits than k).
+constexpr uint32_t kNoDecimal = 0x80000000u;  // -2^31: never a valid code (|q| < 2^31 below)
+uint32_t decimal_code(float f, uint32_t k) {
+  const double q = std::nearbyint(double(f) * kPow10[k]);
+  if (!(std::fabs(q) < 2147483648.0)) return kNoDecimal;
+  const uint32_t code = uint32_t(int32_t(q));
+  const float g = decimal_coord(code, k);
+  return std::memcmp(&g, &f, 4) == 0 ? code : kNoDecimal;
+}
+
+// The smallest k <= kMaxDecimalDigits for which every coordinate (float keys, 3 x nv) has a
+// decimal code, else kMaxDecimalDigits + 1. A coordinate with k digits nearly always has k + 1
+// too (the same real value), so one pass raises k past each coordinate that fails; a last pass
+// checks every coordinate at the final k (and raises it again in the rare other case).
+uint32_t decimal_digits(const uint32_t* keys, uint32_t nv) {
+  uint32_t k = 0;
+  for (;;) {
+    for (uint32_t i = 0; i < 3 * nv; ++i)
+      while (decimal_code(key_float(keys[i]), k) == kNoDecimal)
+        if (++k > kMaxDecimalDigits) return k;
+    bool all = true;
+    for (uint32_t i = 0; i < 3 * nv && all; ++i)
+      all = decimal_code(key_float(keys[i]), k) != kNoDecimal;
+    if (all) return k;
+    if (++k > kMaxDecimalDigits) return k;
+  }
+}
+
 }  // namespace
 
 DecodeCache& decode_cache() {
@@ -218,13 +248,14 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     }
   }
   child_refs[k] = uint32_t(refs.size());
-  h.ib = uint8_t(bit_width(max_back));
+  const uint32_t ib = bit_width(max_back);
+  h.ib = uint8_t(ib);
   // Topology bits per child: 2 bits a restart, 4 a strip step, 1 or 1 + ib a reference.
   uint32_t child_off[9] = {};
   for (int c = 0; c < k; ++c) {
     uint32_t b = 0;
     for (uint32_t j = child_step[c] + 1; j < child_step[c + 1]; ++j) b += steps[j].p == 3 ? 2 : 4;
-    for (uint32_t r = child_refs[c]; r < child_refs[c + 1]; ++r) b += refs[r] < 0 ? 1 : 1 + h.ib;
+    for (uint32_t r = child_refs[c]; r < child_refs[c + 1]; ++r) b += refs[r] < 0 ? 1 : 1 + ib;
     child_off[c + 1] = child_off[c] + b;
   }
   if (child_off[k] > 0xffff) throw std::logic_error("cluster: topology beyond 65535 bits");
@@ -243,6 +274,34 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   if (!s.lossless)
     for (int a = 0; a < 3; ++a)
       if (anchor[a] >> 24) throw std::logic_error("cluster: lattice code beyond 24 bits");
+  // Lossless: the decimal mode when its codes take fewer vertex bits than the float keys.
+  if (s.lossless) {
+    const uint32_t k = decimal_digits(codes.data(), nv);
+    if (k <= kMaxDecimalDigits) {
+      int32_t lo[3], hi[3];
+      thread_local std::vector<uint32_t> qs;
+      qs.resize(3 * size_t(nv));
+      for (uint32_t i = 0; i < 3 * nv; ++i) qs[i] = decimal_code(key_float(codes[i]), k);
+      uint32_t dec_bits = 0, key_bits = 0;
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = hi[a] = int32_t(qs[a]);
+        for (uint32_t i = 0; i < nv; ++i) {
+          lo[a] = std::min(lo[a], int32_t(qs[3 * i + a]));
+          hi[a] = std::max(hi[a], int32_t(qs[3 * i + a]));
+        }
+        dec_bits += bit_width(uint32_t(hi[a]) - uint32_t(lo[a]));
+        key_bits += h.bits[a];
+      }
+      if (dec_bits < key_bits) {
+        codes.swap(qs);
+        for (int a = 0; a < 3; ++a) {
+          anchor[a] = uint32_t(lo[a]);
+          h.bits[a] = uint8_t(bit_width(uint32_t(hi[a]) - uint32_t(lo[a])));
+        }
+        h.ib = uint8_t(ib | (1 + k) << 4);
+      }
+    }
+  }
   // Triangles in decode order, their ids.
   thread_local std::vector<uint32_t> order;
   order.clear();
@@ -327,7 +386,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     if (d < 0)
       w.put(1, 1);
     else
-      w.put(uint32_t(d) << 1, 1 + h.ib);
+      w.put(uint32_t(d) << 1, 1 + ib);
   };
   for (int c = 0; c < k; ++c)
     for (uint32_t j = child_step[c]; j < child_step[c + 1]; ++j) {
@@ -347,6 +406,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     st.topology_bits += h.tbits + (L.verts - L.table) + 8 * (sizeof(h.sizes) + sizeof(h.tbits));
     st.id_bits += (L.topo - L.runs) + h.bb + h.hb + 6 * 8;  // + pb, gb, nruns, ob, bb, hb
     st.header_bits += 6 * 8 + 3 * L.aw;                     // nverts, ntris, bits, ib; anchors
+    st.decimal_clusters += coord_mode(h) != 0;
   }
   return out;
 }
@@ -390,8 +450,14 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
   for (int a = 0; a < 3; ++a)
     if (h.bits[a] > max_bits)
       return fail("axis width beyond " + std::to_string(max_bits) + " bits");
-  if (h.ib > 8 || h.pb > 32 || h.gb > 32 || h.ob > 32 || h.bb > 32 || h.hb > 32)
+  if (index_bits(h) > 8 || h.pb > 32 || h.gb > 32 || h.ob > 32 || h.bb > 32 || h.hb > 32)
     return fail("index or id width beyond its limit");
+  if (const uint32_t mode = coord_mode(h)) {
+    if (!lossless) return fail("coordinate mode " + std::to_string(mode) + " in a lossy cluster");
+    if (mode - 1 > kMaxDecimalDigits)
+      return fail("decimal mode with " + std::to_string(mode - 1) + " digits (at most " +
+                  std::to_string(kMaxDecimalDigits) + ")");
+  }
   if (h.nruns < 1 || h.nruns > h.ntris) return fail("run count must be 1..ntris");
   const uint32_t sizes = child_sizes(h);
   if (child_first(sizes, children) != h.ntris) return fail("children do not cover the triangles");

@@ -43,8 +43,22 @@
 // operations from the same integer (the product is exact: q < 2^24, step a power of two), so a
 // vertex shared by clusters decodes bit-identically in all of them and the watertight test
 // (core/watertight.h) sees one closed surface.
-// Lossless (`cluster-lossless`): the code is the float's bit pattern mapped to an order-preserving
-// unsigned integer, so the per-cluster offsets are the low bits below the shared high bits.
+// Lossless (`cluster-lossless`): per cluster one of two codes (the mode in the top 4 bits of the
+// header's ib byte, whose low 4 bits hold ib <= 8):
+//   mode 0, float keys: the float's bit pattern mapped to an order-preserving unsigned integer, so
+//     the per-cluster offsets are the low bits below the shared high bits (about 21-22 bits per
+//     coordinate on scans);
+//   mode 1 + k (k <= 9), decimal: the coordinate is the 32-bit signed integer q with
+//     decimal_coord(q, k) = float(double(q) / 10^k) equal to it bit for bit, the anchor the
+//     per-axis minimum q (two's complement). Meshes stored as text with few decimals (OBJ files
+//     printed with %f: `v -0.777853 2.740647 3.930020`) hold the floats nearest to such q x 10^-k
+//     with small q, which take 3-5 bits fewer per coordinate than their keys. The encoder takes
+//     the smallest k for which q = round(f x 10^k) decodes to every coordinate f of the cluster
+//     (verified with decimal_coord itself), and this mode only when it takes fewer vertex bits
+//     than the keys; the decoders (scalar and AVX2) compute decimal_coord's operations (an exact
+//     int-to-double conversion, one correctly rounded division, one rounding to float), so both
+//     give the encoder's bits. The mode lives in spare header bits: the header stays 17 bytes
+//     and a float-key cluster is the same bytes as before the mode existed.
 //
 // An isolated BVH leaf (a one-triangle cluster, or a whole scene of at most 8 triangles) is an
 // 8-byte block holding the offset of a one-child cluster record in the scene's side arena
@@ -82,7 +96,8 @@ struct ClusterHeader {
   uint8_t nverts;    // distinct vertices (codes) in the cluster, 1..255
   uint8_t ntris;     // triangles, 1..64
   uint8_t bits[3];   // per-axis offset widths (lossy <= 24, lossless <= 32)
-  uint8_t ib;        // bits of a reused vertex's distance back (<= 8)
+  uint8_t ib;        // low 4 bits: bits of a reused vertex's distance back (<= 8); high 4 bits:
+                     // lossless coordinate mode (0 float keys, 1 + k decimal q x 10^-k, k <= 9)
   uint8_t pb, gb;    // bits per primID run start / geomID offset (<= 32)
   uint8_t nruns;     // primID runs, 1..ntris
   uint8_t ob;        // bits per primID offset in its run (<= 32)
@@ -115,6 +130,22 @@ SLIM_INLINE float key_float(uint32_t k) {
   float f;
   std::memcpy(&f, &u, 4);
   return f;
+}
+
+// The header's ib byte: bits of a reused vertex's distance back, and the lossless coordinate mode
+// (0: float keys; 1 + k: decimal with k digits).
+SLIM_INLINE uint32_t index_bits(const ClusterHeader& h) { return h.ib & 15u; }
+SLIM_INLINE uint32_t coord_mode(const ClusterHeader& h) { return uint32_t(h.ib) >> 4; }
+constexpr uint32_t kMaxDecimalDigits = 9;  // mode 1 + k, k <= 9: 10^k and |q| < 2^31 in a double
+
+// 10^k, exact in a double for k <= 22.
+inline constexpr double kPow10[kMaxDecimalDigits + 1] = {1e0, 1e1, 1e2, 1e3, 1e4,
+                                                         1e5, 1e6, 1e7, 1e8, 1e9};
+// The one decoding of a decimal-mode coordinate (the encoder's verification, the scalar and the
+// AVX2 decoders compute these operations): q (two's complement) over 10^k. The conversion of q is
+// exact, the division correctly rounded, then one rounding to float.
+SLIM_INLINE float decimal_coord(uint32_t q, uint32_t k) {
+  return float(double(int32_t(q)) / kPow10[k]);
 }
 
 // The one decoding of a lossy coordinate (build and traversal use this function only).
@@ -152,10 +183,11 @@ SLIM_INLINE float box_extent(const ClusterLattice& lat, uint32_t scale) {
   return f;
 }
 
+// mode: coord_mode() of the cluster (lossless only).
 template <bool kLossless>
-SLIM_INLINE float decode_coord(const ClusterLattice& lat, int axis, uint32_t code) {
+SLIM_INLINE float decode_coord(const ClusterLattice& lat, int axis, uint32_t code, uint32_t mode) {
   if constexpr (kLossless)
-    return key_float(code);
+    return mode ? decimal_coord(code, mode - 1) : key_float(code);
   else
     return lattice_coord(lat, axis, code);
 }
@@ -227,7 +259,7 @@ SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get
     cnt = x >> L.tb;
   }
   bool ok = true;
-  const uint32_t ib = h.ib, dmask = (1u << ib) - 1;
+  const uint32_t ib = index_bits(h), dmask = (1u << ib) - 1;
   // One reference from the bits x (consumed: x and used shift right).
   auto ref = [&](uint32_t& x, uint32_t& used) SLIM_INLINE_LAMBDA {
     const uint32_t isnew = x & 1, d = (x >> 1) & dmask;
@@ -317,7 +349,7 @@ SLIM_INLINE void decode_strip_packed(const ClusterHeader& h, const Layout& L, co
     pos += x & ((1u << L.tb) - 1);
     cnt = x >> L.tb;
   }
-  const uint32_t ib = h.ib, dmask = (1u << ib) - 1;
+  const uint32_t ib = index_bits(h), dmask = (1u << ib) - 1;
   // One reference from the low bits of y: the vertex; y shifted past it, its width added to s.
   auto ref = [&](uint32_t& y, uint32_t& s) SLIM_INLINE_LAMBDA {
     const uint32_t isnew = y & 1;
@@ -410,10 +442,20 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
     origins[a] = _mm256_set1_ps(lat.origin[a]);
   }
   const __m256 step = _mm256_set1_ps(lat.step);
+  const uint32_t mode = coord_mode(h);
+  const __m256d pow10 = _mm256_set1_pd(kPow10[mode ? mode - 1 : 0]);
   auto store = [&](int k, int a, __m256i off) {
     const __m256i code = _mm256_add_epi32(off, anchors[a]);
     __m256 x;
     if constexpr (kLossless) {
+      if (mode) {  // decimal_coord lane by lane: exact conversion, division, rounding to float
+        const __m128 lo =
+            _mm256_cvtpd_ps(_mm256_div_pd(_mm256_cvtepi32_pd(_mm256_castsi256_si128(code)), pow10));
+        const __m128 hi = _mm256_cvtpd_ps(
+            _mm256_div_pd(_mm256_cvtepi32_pd(_mm256_extracti128_si256(code, 1)), pow10));
+        _mm256_store_ps(d.v[k][a], _mm256_set_m128(hi, lo));
+        return;
+      }
       const __m256i neg = _mm256_srai_epi32(code, 31);  // key's top bit: a positive float
       const __m256i pos_bits = _mm256_and_si256(code, _mm256_set1_epi32(0x7fffffff));
       const __m256i neg_bits = _mm256_xor_si256(code, _mm256_set1_epi32(-1));
@@ -492,12 +534,13 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const View& v, int chil
   decode_vertices_avx2<kLossless>(lat, h, v.bits, L, v.anchor, tri, d);
 #else
   for (int l = d.n; l < 8; ++l) tri[l] = tri[d.n - 1];
+  const uint32_t mode = coord_mode(h);
   for (int l = 0; l < 8; ++l)
     for (int k = 0; k < 3; ++k) {
       uint64_t pos = L.verts + uint64_t((tri[l] >> (8 * k)) & 0xff) * L.vbits;
       for (int a = 0; a < 3; ++a) {
         d.v[k][a][l] =
-            decode_coord<kLossless>(lat, a, v.anchor[a] + read_bits(v.bits, pos, h.bits[a]));
+            decode_coord<kLossless>(lat, a, v.anchor[a] + read_bits(v.bits, pos, h.bits[a]), mode);
         pos += h.bits[a];
       }
     }
@@ -639,10 +682,11 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
 struct EncodeStats {
   std::mutex m;
   uint64_t clusters = 0, triangles = 0, vertices = 0;
-  uint64_t position_bits = 0;  // sum over clusters of nverts * (bx + by + bz)
-  uint64_t topology_bits = 0;  // strips, the child table, the child sizes and tbits
-  uint64_t id_bits = 0;        // run starts, run indices, offsets, geomIDs, the bases and widths
-  uint64_t header_bits = 0;    // the rest of the header, the anchors
+  uint64_t position_bits = 0;     // sum over clusters of nverts * (bx + by + bz)
+  uint64_t topology_bits = 0;     // strips, the child table, the child sizes and tbits
+  uint64_t id_bits = 0;           // run starts, run indices, offsets, geomIDs, the bases and widths
+  uint64_t header_bits = 0;       // the rest of the header, the anchors
+  uint64_t decimal_clusters = 0;  // lossless clusters in decimal mode
 };
 
 }  // namespace cluster

@@ -40,6 +40,7 @@ if(SLIM_FUZZ)
                         scene_file)
   set(SLIM_FUZZ_SOURCES_lossy_subgrid src/prim/lossy_subgrid.cpp)
   set(SLIM_FUZZ_SOURCES_cluster src/prim/cluster.cpp)  # the cluster block decoder
+  set(SLIM_FUZZ_LIBS_cluster TBB::tbb)  # cluster.cpp's quantize runs parallel_for
   set(SLIM_FUZZ_SOURCES_quantized_mesh src/prim/quantized_mesh.cpp src/mesh/tessellate.cpp)
   set(SLIM_FUZZ_LIBS_quantized_mesh ${SLIM_GLU_LIB})
   # pairing: the pairing and the fan triangulation Scene::build runs first, against the test

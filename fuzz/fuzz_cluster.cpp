@@ -7,7 +7,8 @@
 //   1. cluster::check() either rejects the block or accepts one that the decoders read only
 //      inside its bytes plus kClusterReadSlack (ASan: the block is copied to an exact-size
 //      buffer), for every child, with ids of every triangle;
-//   2. round trip: the input bytes as vertex codes and a topology of up to 63 triangles in up to 8
+//   2. round trip: the input bytes as vertex codes (lossless: float keys, or the keys of decimals
+//      q x 10^-k, cluster.h's decimal mode) and a topology of up to 63 triangles in up to 8
 //      children: encode(), check() accepts it, and every child decodes to its triangles (in the
 //      encoder's strip order), the codes' positions and the ids bit for bit;
 //   3. lossy: the frame of the multi-leaf boxes on the lattice (cluster::LatticeBoxes8) made for
@@ -85,8 +86,14 @@ void multileaf_boxes(const ClusterLattice& lat, const std::vector<uint8_t>& bloc
 }
 
 void round_trip(Reader& in, uint32_t ntris, bool lossless) {
-  // Up to 64 distinct vertices with codes from the input (lossy: below 2^24).
+  // Up to 64 distinct vertices with codes from the input (lossy: below 2^24). Lossless, flavour
+  // bit 0: the coordinates are decimals q x 10^-k (k = bits 1-4 mod 10, q the input's 32 bits
+  // shifted right by bits 5-7 x 4), the float keys of decimal_coord(q, k), so that the encoder
+  // may take the decimal mode; an input word with its top 3 bits set keeps its key (a vertex
+  // that breaks the mode).
   const uint32_t nv = 1 + in.byte() % 64;
+  const uint8_t flavour = lossless ? in.byte() : 0;
+  const uint32_t digits = ((flavour >> 1) & 15) % 10, shift = 4 * (flavour >> 5);
   std::vector<uint32_t> codes(3 * nv);
   std::vector<Vec3f> decoded(nv);
   ClusterLattice lat;
@@ -97,6 +104,8 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
       uint32_t c = 0;
       in.bytes(&c, 4);
       if (!lossless) c &= (1u << 24) - 1;
+      if ((flavour & 1) && (c >> 29) != 7)
+        c = cluster::float_key(cluster::decimal_coord(uint32_t(int32_t(c) >> shift), digits));
       codes[3 * i + a] = c;
       decoded[i][a] = lossless ? cluster::key_float(c) : cluster::lattice_coord(lat, a, c);
     }

@@ -7,6 +7,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <numeric>
 #include <optional>
@@ -37,11 +38,24 @@ double detail(const Scene& s, const std::string& key) {
   return -1;
 }
 
+// `m` with every coordinate printed with `digits` decimals and parsed back (as an OBJ file written
+// with %.6f and read again): the nearest floats to decimals q x 10^-digits.
+PolyMesh printed(PolyMesh m, int digits) {
+  for (Vec3f& p : m.positions)
+    for (int a = 0; a < 3; ++a) {
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%.*f", digits, double(p[a]));
+      p[a] = std::strtof(buf, nullptr);
+    }
+  return m;
+}
+
 // Encodes the triangles of `tm` in clusters of random shape (1..8 children of 1..8 triangles, in
 // the order of `order`) and checks that every child decodes to the source's positions and ids bit
-// for bit.
+// for bit. *decimal (if given) receives the count of clusters in the lossless decimal mode,
+// *clusters the count of clusters.
 void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32_t seed,
-                 bool shuffle) {
+                 bool shuffle, size_t* decimal = nullptr, size_t* clusters_out = nullptr) {
   const cluster::Quantized z = cluster::quantize(
       tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(), rel_error, lossless);
   ClusterSource src;
@@ -71,6 +85,12 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
     ASSERT_TRUE(
         cluster::check(data.data(), data.size() - kClusterReadSlack, uint32_t(kk), lossless, &why))
         << why;
+    ClusterHeader hdr;
+    std::memcpy(&hdr, data.data(), sizeof(hdr));
+    if (!lossless) {
+      ASSERT_EQ(cluster::coord_mode(hdr), 0u);
+    }
+    if (decimal) *decimal += cluster::coord_mode(hdr) != 0;
     // Lossy: the multi-leaf boxes (cluster::LatticeBoxes8) as the builder writes them, right
     // ahead of the cluster: every child's box decoded as the traversal decodes it contains the
     // child's decoded triangles (all 8 lanes, the padding included).
@@ -161,6 +181,7 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
     clusters++;
   }
   EXPECT_GT(clusters, 0u);
+  if (clusters_out) *clusters_out += clusters;
 }
 
 TEST(ClusterCodec, DecodeEqualsEncodeRandomMeshes) {
@@ -177,11 +198,109 @@ TEST(ClusterCodec, DecodeEqualsEncodeRandomMeshes) {
   }
 }
 
+// Lossless clusters of decimal coordinates (cluster.h, the decimal mode): meshes whose coordinates
+// were printed with 0 to 6 decimals and parsed back decode bit for bit, mostly in the decimal mode;
+// where one vertex in 40 is one float step off its decimal, the clusters that hold such a vertex
+// keep the float keys and still decode bit for bit.
+TEST(ClusterCodec, DecodeEqualsEncodeDecimalMeshes) {
+  PolyMesh soup = random_soup(3000, 31);
+  PolyMesh sphere = icosphere(3);
+  for (Vec3f& p : sphere.positions) p = p * 37.0f - Vec3f(3.0f, 100.0f, -0.5f);
+  PolyMesh far = random_soup(500, 32, 0.3f);
+  for (Vec3f& p : far.positions) p = p * 1000.0f - Vec3f(5000.0f, -20.0f, 3.0f);
+  struct Case {
+    std::vector<PolyMesh> meshes;
+    bool mixed;
+  };
+  std::vector<Case> cases;
+  cases.push_back({{printed(soup, 6), printed(sphere, 4), printed(far, 2)}, false});
+  cases.push_back({{printed(soup, 3), printed(sphere, 0), printed(far, 1)}, false});
+  cases.push_back({{printed(soup, 6), printed(sphere, 5)}, true});
+  for (Case& c : cases) {
+    if (c.mixed)
+      for (PolyMesh& m : c.meshes)
+        for (size_t i = 0; i < m.positions.size(); i += 40)
+          m.positions[i].y = std::nextafter(m.positions[i].y, 1e30f);
+    std::vector<const PolyMesh*> ptrs;
+    for (const PolyMesh& m : c.meshes) ptrs.push_back(&m);
+    TriangleMesh tm = triangulate_fan(ptrs);
+    size_t decimal = 0, clusters = 0;
+    check_codec(tm, true, 1e-5, 7, true, &decimal, &clusters);
+    check_codec(tm, true, 1e-5, 8, false, &decimal, &clusters);
+    std::printf("  decimal clusters: %zu of %zu%s\n", decimal, clusters,
+                c.mixed ? " (one vertex in 40 off its decimal)" : "");
+    EXPECT_GT(decimal, clusters / 2);
+    if (c.mixed) {
+      EXPECT_LT(decimal, clusters);
+    }
+  }
+}
+
+// The decimal mode's choice on single triangles: the smallest number of digits that gives every
+// coordinate back, and the float keys where none does (a float off its decimal, -0).
+TEST(ClusterCodec, DecimalModeDigits) {
+  auto mode_of = [](std::array<float, 9> c) {
+    PolyMesh m;
+    m.positions = {Vec3f(c[0], c[1], c[2]), Vec3f(c[3], c[4], c[5]), Vec3f(c[6], c[7], c[8])};
+    m.face_indices = {0, 1, 2};
+    m.face_sizes = {3};
+    const TriangleMesh tm = triangulate_fan({&m});
+    const cluster::Quantized z =
+        cluster::quantize(tm.vertices.data(), tm.vertices.size(), tm.tris.data(), 1, 1e-5, true);
+    ClusterSource src;
+    src.vertices = z.decoded.data();
+    src.codes = z.codes.data();
+    src.tris = tm.tris.data();
+    src.geom_ids = tm.geom_ids.data();
+    src.prim_ids = tm.prim_ids.data();
+    src.lossless = true;
+    const uint32_t prim = 0, count = 1;
+    const uint32_t* prims = &prim;
+    const std::vector<uint8_t> data = cluster::encode(src, &prims, &count, 1, true);
+    std::string why;
+    EXPECT_TRUE(cluster::check(data.data(), data.size() - kClusterReadSlack, 1, true, &why)) << why;
+    cluster::Decoded8 d;
+    cluster::decode_child<true>(z.lattice, data.data(), 1, 0, d);
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < 3; ++a)
+        EXPECT_EQ(bits_of(d.v[k][a][0]), bits_of(tm.vertices[tm.tris[k]][a]));
+    ClusterHeader h;
+    std::memcpy(&h, data.data(), sizeof(h));
+    return cluster::coord_mode(h);
+  };
+  EXPECT_EQ(mode_of({0.1f, 0.2f, 0.3f, 1.5f, -2.25f, 0.7f, 1.0f, 0.0f, 3.0f}), 1u + 2);
+  EXPECT_EQ(mode_of({0.1f, 0.2f, 0.3f, 1.5f, -2.2f, 0.7f, 1.0f, 0.0f, 3.0f}), 1u + 1);
+  EXPECT_EQ(mode_of({-0.777853f, 2.740647f, 3.930020f, -0.777854f, 2.740647f, 3.930021f, -0.777855f,
+                     2.740649f, 3.930022f}),
+            1u + 6);
+  EXPECT_EQ(mode_of({100.0f, 2000.0f, -30.0f, 101.0f, 2001.0f, -31.0f, 103.0f, 2000.0f, -29.0f}),
+            1u + 0);
+  // One float step above 0.001 (steps of 1.2e-10): 9 digits do not give it back.
+  EXPECT_EQ(
+      mode_of({0.1f, 0.2f, std::nextafter(0.001f, 1.0f), 1.5f, -2.2f, 0.7f, 1.0f, 0.0f, 3.0f}), 0u);
+  // One float step above 3 (steps of 2.4e-7) takes 7 digits: more bits than the keys (2 digits
+  // without it).
+  EXPECT_EQ(mode_of({3.0f, 3.5f, 3.25f, 3.5f, 3.0f, 3.0f, 3.25f, 3.75f, 3.5f}), 1u + 2);
+  EXPECT_EQ(
+      mode_of({3.0f, 3.5f, 3.25f, 3.5f, 3.0f, std::nextafter(3.0f, 4.0f), 3.25f, 3.75f, 3.5f}), 0u);
+  // Beyond 2^31 x 10^-k: 2.5 x 10^9 needs 0 digits but does not fit 32 bits.
+  EXPECT_EQ(mode_of({0.5f, 0.25f, 2.5e9f, 1.5f, -2.25f, 0.75f, 1.0f, 0.0f, 3.0f}), 0u);
+  // -0 is not a decimal (q = 0 decodes to +0).
+  EXPECT_EQ(mode_of({0.1f, 0.2f, -0.0f, 1.5f, -2.2f, 0.7f, 1.0f, 0.0f, 3.0f}), 0u);
+}
+
 TEST(ClusterCodec, DecodeEqualsEncodeRealMesh) {
   SLIM_REQUIRE_SHARED_DATA();
-  PolyMesh m = load(shared_data_dir() + "/stanford_bunny.obj.xz");
+  PolyMesh m = load(shared_data_dir() + "/stanford_bunny.obj.xz");  // %f decimals
   TriangleMesh tm = triangulate_fan({&m});
-  for (bool lossless : {false, true}) check_codec(tm, lossless, 1e-5, 4, false);
+  for (bool lossless : {false, true}) {
+    size_t decimal = 0, clusters = 0;
+    check_codec(tm, lossless, 1e-5, 4, false, &decimal, &clusters);
+    if (lossless) {
+      std::printf("  bunny: %zu of %zu clusters decimal\n", decimal, clusters);
+      EXPECT_GT(decimal, clusters * 9 / 10);
+    }
+  }
 }
 
 TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
@@ -222,6 +341,38 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, sizes), 0x07));   // children of 8 + 1 (< 16)
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, sizes) + 2, 1));  // a size for a sixth child
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, tbits), 0));      // the strips past the stream
+  // The coordinate mode (the top 4 bits of ib): none in a lossy cluster.
+  const uint8_t ib = good[offsetof(ClusterHeader, ib)];
+  ASSERT_LE(ib, 8);
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ib), uint8_t(ib | 1 << 4)));
+  EXPECT_NE(why.find("lossy"), std::string::npos) << why;
+  // Lossless: float keys or decimals of 0..9 digits (modes 0..10), not more.
+  PolyMesh dec = printed(icosphere(2), 4);
+  TriangleMesh dtm = triangulate_fan({&dec});
+  const cluster::Quantized dz = cluster::quantize(dtm.vertices.data(), dtm.vertices.size(),
+                                                  dtm.tris.data(), dtm.tri_count(), 1e-5, true);
+  src.vertices = dz.decoded.data();
+  src.codes = dz.codes.data();
+  src.tris = dtm.tris.data();
+  src.geom_ids = dtm.geom_ids.data();
+  src.prim_ids = dtm.prim_ids.data();
+  src.lossless = true;
+  const std::vector<uint8_t> lgood = cluster::encode(src, prims, counts, 2, false);
+  ClusterHeader lh;
+  std::memcpy(&lh, lgood.data(), sizeof(lh));
+  ASSERT_EQ(cluster::coord_mode(lh), 1u + 4);  // 4 digits
+  ASSERT_TRUE(cluster::check(lgood.data(), lgood.size(), 2, true, &why)) << why;
+  for (uint32_t mode = 0; mode < 16; ++mode) {
+    std::vector<uint8_t> b = lgood;
+    b[offsetof(ClusterHeader, ib)] = uint8_t(cluster::index_bits(lh) | mode << 4);
+    EXPECT_EQ(cluster::check(b.data(), b.size(), 2, true, &why), mode <= 10) << mode;
+    if (mode > 10) {
+      EXPECT_NE(why.find("decimal mode with"), std::string::npos) << why;
+      continue;
+    }
+    cluster::Decoded8 d;  // another mode: other positions, but no failure
+    for (int c = 0; c < 2; ++c) cluster::decode_child<true>(dz.lattice, b.data(), 2, c, d);
+  }
 }
 
 struct Built {
@@ -243,8 +394,7 @@ Built test_scene() {
   return b;
 }
 
-TEST(ClusterScene, LosslessHitsEqualTri4v) {
-  Built b = test_scene();
+void lossless_hits_equal_tri4v(const Built& b) {
   Scene ref = Scene::build(b.ptrs(), BuildOptions::from_config("bvh8-tri4v"));
   Scene s = Scene::build(b.ptrs(), BuildOptions::from_config("cluster-lossless"));
   std::string why;
@@ -286,6 +436,25 @@ TEST(ClusterScene, LosslessHitsEqualTri4v) {
   EXPECT_EQ(wrong, 0);
   EXPECT_LE(edge_ties, 1 + hits / 1000);
   EXPECT_LE(coincident, 1 + hits / 1000);
+}
+
+TEST(ClusterScene, LosslessHitsEqualTri4v) {
+  Built b = test_scene();
+  lossless_hits_equal_tri4v(b);
+  // Computed floats: few clusters in the decimal mode.
+  EXPECT_LT(detail(Scene::build(b.ptrs(), BuildOptions::from_config("cluster-lossless")),
+                   "decimal_cluster_fraction"),
+            0.05);
+}
+
+// The same scene with its coordinates printed with 5 decimals and parsed back: its clusters take
+// the decimal mode (cluster.h), and the hits stay bvh8-tri4v's bit for bit.
+TEST(ClusterScene, LosslessHitsEqualTri4vDecimalCoordinates) {
+  Built b = test_scene();
+  for (PolyMesh& m : b.meshes) m = printed(std::move(m), 5);
+  lossless_hits_equal_tri4v(b);
+  const Scene s = Scene::build(b.ptrs(), BuildOptions::from_config("cluster-lossless"));
+  EXPECT_GT(detail(s, "decimal_cluster_fraction"), 0.9);
 }
 
 // The lossy scene against a double-precision brute force over its own decoded triangles

@@ -136,11 +136,13 @@ SLIM_INLINE float key_float(uint32_t k) {
 // (0: float keys; 1 + k: decimal with k digits).
 SLIM_INLINE uint32_t index_bits(const ClusterHeader& h) { return h.ib & 15u; }
 SLIM_INLINE uint32_t coord_mode(const ClusterHeader& h) { return uint32_t(h.ib) >> 4; }
-constexpr uint32_t kMaxDecimalDigits = 9;  // mode 1 + k, k <= 9: 10^k and |q| < 2^31 in a double
+constexpr uint32_t kMaxDecimalDigits = 9;  // mode 1 + k: up to a float's 9 significant digits
 
-// 10^k, exact in a double for k <= 22.
-inline constexpr double kPow10[kMaxDecimalDigits + 1] = {1e0, 1e1, 1e2, 1e3, 1e4,
-                                                         1e5, 1e6, 1e7, 1e8, 1e9};
+// 10^k, exact in a double for k <= 22. 16 entries: any 4-bit mode indexes inside the table, so a
+// block that check() would reject (mode 11..15, a scene file opened without the structure check)
+// decodes wrong positions, never reads beyond it.
+inline constexpr double kPow10[16] = {1e0, 1e1, 1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
+                                      1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15};
 // The one decoding of a decimal-mode coordinate (the encoder's verification, the scalar and the
 // AVX2 decoders compute these operations): q (two's complement) over 10^k. The conversion of q is
 // exact, the division correctly rounded, then one rounding to float.

@@ -236,8 +236,9 @@ TEST(ClusterCodec, DecodeEqualsEncodeDecimalMeshes) {
   }
 }
 
-// The decimal mode's choice on single triangles: the smallest number of digits that gives every
-// coordinate back, and the float keys where none does (a float off its decimal, -0).
+// The decimal mode's choice on single triangles: per axis the smallest number of digits that gives
+// every coordinate back (at least the cluster's less 3), and the float keys where none does (a
+// float off its decimal, -0) or where they take fewer bits.
 TEST(ClusterCodec, DecimalModeDigits) {
   auto mode_of = [](std::array<float, 9> c) {
     PolyMesh m;
@@ -266,27 +267,41 @@ TEST(ClusterCodec, DecimalModeDigits) {
         EXPECT_EQ(bits_of(d.v[k][a][0]), bits_of(tm.vertices[tm.tris[k]][a]));
     ClusterHeader h;
     std::memcpy(&h, data.data(), sizeof(h));
-    return cluster::coord_mode(h);
+    if (cluster::coord_mode(h))  // the axes' digits, the cluster's k the largest
+      return std::array<uint32_t, 4>{cluster::coord_mode(h), cluster::axis_digits(h, 0),
+                                     cluster::axis_digits(h, 1), cluster::axis_digits(h, 2)};
+    return std::array<uint32_t, 4>{0, 0, 0, 0};
   };
-  EXPECT_EQ(mode_of({0.1f, 0.2f, 0.3f, 1.5f, -2.25f, 0.7f, 1.0f, 0.0f, 3.0f}), 1u + 2);
-  EXPECT_EQ(mode_of({0.1f, 0.2f, 0.3f, 1.5f, -2.2f, 0.7f, 1.0f, 0.0f, 3.0f}), 1u + 1);
+  using A = std::array<uint32_t, 4>;
+  EXPECT_EQ(mode_of({0.1f, 0.2f, 0.3f, 1.5f, -2.25f, 0.7f, 1.0f, 0.0f, 3.0f}), (A{3, 1, 2, 1}));
+  EXPECT_EQ(mode_of({0.1f, 0.2f, 0.3f, 1.5f, -2.2f, 0.7f, 1.0f, 0.0f, 3.0f}), (A{2, 1, 1, 1}));
   EXPECT_EQ(mode_of({-0.777853f, 2.740647f, 3.930020f, -0.777854f, 2.740647f, 3.930021f, -0.777855f,
                      2.740649f, 3.930022f}),
-            1u + 6);
+            (A{7, 6, 6, 6}));
   EXPECT_EQ(mode_of({100.0f, 2000.0f, -30.0f, 101.0f, 2001.0f, -31.0f, 103.0f, 2000.0f, -29.0f}),
-            1u + 0);
+            (A{1, 0, 0, 0}));
+  // %g with 6 significant digits: x near 100 with 3 decimals, y near 8 with 5, z near 0.05 with 6.
+  EXPECT_EQ(mode_of({101.87f, 8.88925f, 0.050586f, 102.012f, 8.91352f, 0.050726f, 102.155f,
+                     8.88921f, 0.050585f}),
+            (A{7, 3, 5, 6}));
+  // Axes at most 3 digits below the cluster's k: x takes 3 digits for 6 (x with 0 would do).
+  EXPECT_EQ(
+      mode_of({101.0f, 8.889f, 0.050586f, 102.0f, 8.913f, 0.050726f, 103.0f, 8.889f, 0.050585f}),
+      (A{7, 3, 3, 6}));
   // One float step above 0.001 (steps of 1.2e-10): 9 digits do not give it back.
   EXPECT_EQ(
-      mode_of({0.1f, 0.2f, std::nextafter(0.001f, 1.0f), 1.5f, -2.2f, 0.7f, 1.0f, 0.0f, 3.0f}), 0u);
-  // One float step above 3 (steps of 2.4e-7) takes 7 digits: more bits than the keys (2 digits
-  // without it).
-  EXPECT_EQ(mode_of({3.0f, 3.5f, 3.25f, 3.5f, 3.0f, 3.0f, 3.25f, 3.75f, 3.5f}), 1u + 2);
+      mode_of({0.1f, 0.2f, std::nextafter(0.001f, 1.0f), 1.5f, -2.2f, 0.7f, 1.0f, 0.0f, 3.0f}),
+      (A{0, 0, 0, 0}));
+  // One float step above 3 (steps of 2.4e-7) takes 7 digits, which raises x and y from 2 to 4
+  // (3 at most below the cluster's k): still fewer bits than the keys.
+  EXPECT_EQ(mode_of({3.0f, 3.5f, 3.25f, 3.5f, 3.0f, 3.0f, 3.25f, 3.75f, 3.5f}), (A{3, 2, 2, 2}));
   EXPECT_EQ(
-      mode_of({3.0f, 3.5f, 3.25f, 3.5f, 3.0f, std::nextafter(3.0f, 4.0f), 3.25f, 3.75f, 3.5f}), 0u);
+      mode_of({3.0f, 3.5f, 3.25f, 3.5f, 3.0f, std::nextafter(3.0f, 4.0f), 3.25f, 3.75f, 3.5f}),
+      (A{8, 4, 4, 7}));
   // Beyond 2^31 x 10^-k: 2.5 x 10^9 needs 0 digits but does not fit 32 bits.
-  EXPECT_EQ(mode_of({0.5f, 0.25f, 2.5e9f, 1.5f, -2.25f, 0.75f, 1.0f, 0.0f, 3.0f}), 0u);
+  EXPECT_EQ(mode_of({0.5f, 0.25f, 2.5e9f, 1.5f, -2.25f, 0.75f, 1.0f, 0.0f, 3.0f}), (A{0, 0, 0, 0}));
   // -0 is not a decimal (q = 0 decodes to +0).
-  EXPECT_EQ(mode_of({0.1f, 0.2f, -0.0f, 1.5f, -2.2f, 0.7f, 1.0f, 0.0f, 3.0f}), 0u);
+  EXPECT_EQ(mode_of({0.1f, 0.2f, -0.0f, 1.5f, -2.2f, 0.7f, 1.0f, 0.0f, 3.0f}), (A{0, 0, 0, 0}));
 }
 
 TEST(ClusterCodec, DecodeEqualsEncodeRealMesh) {
@@ -372,6 +387,17 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
     }
     cluster::Decoded8 d;  // another mode: other positions, but no failure
     for (int c = 0; c < 2; ++c) cluster::decode_child<true>(dz.lattice, b.data(), 2, c, d);
+  }
+  // An axis's digits below the cluster's (the top 2 bits of bits[a]): at most k, decimal mode only.
+  ASSERT_EQ(lh.bits[1] >> 6, 0);
+  for (uint32_t mode : {0u, 1u, 3u, 4u, 5u}) {
+    std::vector<uint8_t> b = lgood;
+    b[offsetof(ClusterHeader, ib)] = uint8_t(cluster::index_bits(lh) | mode << 4);
+    b[offsetof(ClusterHeader, bits) + 1] = uint8_t(lh.bits[1] | 3 << 6);
+    EXPECT_EQ(cluster::check(b.data(), b.size(), 2, true, &why), mode >= 4) << mode;
+    if (mode < 4) {
+      EXPECT_NE(why.find("axis 1"), std::string::npos) << why;
+    }
   }
 }
 

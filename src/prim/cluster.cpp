@@ -47,22 +47,47 @@ uint32_t decimal_code(float f, uint32_t k) {
   return std::memcmp(&g, &f, 4) == 0 ? code : kNoDecimal;
 }
 
-// The smallest k <= kMaxDecimalDigits for which every coordinate (float keys, 3 x nv) has a
-// decimal code, else kMaxDecimalDigits + 1. A coordinate with k digits nearly always has k + 1
-// too (the same real value), so one pass raises k past each coordinate that fails; a last pass
-// checks every coordinate at the final k (and raises it again in the rare other case).
-uint32_t decimal_digits(const uint32_t* keys, uint32_t nv) {
-  uint32_t k = 0;
+// The smallest k >= start, k <= kMaxDecimalDigits, for which every coordinate of axis a (float
+// keys, 3 per vertex, nv vertices) has a decimal code, else kMaxDecimalDigits + 1. A coordinate
+// with k digits nearly always has k + 1 too (the same real value), so one pass raises k past each
+// coordinate that fails; a last pass checks every coordinate at the final k (and raises it again
+// in the rare other case).
+uint32_t decimal_digits(const uint32_t* keys, uint32_t nv, int a, uint32_t start) {
+  uint32_t k = start;
   for (;;) {
-    for (uint32_t i = 0; i < 3 * nv; ++i)
-      while (decimal_code(key_float(keys[i]), k) == kNoDecimal)
+    for (uint32_t i = 0; i < nv; ++i)
+      while (decimal_code(key_float(keys[3 * i + a]), k) == kNoDecimal)
         if (++k > kMaxDecimalDigits) return k;
     bool all = true;
-    for (uint32_t i = 0; i < 3 * nv && all; ++i)
-      all = decimal_code(key_float(keys[i]), k) != kNoDecimal;
+    for (uint32_t i = 0; i < nv && all; ++i)
+      all = decimal_code(key_float(keys[3 * i + a]), k) != kNoDecimal;
     if (all) return k;
     if (++k > kMaxDecimalDigits) return k;
   }
+}
+
+// The digits of the decimal mode: per axis the smallest k_a that gives back every coordinate of
+// the axis, at least k - 3 (the header's 2 bits per axis), k the largest; false if an axis has
+// none.
+bool decimal_axes(const uint32_t* keys, uint32_t nv, uint32_t& k, uint32_t (&ka)[3]) {
+  k = 0;
+  for (int a = 0; a < 3; ++a) {
+    ka[a] = decimal_digits(keys, nv, a, 0);
+    if (ka[a] > kMaxDecimalDigits) return false;
+    k = std::max(k, ka[a]);
+  }
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (int a = 0; a < 3; ++a) {
+      ka[a] = decimal_digits(keys, nv, a, std::max(ka[a], k >= 3 ? k - 3 : 0u));
+      if (ka[a] > kMaxDecimalDigits) return false;
+      if (ka[a] > k) {
+        k = ka[a];
+        changed = true;
+      }
+    }
+  }
+  return true;
 }
 
 }  // namespace
@@ -275,31 +300,30 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     for (int a = 0; a < 3; ++a)
       if (anchor[a] >> 24) throw std::logic_error("cluster: lattice code beyond 24 bits");
   // Lossless: the decimal mode when its codes take fewer vertex bits than the float keys.
-  if (s.lossless) {
-    const uint32_t k = decimal_digits(codes.data(), nv);
-    if (k <= kMaxDecimalDigits) {
-      int32_t lo[3], hi[3];
-      thread_local std::vector<uint32_t> qs;
-      qs.resize(3 * size_t(nv));
-      for (uint32_t i = 0; i < 3 * nv; ++i) qs[i] = decimal_code(key_float(codes[i]), k);
-      uint32_t dec_bits = 0, key_bits = 0;
+  uint32_t digits = 0, ka[3];
+  if (s.lossless && decimal_axes(codes.data(), nv, digits, ka)) {
+    int32_t lo[3], hi[3];
+    thread_local std::vector<uint32_t> qs;
+    qs.resize(3 * size_t(nv));
+    for (uint32_t i = 0; i < nv; ++i)
+      for (int a = 0; a < 3; ++a) qs[3 * i + a] = decimal_code(key_float(codes[3 * i + a]), ka[a]);
+    uint32_t dec_bits = 0, key_bits = 0;
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = hi[a] = int32_t(qs[a]);
+      for (uint32_t i = 0; i < nv; ++i) {
+        lo[a] = std::min(lo[a], int32_t(qs[3 * i + a]));
+        hi[a] = std::max(hi[a], int32_t(qs[3 * i + a]));
+      }
+      dec_bits += bit_width(uint32_t(hi[a]) - uint32_t(lo[a]));
+      key_bits += h.bits[a];
+    }
+    if (dec_bits < key_bits) {
+      codes.swap(qs);
       for (int a = 0; a < 3; ++a) {
-        lo[a] = hi[a] = int32_t(qs[a]);
-        for (uint32_t i = 0; i < nv; ++i) {
-          lo[a] = std::min(lo[a], int32_t(qs[3 * i + a]));
-          hi[a] = std::max(hi[a], int32_t(qs[3 * i + a]));
-        }
-        dec_bits += bit_width(uint32_t(hi[a]) - uint32_t(lo[a]));
-        key_bits += h.bits[a];
+        anchor[a] = uint32_t(lo[a]);
+        h.bits[a] = uint8_t(bit_width(uint32_t(hi[a]) - uint32_t(lo[a])) | (digits - ka[a]) << 6);
       }
-      if (dec_bits < key_bits) {
-        codes.swap(qs);
-        for (int a = 0; a < 3; ++a) {
-          anchor[a] = uint32_t(lo[a]);
-          h.bits[a] = uint8_t(bit_width(uint32_t(hi[a]) - uint32_t(lo[a])));
-        }
-        h.ib = uint8_t(ib | (1 + k) << 4);
-      }
+      h.ib = uint8_t(ib | (1 + digits) << 4);
     }
   }
   // Triangles in decode order, their ids.
@@ -370,7 +394,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     w.put(child_cnt[c], L.vbw);
   }
   for (uint32_t i = 0; i < nv; ++i)
-    for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], h.bits[a]);
+    for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], axis_bits(h, a));
   for (uint32_t st : starts) w.put(st - prim_base, h.pb);
   for (uint32_t t : order) {
     const uint32_t id = s.prim_ids[t];
@@ -448,7 +472,7 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
   if (h.ntris < 1 || h.ntris > 64) return fail("triangle count must be 1..64");
   const uint32_t max_bits = lossless ? 32 : 24;
   for (int a = 0; a < 3; ++a)
-    if (h.bits[a] > max_bits)
+    if (axis_bits(h, a) > max_bits || (!lossless && h.bits[a] > max_bits))
       return fail("axis width beyond " + std::to_string(max_bits) + " bits");
   if (index_bits(h) > 8 || h.pb > 32 || h.gb > 32 || h.ob > 32 || h.bb > 32 || h.hb > 32)
     return fail("index or id width beyond its limit");
@@ -457,6 +481,14 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
     if (mode - 1 > kMaxDecimalDigits)
       return fail("decimal mode with " + std::to_string(mode - 1) + " digits (at most " +
                   std::to_string(kMaxDecimalDigits) + ")");
+  }
+  for (int a = 0; a < 3; ++a) {
+    const uint32_t below = uint32_t(h.bits[a]) >> 6;
+    if (below && !coord_mode(h))
+      return fail("axis " + std::to_string(a) + " digit offset outside the decimal mode");
+    if (below && below > coord_mode(h) - 1)
+      return fail("axis " + std::to_string(a) + " has " + std::to_string(below) +
+                  " digits fewer than the cluster's " + std::to_string(coord_mode(h) - 1));
   }
   if (h.nruns < 1 || h.nruns > h.ntris) return fail("run count must be 1..ntris");
   const uint32_t sizes = child_sizes(h);

@@ -49,16 +49,18 @@
 //     the per-cluster offsets are the low bits below the shared high bits (about 21-22 bits per
 //     coordinate on scans);
 //   mode 1 + k (k <= 9), decimal: the coordinate is the 32-bit signed integer q with
-//     decimal_coord(q, k) = float(double(q) / 10^k) equal to it bit for bit, the anchor the
-//     per-axis minimum q (two's complement). Meshes stored as text with few decimals (OBJ files
-//     printed with %f: `v -0.777853 2.740647 3.930020`) hold the floats nearest to such q x 10^-k
-//     with small q, which take 3-5 bits fewer per coordinate than their keys. The encoder takes
-//     the smallest k for which q = round(f x 10^k) decodes to every coordinate f of the cluster
-//     (verified with decimal_coord itself), and this mode only when it takes fewer vertex bits
-//     than the keys; the decoders (scalar and AVX2) compute decimal_coord's operations (an exact
-//     int-to-double conversion, one correctly rounded division, one rounding to float), so both
-//     give the encoder's bits. The mode lives in spare header bits: the header stays 17 bytes
-//     and a float-key cluster is the same bytes as before the mode existed.
+//     decimal_coord(q, k_a) = float(double(q) / 10^k_a) equal to it bit for bit, the anchor the
+//     per-axis minimum q (two's complement); axis a has k_a = k - d_a digits, d_a <= 3 in the top
+//     2 bits of the header's bits[a]. Meshes stored as text with few decimals (OBJ files printed
+//     with %f: `v -0.777853 2.740647 3.930020`, or with %g: x near 100 with 4 decimals, z near 5
+//     with 5) hold the floats nearest to such q x 10^-k with small q, which take 3-10 bits fewer
+//     per coordinate than their keys. The encoder takes per axis the smallest k_a for which
+//     q = round(f x 10^k_a) decodes to every coordinate f of the axis in the cluster (verified
+//     with decimal_coord itself; k_a at least k - 3), and this mode only when it takes fewer
+//     vertex bits than the keys; the decoders (scalar and AVX2) compute decimal_coord's
+//     operations (an exact int-to-double conversion, one correctly rounded division, one rounding
+//     to float), so both give the encoder's bits. The mode lives in spare header bits: the header
+//     stays 17 bytes and a float-key cluster is the same bytes as before the mode existed.
 //
 // An isolated BVH leaf (a one-triangle cluster, or a whole scene of at most 8 triangles) is an
 // 8-byte block holding the offset of a one-child cluster record in the scene's side arena
@@ -95,7 +97,8 @@ struct ClusterLattice {
 struct ClusterHeader {
   uint8_t nverts;    // distinct vertices (codes) in the cluster, 1..255
   uint8_t ntris;     // triangles, 1..64
-  uint8_t bits[3];   // per-axis offset widths (lossy <= 24, lossless <= 32)
+  uint8_t bits[3];   // per-axis offset widths (low 6 bits: lossy <= 24, lossless <= 32); decimal
+                     // mode: the top 2 bits are the axis's digits below the cluster's k
   uint8_t ib;        // low 4 bits: bits of a reused vertex's distance back (<= 8); high 4 bits:
                      // lossless coordinate mode (0 float keys, 1 + k decimal q x 10^-k, k <= 9)
   uint8_t pb, gb;    // bits per primID run start / geomID offset (<= 32)
@@ -136,6 +139,17 @@ SLIM_INLINE float key_float(uint32_t k) {
 // (0: float keys; 1 + k: decimal with k digits).
 SLIM_INLINE uint32_t index_bits(const ClusterHeader& h) { return h.ib & 15u; }
 SLIM_INLINE uint32_t coord_mode(const ClusterHeader& h) { return uint32_t(h.ib) >> 4; }
+// Bits of axis a's vertex offsets.
+SLIM_INLINE uint32_t axis_bits(const ClusterHeader& h, int a) { return h.bits[a] & 63u; }
+// Decimal mode: the digits of axis a, the cluster's k less the axis's top 2 bits of bits[a]
+// (taken mod 16: a block check() rejects still indexes kPow10).
+SLIM_INLINE uint32_t axis_digits(const ClusterHeader& h, int a) {
+  return (coord_mode(h) - 1 - (uint32_t(h.bits[a]) >> 6)) & 15u;
+}
+// decode_coord's mode argument for axis a: 0 float keys, 1 + the axis's digits.
+SLIM_INLINE uint32_t axis_mode(const ClusterHeader& h, int a) {
+  return coord_mode(h) ? 1 + axis_digits(h, a) : 0;
+}
 constexpr uint32_t kMaxDecimalDigits = 9;  // mode 1 + k: up to a float's 9 significant digits
 
 // 10^k, exact in a double for k <= 22. 16 entries: any 4-bit mode indexes inside the table, so a
@@ -226,7 +240,7 @@ struct Layout {
 SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, bool lossless) {
   Layout l;
   l.aw = lossless ? 32 : 24;
-  l.vbits = uint32_t(h.bits[0]) + h.bits[1] + h.bits[2];
+  l.vbits = axis_bits(h, 0) + axis_bits(h, 1) + axis_bits(h, 2);
   l.tb = bit_width(h.tbits);
   l.vbw = bit_width(h.nverts);
   l.rb = h.nruns ? bit_width(uint32_t(h.nruns) - 1) : 0;
@@ -440,21 +454,22 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
   __m256 origins[3];
   for (int a = 0; a < 3; ++a) {
     anchors[a] = _mm256_set1_epi32(int(anchor[a]));
-    masks[a] = mask(h.bits[a]);
+    masks[a] = mask(axis_bits(h, a));
     origins[a] = _mm256_set1_ps(lat.origin[a]);
   }
   const __m256 step = _mm256_set1_ps(lat.step);
   const uint32_t mode = coord_mode(h);
-  const __m256d pow10 = _mm256_set1_pd(kPow10[mode ? mode - 1 : 0]);
+  __m256d pow10[3];
+  for (int a = 0; a < 3; ++a) pow10[a] = _mm256_set1_pd(kPow10[axis_digits(h, a)]);
   auto store = [&](int k, int a, __m256i off) {
     const __m256i code = _mm256_add_epi32(off, anchors[a]);
     __m256 x;
     if constexpr (kLossless) {
       if (mode) {  // decimal_coord lane by lane: exact conversion, division, rounding to float
-        const __m128 lo =
-            _mm256_cvtpd_ps(_mm256_div_pd(_mm256_cvtepi32_pd(_mm256_castsi256_si128(code)), pow10));
+        const __m128 lo = _mm256_cvtpd_ps(
+            _mm256_div_pd(_mm256_cvtepi32_pd(_mm256_castsi256_si128(code)), pow10[a]));
         const __m128 hi = _mm256_cvtpd_ps(
-            _mm256_div_pd(_mm256_cvtepi32_pd(_mm256_extracti128_si256(code, 1)), pow10));
+            _mm256_div_pd(_mm256_cvtepi32_pd(_mm256_extracti128_si256(code, 1)), pow10[a]));
         _mm256_store_ps(d.v[k][a], _mm256_set_m128(hi, lo));
         return;
       }
@@ -484,19 +499,19 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
       uint32_t shift = 0;
       for (int a = 0; a < 3; ++a) {
         store(k, a, _mm256_and_si256(low32(lo, hi, shift), masks[a]));
-        shift += h.bits[a];
+        shift += axis_bits(h, a);
       }
       continue;
     }
     for (int a = 0; a < 3; ++a) {
-      if (h.bits[a] <= 25) {
-        store(k, a, field(vpos, h.bits[a]));
+      if (axis_bits(h, a) <= 25) {
+        store(k, a, field(vpos, axis_bits(h, a)));
       } else {
         __m256i lo, hi;
         gather64(vpos, lo, hi);
         store(k, a, _mm256_and_si256(low32(lo, hi, 0), masks[a]));
       }
-      vpos = _mm256_add_epi32(vpos, _mm256_set1_epi32(h.bits[a]));
+      vpos = _mm256_add_epi32(vpos, _mm256_set1_epi32(int(axis_bits(h, a))));
     }
   }
 }
@@ -536,14 +551,13 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const View& v, int chil
   decode_vertices_avx2<kLossless>(lat, h, v.bits, L, v.anchor, tri, d);
 #else
   for (int l = d.n; l < 8; ++l) tri[l] = tri[d.n - 1];
-  const uint32_t mode = coord_mode(h);
   for (int l = 0; l < 8; ++l)
     for (int k = 0; k < 3; ++k) {
       uint64_t pos = L.verts + uint64_t((tri[l] >> (8 * k)) & 0xff) * L.vbits;
       for (int a = 0; a < 3; ++a) {
-        d.v[k][a][l] =
-            decode_coord<kLossless>(lat, a, v.anchor[a] + read_bits(v.bits, pos, h.bits[a]), mode);
-        pos += h.bits[a];
+        d.v[k][a][l] = decode_coord<kLossless>(
+            lat, a, v.anchor[a] + read_bits(v.bits, pos, axis_bits(h, a)), axis_mode(h, a));
+        pos += axis_bits(h, a);
       }
     }
 #endif

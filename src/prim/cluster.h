@@ -459,8 +459,9 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
   }
   const __m256 step = _mm256_set1_ps(lat.step);
   const uint32_t mode = coord_mode(h);
-  __m256d pow10[3];
-  for (int a = 0; a < 3; ++a) pow10[a] = _mm256_set1_pd(kPow10[axis_digits(h, a)]);
+  __m256d pow10[3] = {};
+  if (kLossless && mode)
+    for (int a = 0; a < 3; ++a) pow10[a] = _mm256_set1_pd(kPow10[axis_digits(h, a)]);
   auto store = [&](int k, int a, __m256i off) {
     const __m256i code = _mm256_add_epi32(off, anchors[a]);
     __m256 x;

@@ -126,6 +126,42 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
                 << "child " << c << " lane " << l;
       }
     }
+    // Lossless: the boxes from the anchors (cluster::ExactBoxes8): the start is the cluster's
+    // lowest coordinate per axis exactly (a vertex's, in the cluster's coordinate mode), and every
+    // child's box decoded as the traversal decodes it contains the child's triangles.
+    if (lossless) {
+      Box3f boxes[8], all;
+      for (int c = 0; c < kk; ++c) {
+        for (uint32_t j = 0; j < counts[c]; ++j)
+          for (int q = 0; q < 3; ++q)
+            boxes[c].extend(z.decoded[tm.tris[3 * size_t(prims[c][j]) + q]]);
+        all.extend(boxes[c]);
+      }
+      std::vector<uint8_t> ml(sizeof(cluster::ExactBoxes8) + data.size());
+      std::memcpy(ml.data() + sizeof(cluster::ExactBoxes8), data.data(), data.size());
+      auto& eb = *reinterpret_cast<cluster::ExactBoxes8*>(ml.data());
+      float start[4], extent[4], s2[4], e2[4];
+      ASSERT_TRUE(cluster::write_exact_box_frame(data.data(), all, eb, start, extent));
+      quantize_planes(start, extent, boxes, kk, eb.q);
+      cluster::exact_box_frame(ml.data(), s2, e2);
+      ASSERT_EQ(std::memcmp(start, s2, 3 * sizeof(float)), 0);
+      ASSERT_EQ(std::memcmp(extent, e2, 3 * sizeof(float)), 0);
+      for (int a = 0; a < 3; ++a) {
+        ASSERT_EQ(bits_of(start[a]), bits_of(all.lo[a])) << "axis " << a;
+        // At most 1/128 above the exact 1/255 of the span (one bfloat16), or the least normal.
+        const double need = (double(all.hi[a]) - double(start[a])) / 255.0;
+        EXPECT_LE(double(extent[a]), std::max(need * (1.0 + 1.0 / 64), 1.2e-38)) << "axis " << a;
+      }
+      for (int c = 0; c < kk; ++c) {
+        const Box3f b = dequantize_planes(eb.q, s2, e2, c);
+        cluster::Decoded8 d;
+        cluster::decode_child<true>(z.lattice, data.data(), uint32_t(kk), c, d);
+        for (int l = 0; l < 8; ++l)
+          for (int q = 0; q < 3; ++q)
+            ASSERT_TRUE(b.contains(Vec3f(d.v[q][0][l], d.v[q][1][l], d.v[q][2][l])))
+                << "child " << c << " lane " << l;
+      }
+    }
     // One view of the cluster serves all its children (as in the traversal).
     const cluster::View view = lossless ? cluster::view<true>(data.data(), uint32_t(kk))
                                         : cluster::view<false>(data.data(), uint32_t(kk));
@@ -619,15 +655,14 @@ TEST(ClusterScene, StatisticsAndSizes) {
   Scene l = Scene::build(torus, BuildOptions::from_config("cluster-lossless"));
   EXPECT_EQ(detail(l, "max_error"), 0);
   EXPECT_GT(l.memory().total(), s.memory().total());
-  // Multi-leaf headers: the lossy clusters' boxes on the lattice (51 B), a MultiLeaf8 (72 B) for
-  // the lossless clusters and the other compressed-leaf formats.
+  // Multi-leaf headers: the lossy clusters' boxes on the lattice (51 B), the lossless clusters'
+  // boxes from their anchors (54 B), a MultiLeaf8 (72 B) for the other compressed-leaf formats.
   EXPECT_GT(detail(s, "multileaf_count"), 0);
   EXPECT_EQ(detail(s, "multileaf_bytes"),
             double(sizeof(cluster::LatticeBoxes8)) * detail(s, "multileaf_count"));
-  for (const Scene* o : {&l}) {
-    EXPECT_GT(detail(*o, "multileaf_count"), 0);
-    EXPECT_EQ(detail(*o, "multileaf_bytes"), 72.0 * detail(*o, "multileaf_count"));
-  }
+  EXPECT_GT(detail(l, "multileaf_count"), 0);
+  EXPECT_EQ(detail(l, "multileaf_bytes"),
+            double(sizeof(cluster::ExactBoxes8)) * detail(l, "multileaf_count"));
   for (const char* config : {"clbvh-tri4v", "clbvh-compact"}) {
     Scene o = Scene::build(torus, BuildOptions::from_config(config));
     EXPECT_GT(detail(o, "multileaf_count"), 0) << config;

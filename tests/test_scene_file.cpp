@@ -638,12 +638,16 @@ void set_root_child(std::string& b, const std::string& prefix, uint64_t ref) {
   put64(b, child, ref);
 }
 
-// The lossy clusters' multi-leaf boxes (cluster::LatticeBoxes8): a child box shrunk to a point
-// passes the structure check (any 8-bit plane is safe to read) but not validate(), which decodes
-// every child box as the traversal does and checks that it contains the child's triangles.
-TEST(SceneFile, ClusterBoxShrunkIsCaughtByValidate) {
+// The clusters' multi-leaf boxes (cluster::LatticeBoxes8, cluster::ExactBoxes8: the planes come
+// first in both): a child box shrunk to a point passes the structure check (any 8-bit plane is
+// safe to read) but not validate(), which decodes every child box as the traversal does and checks
+// that it contains the child's triangles.
+class ClusterBoxShrunk : public ::testing::TestWithParam<const char*> {};
+TEST_P(ClusterBoxShrunk, IsCaughtByValidate) {
+  static_assert(offsetof(cluster::LatticeBoxes8, q) == 0 && offsetof(cluster::ExactBoxes8, q) == 0,
+                "the planes come first");
   const std::string path = temp_path("clbox"), bad = temp_path("clbox_bad");
-  const Scene built = Scene::build(load("torus:64"), BuildOptions::from_config("cluster"));
+  const Scene built = Scene::build(load("torus:64"), BuildOptions::from_config(GetParam()));
   std::string why;
   ASSERT_TRUE(built.validate(&why)) << why;
   built.save(path);
@@ -651,7 +655,7 @@ TEST(SceneFile, ClusterBoxShrunkIsCaughtByValidate) {
   const uint64_t ref = first_leaf(b, "");
   ASSERT_EQ(NodeRef::tag(ref), kRefMulti);
   const uint64_t at = section(b, "bvh.leaves").offset + NodeRef::offset(ref);
-  for (int p = 0; p < 6; ++p) b[at + offsetof(cluster::LatticeBoxes8, q) + 8 * p] = 0;
+  for (int p = 0; p < 6; ++p) b[at + 8 * p] = 0;
   write_all(bad, b);
   OpenOptions oo;
   oo.verify_checksums = false;
@@ -662,6 +666,8 @@ TEST(SceneFile, ClusterBoxShrunkIsCaughtByValidate) {
   std::filesystem::remove(path);
   std::filesystem::remove(bad);
 }
+INSTANTIATE_TEST_SUITE_P(SceneFile, ClusterBoxShrunk,
+                         ::testing::Values("cluster", "cluster-lossless"));
 
 // For each format, one reference set out of range: the structure check names the section, the
 // offset and what is wrong, where the checksums are off.
@@ -779,7 +785,19 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
            offsetof(cluster::LatticeBoxes8, scale) + 1] = char(0xff);
        },
        "bvh.leaves", "multi-leaf box scale exponent 31 beyond 24"},
-      {"cluster-lossless", "cluster header", block_field(0, 0), "bvh.leaves", "cluster"},
+      {"cluster-lossless", "cluster header",
+       [](std::string& b) { put32(b, first_block(b, "", sizeof(cluster::ExactBoxes8)), 0); },
+       "bvh.leaves", "cluster"},
+      {"cluster-lossless", "multi-leaf box extent",
+       [](std::string& b) {
+         const uint64_t ref = first_leaf(b, "");
+         ASSERT_EQ(NodeRef::tag(ref), kRefMulti);
+         const uint64_t at = section(b, "bvh.leaves").offset + NodeRef::offset(ref) +
+                             offsetof(cluster::ExactBoxes8, extent) + 2;
+         b[at] = char(0x80);  // bfloat16 0xff80: -inf
+         b[at + 1] = char(0xff);
+       },
+       "bvh.leaves", "multi-leaf box extent 65408 (bfloat16 bits) not a positive normal float"},
       {"costa", "primitive range", block_field(offsetof(CostaBlock, first), 0xfffffff0u),
        "bvh.leaves", "primitive range beyond the store"},
       {"costa-PFV", "primitive count", block_field(offsetof(CostaBlock, count), 9), "bvh.leaves",

@@ -458,6 +458,28 @@ bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f
   return true;
 }
 
+bool write_exact_box_frame(const uint8_t* data, const Box3f& box, ExactBoxes8& boxes, float* start,
+                           float* extent) {
+  exact_box_start(data, start);
+  extent[3] = 0.0f;
+  for (int a = 0; a < 3; ++a) {
+    if (!(start[a] <= box.lo[a])) return false;
+    // The smallest normal bfloat16 whose q = 255 plane, with the traversal's one fma, reaches the
+    // top: from the bfloat16 just below the exact 1/255 of the span, upwards.
+    const float need = (box.hi[a] - start[a]) / 255.0f;
+    uint32_t u;
+    std::memcpy(&u, &need, 4);
+    uint16_t b = uint16_t(std::max<uint32_t>(u >> 16, 0x0080));
+    for (;; ++b) {
+      if (!extent_ok(b)) return false;
+      if (std::fma(255.0f, bfloat16_float(b), start[a]) >= box.hi[a]) break;
+    }
+    boxes.extent[a] = b;
+    extent[a] = bfloat16_float(b);
+  }
+  return true;
+}
+
 bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless, std::string* why) {
   auto fail = [&](const std::string& m) {
     if (why) *why = "cluster: " + m;

@@ -186,6 +186,27 @@ struct LatticeBoxes8 {
 static_assert(sizeof(LatticeBoxes8) == 51, "lossy cluster multi-leaf boxes are 51 bytes");
 constexpr uint32_t kMaxBoxScaleExp = 24;  // 255 x 2^24 steps span any cluster (< 2^24 steps)
 
+// ---- the lossless clusters' multi-leaf boxes (ClusterLeaf<true>) ----
+// The start is the cluster's lowest vertex per axis: its anchor (the per-axis minimum code, the
+// stream's first field) decoded in the cluster's mode (float key or decimal), exactly a vertex
+// coordinate. The extent per axis is a bfloat16 (a float's top 16 bits, decoded by a shift), the
+// smallest normal one whose q = 255 plane, start + 255 x extent with the traversal's fma, reaches
+// the cluster's top: at most 1/128 above the exact 1/255 of the span. 54 bytes instead of 72.
+struct ExactBoxes8 {
+  uint8_t q[6][8];     // 48 B: lo_x, hi_x, lo_y, hi_y, lo_z, hi_z (as QuantBoxes8::q)
+  uint16_t extent[3];  // 6 B: per axis a bfloat16, a positive normal float
+};
+static_assert(sizeof(ExactBoxes8) == 54, "lossless cluster multi-leaf boxes are 54 bytes");
+SLIM_INLINE float bfloat16_float(uint16_t b) {
+  const uint32_t u = uint32_t(b) << 16;
+  float f;
+  std::memcpy(&f, &u, 4);
+  return f;
+}
+// A bfloat16 extent the traversal takes as given: positive, normal (denormals may be flushed to
+// zero while tracing) and finite.
+SLIM_INLINE bool extent_ok(uint16_t b) { return b >= 0x0080 && b < 0x7f80; }
+
 // The extent of scale byte `scale` (build and traversal use this function only): the step (a
 // power of two: mantissa 0) with e added to its exponent and m as its top 3 mantissa bits, which
 // is (8 + m) 2^e x step / 8 while the step and the result are normal floats, in 2 integer
@@ -662,6 +683,34 @@ SLIM_INLINE void box_frame(const ClusterLattice& lat, const uint8_t* p, float* s
 bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f& box,
                      LatticeBoxes8& boxes, float* start, float* extent);
 
+// The frame of the ExactBoxes8 at p (4 floats each, the 4th unused), the lossless cluster's data
+// right behind it: the start its anchors decoded in the cluster's mode, the extents the bfloat16s.
+// The one computation of it, for the builder (exact_box_start on the encoded cluster) and the
+// traversal.
+SLIM_INLINE void exact_box_start(const uint8_t* data, float* start) {
+  ClusterHeader h;
+  std::memcpy(&h, data, sizeof(h));
+  const uint8_t* bits = data + sizeof(ClusterHeader);
+  for (int a = 0; a < 3; ++a) {
+    uint32_t code;
+    std::memcpy(&code, bits + 4 * a, 4);  // 32-bit anchors, LSB first: little-endian words
+    start[a] = decode_coord<true>(ClusterLattice{}, a, code, axis_mode(h, a));
+  }
+  start[3] = 0.0f;
+}
+SLIM_INLINE void exact_box_frame(const uint8_t* p, float* start, float* extent) {
+  exact_box_start(p + sizeof(ExactBoxes8), start);
+  uint16_t e[3];
+  std::memcpy(e, p + offsetof(ExactBoxes8, extent), sizeof(e));
+  for (int a = 0; a < 3; ++a) extent[a] = bfloat16_float(e[a]);
+  extent[3] = 0.0f;
+}
+// The builder's side: writes the extents into `boxes` for the lossless cluster at `data` whose
+// vertices lie in `box`, and returns the frame as exact_box_frame decodes it. False if no normal
+// bfloat16 reaches the box (coordinates near the float range).
+bool write_exact_box_frame(const uint8_t* data, const Box3f& box, ExactBoxes8& boxes, float* start,
+                           float* extent);
+
 // The children a thread decoded last, so that the rays after it that enter the same child (the
 // neighbouring pixels of a tile, a bounce leaving the surface it hit) skip the strip and vertex
 // decoding. Direct-mapped on the child's address; a scene's tag (Context::cache_tag, unique per
@@ -779,11 +828,19 @@ struct ClusterLeaf {
   // are the decoders' read slack), and the side arena's record an isolated leaf names.
   static std::string check_multileaf(const Context&, const uint8_t* data, uint32_t k,
                                      uint64_t avail) {
-    if constexpr (!kLossless)  // the box scales right before the data (the walk checked them in)
+    if constexpr (!kLossless) {  // the box scales right before the data (the walk checked them in)
       for (const uint8_t* sc = data - 3; sc < data; ++sc)
         if (uint32_t(*sc >> 3) > cluster::kMaxBoxScaleExp)
           return "multi-leaf box scale exponent " + std::to_string(*sc >> 3) + " beyond " +
                  std::to_string(cluster::kMaxBoxScaleExp);
+    } else {  // the box extents right before the data
+      uint16_t e[3];
+      std::memcpy(e, data - sizeof(e), sizeof(e));
+      for (uint16_t x : e)
+        if (!cluster::extent_ok(x))
+          return "multi-leaf box extent " + std::to_string(x) +
+                 " (bfloat16 bits) not a positive normal float";
+    }
     std::string why;
     if (avail < kClusterReadSlack) return "cluster beyond the leaf arena";
     if (!cluster::check(data, avail - kClusterReadSlack, k, kLossless, &why)) return why;
@@ -861,21 +918,31 @@ struct ClusterLeaf {
     std::memcpy(out, &off, 8);
   }
 
-  // Lossy: the multi-leaf boxes are a cluster::LatticeBoxes8 (51 B) instead of a 72-byte
-  // MultiLeaf8 (traverse.h, HasMultiLeafBoxes); lossless keeps the MultiLeaf8.
-  static constexpr bool kMultiLeafBoxes = !kLossless;
-  static constexpr uint32_t kMultiLeafHeaderBytes = sizeof(cluster::LatticeBoxes8);
+  // The multi-leaf boxes are a cluster::LatticeBoxes8 (51 B, lossy) or cluster::ExactBoxes8
+  // (54 B, lossless) instead of a 72-byte MultiLeaf8 (traverse.h, HasMultiLeafBoxes).
+  static constexpr bool kMultiLeafBoxes = true;
+  static constexpr uint32_t kMultiLeafHeaderBytes =
+      kLossless ? sizeof(cluster::ExactBoxes8) : sizeof(cluster::LatticeBoxes8);
   static void write_multileaf_frame(const ClusterSource& s, const uint8_t* data, const Box3f& box,
                                     uint8_t* header, float* start, float* extent) {
-    auto* b = reinterpret_cast<cluster::LatticeBoxes8*>(header);
-    if (!cluster::write_box_frame(s.lattice, data, box, *b, start, extent))
+    bool ok;
+    if constexpr (kLossless)
+      ok = cluster::write_exact_box_frame(
+          data, box, *reinterpret_cast<cluster::ExactBoxes8*>(header), start, extent);
+    else
+      ok = cluster::write_box_frame(
+          s.lattice, data, box, *reinterpret_cast<cluster::LatticeBoxes8*>(header), start, extent);
+    if (!ok)
       throw Error(
-          "cluster: a cluster's box does not fit its lattice frame (coordinates near the "
+          "cluster: a cluster's box does not fit its multi-leaf frame (coordinates near the "
           "float range)");
   }
   static SLIM_INLINE void multileaf_frame(const Context& ctx, const uint8_t* p, float* start,
                                           float* extent) {  // 4 floats each
-    cluster::box_frame(ctx.lattice, p, start, extent);
+    if constexpr (kLossless)
+      cluster::exact_box_frame(p, start, extent);
+    else
+      cluster::box_frame(ctx.lattice, p, start, extent);
   }
 
   // ---- traversal side ----

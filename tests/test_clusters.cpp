@@ -422,6 +422,7 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
       continue;
     }
     cluster::Decoded8 d;  // another mode: other positions, but no failure
+    b.resize(b.size() + kClusterReadSlack, 0);  // the decoders' read slack (check() has its size)
     for (int c = 0; c < 2; ++c) cluster::decode_child<true>(dz.lattice, b.data(), 2, c, d);
   }
   // An axis's digits below the cluster's (the top 2 bits of bits[a]): at most k, decimal mode only.

@@ -460,7 +460,11 @@ bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f
 
 bool write_exact_box_frame(const uint8_t* data, const Box3f& box, ExactBoxes8& boxes, float* start,
                            float* extent) {
-  exact_box_start(data, start);
+  // The header and anchors in a padded copy: exact_box_start reads 16 bytes of the stream (the
+  // traversal has the anchors, more stream and the read slack behind them).
+  uint8_t head[sizeof(ClusterHeader) + 16] = {};
+  std::memcpy(head, data, sizeof(ClusterHeader) + 12);
+  exact_box_start(head, start);
   extent[3] = 0.0f;
   for (int a = 0; a < 3; ++a) {
     if (!(start[a] <= box.lo[a])) return false;

@@ -690,12 +690,28 @@ bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f
 SLIM_INLINE void exact_box_start(const uint8_t* data, float* start) {
   ClusterHeader h;
   std::memcpy(&h, data, sizeof(h));
-  const uint8_t* bits = data + sizeof(ClusterHeader);
+  const uint8_t* bits = data + sizeof(ClusterHeader);  // 3 x 32-bit anchors, then more stream
+#if defined(SLIM_SIMD_AVX2)
+  // decode_coord's operations on the three axes at once (the same bits: exact bit operations for
+  // the keys; exact conversion, one correctly rounded division, one rounding for decimals).
+  const __m128i code = _mm_loadu_si128(reinterpret_cast<const __m128i*>(bits));
+  if (coord_mode(h) == 0) {
+    const __m128i positive = _mm_srai_epi32(code, 31);  // key's top bit: a positive float
+    const __m128i pos_bits = _mm_and_si128(code, _mm_set1_epi32(0x7fffffff));
+    const __m128i neg_bits = _mm_xor_si128(code, _mm_set1_epi32(-1));
+    _mm_storeu_ps(start, _mm_castsi128_ps(_mm_blendv_epi8(neg_bits, pos_bits, positive)));
+  } else {
+    const __m256d pow10 = _mm256_setr_pd(kPow10[axis_digits(h, 0)], kPow10[axis_digits(h, 1)],
+                                         kPow10[axis_digits(h, 2)], 1.0);
+    _mm_storeu_ps(start, _mm256_cvtpd_ps(_mm256_div_pd(_mm256_cvtepi32_pd(code), pow10)));
+  }
+#else
   for (int a = 0; a < 3; ++a) {
     uint32_t code;
     std::memcpy(&code, bits + 4 * a, 4);  // 32-bit anchors, LSB first: little-endian words
     start[a] = decode_coord<true>(ClusterLattice{}, a, code, axis_mode(h, a));
   }
+#endif
   start[3] = 0.0f;
 }
 SLIM_INLINE void exact_box_frame(const uint8_t* p, float* start, float* extent) {

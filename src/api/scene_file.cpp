@@ -38,8 +38,8 @@ namespace slim {
 namespace {
 
 constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
-// Version 3 (the lossy clusters' multi-leaf boxes on the scene's lattice, prim/cluster.h, instead
-// of a 72-byte MultiLeaf8). Any change of a section's layout (a node, block or context struct) or
+// Version 3 (the clusters' multi-leaf boxes from their anchors instead of a 72-byte MultiLeaf8,
+// and the lossless clusters' decimal coordinates, prim/cluster.h). Any change of a section's layout (a node, block or context struct) or
 // of the header needs a new version: the sections are the in-memory structs byte for byte.
 constexpr uint32_t kVersion = 3;
 constexpr uint32_t kByteOrder = 0x01020304;

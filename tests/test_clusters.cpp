@@ -50,6 +50,36 @@ PolyMesh printed(PolyMesh m, int digits) {
   return m;
 }
 
+// The multi-leaf boxes of the cluster `data` (k children with the given boxes) as the builder
+// writes them right ahead of it: Boxes is cluster::LatticeBoxes8 (lossy) or cluster::ExactBoxes8
+// (lossless), write(boxes, start, extent) the builder's frame, frame(p, start, extent) the
+// traversal's. The two frames are equal, bound(axis, start, extent) checks each axis, and every
+// child's box decoded as the traversal decodes it contains the child's decoded triangles (all 8
+// lanes, the padding included).
+template <class Boxes, bool kLossless, class Write, class Frame, class Bound>
+void check_multileaf_boxes(const std::vector<uint8_t>& data, const ClusterLattice& lat,
+                           const Box3f* boxes, int k, Write&& write, Frame&& frame, Bound&& bound) {
+  std::vector<uint8_t> ml(sizeof(Boxes) + data.size());
+  std::memcpy(ml.data() + sizeof(Boxes), data.data(), data.size());
+  auto& hb = *reinterpret_cast<Boxes*>(ml.data());
+  float start[4], extent[4], s2[4], e2[4];
+  ASSERT_TRUE(write(hb, start, extent));
+  quantize_planes(start, extent, boxes, k, hb.q);
+  frame(ml.data(), s2, e2);
+  ASSERT_EQ(std::memcmp(start, s2, 3 * sizeof(float)), 0);
+  ASSERT_EQ(std::memcmp(extent, e2, 3 * sizeof(float)), 0);
+  for (int a = 0; a < 3; ++a) bound(a, start[a], extent[a]);
+  for (int c = 0; c < k; ++c) {
+    const Box3f b = dequantize_planes(hb.q, s2, e2, c);
+    cluster::Decoded8 d;
+    cluster::decode_child<kLossless>(lat, data.data(), uint32_t(k), c, d);
+    for (int l = 0; l < 8; ++l)
+      for (int q = 0; q < 3; ++q)
+        ASSERT_TRUE(b.contains(Vec3f(d.v[q][0][l], d.v[q][1][l], d.v[q][2][l])))
+            << "child " << c << " lane " << l;
+  }
+}
+
 // Encodes the triangles of `tm` in clusters of random shape (1..8 children of 1..8 triangles, in
 // the order of `order`) and checks that every child decodes to the source's positions and ids bit
 // for bit. *decimal (if given) receives the count of clusters in the lossless decimal mode,
@@ -91,77 +121,48 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
       ASSERT_EQ(cluster::coord_mode(hdr), 0u);
     }
     if (decimal) *decimal += cluster::coord_mode(hdr) != 0;
-    // Lossy: the multi-leaf boxes (cluster::LatticeBoxes8) as the builder writes them, right
-    // ahead of the cluster: every child's box decoded as the traversal decodes it contains the
-    // child's decoded triangles (all 8 lanes, the padding included).
+    // The multi-leaf boxes as the builder writes them, right ahead of the cluster.
+    Box3f boxes[8], all;
+    for (int c = 0; c < kk; ++c) {
+      for (uint32_t j = 0; j < counts[c]; ++j)
+        for (int q = 0; q < 3; ++q)
+          boxes[c].extend(z.decoded[tm.tris[3 * size_t(prims[c][j]) + q]]);
+      all.extend(boxes[c]);
+    }
     if (!lossless) {
-      Box3f boxes[8], all;
-      for (int c = 0; c < kk; ++c) {
-        for (uint32_t j = 0; j < counts[c]; ++j)
-          for (int q = 0; q < 3; ++q)
-            boxes[c].extend(z.decoded[tm.tris[3 * size_t(prims[c][j]) + q]]);
-        all.extend(boxes[c]);
-      }
-      std::vector<uint8_t> ml(sizeof(cluster::LatticeBoxes8) + data.size());
-      std::memcpy(ml.data() + sizeof(cluster::LatticeBoxes8), data.data(), data.size());
-      auto& lb = *reinterpret_cast<cluster::LatticeBoxes8*>(ml.data());
-      float start[4], extent[4], s2[4], e2[4];
-      ASSERT_TRUE(cluster::write_box_frame(z.lattice, data.data(), all, lb, start, extent));
-      quantize_planes(start, extent, boxes, kk, lb.q);
-      cluster::box_frame(z.lattice, ml.data(), s2, e2);
-      ASSERT_EQ(std::memcmp(start, s2, 3 * sizeof(float)), 0);
-      ASSERT_EQ(std::memcmp(extent, e2, 3 * sizeof(float)), 0);
-      for (int a = 0; a < 3; ++a) {
-        // At most 1/8 above the smallest extent that reaches the cluster's top (one scale byte).
-        const double need = (double(all.hi[a]) - double(start[a])) / 255.0;
-        EXPECT_LE(double(extent[a]), std::max(1.125 * need, double(z.lattice.step)) * 1.0001);
-      }
-      for (int c = 0; c < kk; ++c) {
-        const Box3f b = dequantize_planes(lb.q, s2, e2, c);
-        cluster::Decoded8 d;
-        cluster::decode_child<false>(z.lattice, data.data(), uint32_t(kk), c, d);
-        for (int l = 0; l < 8; ++l)
-          for (int q = 0; q < 3; ++q)
-            ASSERT_TRUE(b.contains(Vec3f(d.v[q][0][l], d.v[q][1][l], d.v[q][2][l])))
-                << "child " << c << " lane " << l;
-      }
+      // On the lattice: the extent at most 1/8 above the smallest that reaches the cluster's top
+      // (one scale byte).
+      check_multileaf_boxes<cluster::LatticeBoxes8, false>(
+          data, z.lattice, boxes, kk,
+          [&](cluster::LatticeBoxes8& lb, float* start, float* extent) {
+            return cluster::write_box_frame(z.lattice, data.data(), all, lb, start, extent);
+          },
+          [&](const uint8_t* p, float* start, float* extent) {
+            cluster::box_frame(z.lattice, p, start, extent);
+          },
+          [&](int a, float start, float extent) {
+            const double need = (double(all.hi[a]) - double(start)) / 255.0;
+            EXPECT_LE(double(extent), std::max(1.125 * need, double(z.lattice.step)) * 1.0001);
+          });
+    } else {
+      // From the anchors: the start the cluster's lowest coordinate exactly (a vertex's, in the
+      // cluster's coordinate mode), the extent at most 1/128 above the exact 1/255 of the span
+      // (one bfloat16), or the least normal float.
+      check_multileaf_boxes<cluster::ExactBoxes8, true>(
+          data, z.lattice, boxes, kk,
+          [&](cluster::ExactBoxes8& eb, float* start, float* extent) {
+            return cluster::write_exact_box_frame(data.data(), all, eb, start, extent);
+          },
+          [&](const uint8_t* p, float* start, float* extent) {
+            cluster::exact_box_frame(p, start, extent);
+          },
+          [&](int a, float start, float extent) {
+            EXPECT_EQ(bits_of(start), bits_of(all.lo[a])) << "axis " << a;
+            const double need = (double(all.hi[a]) - double(start)) / 255.0;
+            EXPECT_LE(double(extent), std::max(need * (1.0 + 1.0 / 64), 1.2e-38)) << "axis " << a;
+          });
     }
-    // Lossless: the boxes from the anchors (cluster::ExactBoxes8): the start is the cluster's
-    // lowest coordinate per axis exactly (a vertex's, in the cluster's coordinate mode), and every
-    // child's box decoded as the traversal decodes it contains the child's triangles.
-    if (lossless) {
-      Box3f boxes[8], all;
-      for (int c = 0; c < kk; ++c) {
-        for (uint32_t j = 0; j < counts[c]; ++j)
-          for (int q = 0; q < 3; ++q)
-            boxes[c].extend(z.decoded[tm.tris[3 * size_t(prims[c][j]) + q]]);
-        all.extend(boxes[c]);
-      }
-      std::vector<uint8_t> ml(sizeof(cluster::ExactBoxes8) + data.size());
-      std::memcpy(ml.data() + sizeof(cluster::ExactBoxes8), data.data(), data.size());
-      auto& eb = *reinterpret_cast<cluster::ExactBoxes8*>(ml.data());
-      float start[4], extent[4], s2[4], e2[4];
-      ASSERT_TRUE(cluster::write_exact_box_frame(data.data(), all, eb, start, extent));
-      quantize_planes(start, extent, boxes, kk, eb.q);
-      cluster::exact_box_frame(ml.data(), s2, e2);
-      ASSERT_EQ(std::memcmp(start, s2, 3 * sizeof(float)), 0);
-      ASSERT_EQ(std::memcmp(extent, e2, 3 * sizeof(float)), 0);
-      for (int a = 0; a < 3; ++a) {
-        ASSERT_EQ(bits_of(start[a]), bits_of(all.lo[a])) << "axis " << a;
-        // At most 1/128 above the exact 1/255 of the span (one bfloat16), or the least normal.
-        const double need = (double(all.hi[a]) - double(start[a])) / 255.0;
-        EXPECT_LE(double(extent[a]), std::max(need * (1.0 + 1.0 / 64), 1.2e-38)) << "axis " << a;
-      }
-      for (int c = 0; c < kk; ++c) {
-        const Box3f b = dequantize_planes(eb.q, s2, e2, c);
-        cluster::Decoded8 d;
-        cluster::decode_child<true>(z.lattice, data.data(), uint32_t(kk), c, d);
-        for (int l = 0; l < 8; ++l)
-          for (int q = 0; q < 3; ++q)
-            ASSERT_TRUE(b.contains(Vec3f(d.v[q][0][l], d.v[q][1][l], d.v[q][2][l])))
-                << "child " << c << " lane " << l;
-      }
-    }
+    ASSERT_FALSE(::testing::Test::HasFatalFailure());
     // One view of the cluster serves all its children (as in the traversal).
     const cluster::View view = lossless ? cluster::view<true>(data.data(), uint32_t(kk))
                                         : cluster::view<false>(data.data(), uint32_t(kk));
@@ -421,7 +422,7 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
       EXPECT_NE(why.find("decimal mode with"), std::string::npos) << why;
       continue;
     }
-    cluster::Decoded8 d;  // another mode: other positions, but no failure
+    cluster::Decoded8 d;                        // another mode: other positions, but no failure
     b.resize(b.size() + kClusterReadSlack, 0);  // the decoders' read slack (check() has its size)
     for (int c = 0; c < 2; ++c) cluster::decode_child<true>(dz.lattice, b.data(), 2, c, d);
   }

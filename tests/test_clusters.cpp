@@ -50,6 +50,18 @@ PolyMesh printed(PolyMesh m, int digits) {
   return m;
 }
 
+// The build-time source of the triangles of `tm` quantized as `z`.
+ClusterSource source_of(const TriangleMesh& tm, const cluster::Quantized& z, bool lossless) {
+  ClusterSource src;
+  src.vertices = z.decoded.data();
+  src.codes = z.codes.data();
+  src.tris = tm.tris.data();
+  src.geom_ids = tm.geom_ids.data();
+  src.prim_ids = tm.prim_ids.data();
+  src.lossless = lossless;
+  return src;
+}
+
 // The multi-leaf boxes of the cluster `data` (k children with the given boxes) as the builder
 // writes them right ahead of it: Boxes is cluster::LatticeBoxes8 (lossy) or cluster::ExactBoxes8
 // (lossless), write(boxes, start, extent) the builder's frame, frame(p, start, extent) the
@@ -88,13 +100,7 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
                  bool shuffle, size_t* decimal = nullptr, size_t* clusters_out = nullptr) {
   const cluster::Quantized z = cluster::quantize(
       tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(), rel_error, lossless);
-  ClusterSource src;
-  src.vertices = z.decoded.data();
-  src.codes = z.codes.data();
-  src.tris = tm.tris.data();
-  src.geom_ids = tm.geom_ids.data();
-  src.prim_ids = tm.prim_ids.data();
-  src.lossless = lossless;
+  ClusterSource src = source_of(tm, z, lossless);
   std::vector<uint32_t> order(tm.tri_count());
   std::iota(order.begin(), order.end(), 0u);
   std::mt19937 rng(seed);
@@ -285,13 +291,7 @@ TEST(ClusterCodec, DecimalModeDigits) {
     const TriangleMesh tm = triangulate_fan({&m});
     const cluster::Quantized z =
         cluster::quantize(tm.vertices.data(), tm.vertices.size(), tm.tris.data(), 1, 1e-5, true);
-    ClusterSource src;
-    src.vertices = z.decoded.data();
-    src.codes = z.codes.data();
-    src.tris = tm.tris.data();
-    src.geom_ids = tm.geom_ids.data();
-    src.prim_ids = tm.prim_ids.data();
-    src.lossless = true;
+    ClusterSource src = source_of(tm, z, true);
     const uint32_t prim = 0, count = 1;
     const uint32_t* prims = &prim;
     const std::vector<uint8_t> data = cluster::encode(src, &prims, &count, 1, true);
@@ -360,12 +360,7 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   TriangleMesh tm = triangulate_fan({&sphere});
   const cluster::Quantized z = cluster::quantize(tm.vertices.data(), tm.vertices.size(),
                                                  tm.tris.data(), tm.tri_count(), 1e-5, false);
-  ClusterSource src;
-  src.vertices = z.decoded.data();
-  src.codes = z.codes.data();
-  src.tris = tm.tris.data();
-  src.geom_ids = tm.geom_ids.data();
-  src.prim_ids = tm.prim_ids.data();
+  ClusterSource src = source_of(tm, z, false);
   std::vector<uint32_t> t(16);
   std::iota(t.begin(), t.end(), 0u);
   const uint32_t* prims[2] = {t.data(), t.data() + 8};
@@ -403,12 +398,7 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   TriangleMesh dtm = triangulate_fan({&dec});
   const cluster::Quantized dz = cluster::quantize(dtm.vertices.data(), dtm.vertices.size(),
                                                   dtm.tris.data(), dtm.tri_count(), 1e-5, true);
-  src.vertices = dz.decoded.data();
-  src.codes = dz.codes.data();
-  src.tris = dtm.tris.data();
-  src.geom_ids = dtm.geom_ids.data();
-  src.prim_ids = dtm.prim_ids.data();
-  src.lossless = true;
+  src = source_of(dtm, dz, true);
   const std::vector<uint8_t> lgood = cluster::encode(src, prims, counts, 2, false);
   ClusterHeader lh;
   std::memcpy(&lh, lgood.data(), sizeof(lh));
@@ -793,13 +783,7 @@ TEST(ClusterScene, DecodeCacheNeverAnswersForAnotherScene) {
       const TriangleMesh tm = one_triangle(depth);
       const cluster::Quantized z = cluster::quantize(tm.vertices.data(), tm.vertices.size(),
                                                      tm.tris.data(), 1, 1e-5, lossless);
-      ClusterSource src;
-      src.vertices = z.decoded.data();
-      src.codes = z.codes.data();
-      src.tris = tm.tris.data();
-      src.geom_ids = tm.geom_ids.data();
-      src.prim_ids = tm.prim_ids.data();
-      src.lossless = lossless;
+      ClusterSource src = source_of(tm, z, lossless);
       const uint32_t prim = 0, count = 1;
       const uint32_t* prims = &prim;
       const std::vector<uint8_t> data = cluster::encode(src, &prims, &count, 1, true);

@@ -435,26 +435,41 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   return out;
 }
 
+// The frames' extent per axis: the smallest code in [first, last] (extents grow with the code)
+// whose extent, a positive finite float, puts the q = 255 plane (start + 255 x extent with the
+// traversal's one fma) at or above the box's top. False if the start lies above the box or no code
+// reaches it.
+template <class Extent>
+bool reaching_extents(const float* start, const Box3f& box, uint32_t (&first)[3], uint32_t last,
+                      Extent&& extent_of, uint32_t (&code)[3]) {
+  for (int a = 0; a < 3; ++a) {
+    if (!(start[a] <= box.lo[a])) return false;
+    for (code[a] = first[a];; ++code[a]) {
+      if (code[a] > last) return false;
+      const float e = extent_of(code[a]);
+      if (e > 0.0f && std::isfinite(e) && std::fma(255.0f, e, start[a]) >= box.hi[a]) break;
+    }
+  }
+  return true;
+}
+
 bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f& box,
                      LatticeBoxes8& boxes, float* start, float* extent) {
   // The anchors in a padded copy: box_start reads 16 bytes (the traversal has the read slack).
   uint8_t anchors[16] = {};
   std::memcpy(anchors, data + sizeof(ClusterHeader), 9);
   box_start(lat, anchors, start);
-  extent[3] = 0.0f;
+  // Scale bytes e << 3 | m, e <= kMaxBoxScaleExp.
+  uint32_t first[3] = {0, 0, 0}, sc[3];
+  if (!reaching_extents(
+          start, box, first, ((kMaxBoxScaleExp + 1) << 3) - 1,
+          [&](uint32_t c) { return box_extent(lat, c); }, sc))
+    return false;
   for (int a = 0; a < 3; ++a) {
-    if (!(start[a] <= box.lo[a])) return false;
-    // The smallest scale (scales grow with the byte) whose q = 255 decodes at or above the top,
-    // with the traversal's one fma.
-    uint32_t sc = 0;
-    for (;; ++sc) {
-      if ((sc >> 3) > kMaxBoxScaleExp) return false;
-      const float e = box_extent(lat, sc);
-      if (e > 0.0f && std::isfinite(e) && std::fma(255.0f, e, start[a]) >= box.hi[a]) break;
-    }
-    boxes.scale[a] = uint8_t(sc);
-    extent[a] = box_extent(lat, sc);
+    boxes.scale[a] = uint8_t(sc[a]);
+    extent[a] = box_extent(lat, sc[a]);
   }
+  extent[3] = 0.0f;
   return true;
 }
 
@@ -465,22 +480,22 @@ bool write_exact_box_frame(const uint8_t* data, const Box3f& box, ExactBoxes8& b
   uint8_t head[sizeof(ClusterHeader) + 16] = {};
   std::memcpy(head, data, sizeof(ClusterHeader) + 12);
   exact_box_start(head, start);
-  extent[3] = 0.0f;
+  // Normal bfloat16s, from the one just below the exact 1/255 of the span.
+  uint32_t first[3], b[3];
   for (int a = 0; a < 3; ++a) {
-    if (!(start[a] <= box.lo[a])) return false;
-    // The smallest normal bfloat16 whose q = 255 plane, with the traversal's one fma, reaches the
-    // top: from the bfloat16 just below the exact 1/255 of the span, upwards.
     const float need = (box.hi[a] - start[a]) / 255.0f;
     uint32_t u;
     std::memcpy(&u, &need, 4);
-    uint16_t b = uint16_t(std::max<uint32_t>(u >> 16, 0x0080));
-    for (;; ++b) {
-      if (!extent_ok(b)) return false;
-      if (std::fma(255.0f, bfloat16_float(b), start[a]) >= box.hi[a]) break;
-    }
-    boxes.extent[a] = b;
-    extent[a] = bfloat16_float(b);
+    first[a] = std::max<uint32_t>(u >> 16, 0x0080);
   }
+  if (!reaching_extents(
+          start, box, first, 0x7f7f, [](uint32_t c) { return bfloat16_float(uint16_t(c)); }, b))
+    return false;
+  for (int a = 0; a < 3; ++a) {
+    boxes.extent[a] = uint16_t(b[a]);
+    extent[a] = bfloat16_float(uint16_t(b[a]));
+  }
+  extent[3] = 0.0f;
   return true;
 }
 

@@ -437,6 +437,19 @@ struct Decoded8 {
 };
 
 #if defined(SLIM_SIMD_AVX2)
+// key_float lane by lane (exact bit operations: the same bits).
+SLIM_INLINE __m256 key_floats8(__m256i code) {
+  const __m256i positive = _mm256_srai_epi32(code, 31);  // key's top bit: a positive float
+  const __m256i pos_bits = _mm256_and_si256(code, _mm256_set1_epi32(0x7fffffff));
+  const __m256i neg_bits = _mm256_xor_si256(code, _mm256_set1_epi32(-1));
+  return _mm256_castsi256_ps(_mm256_blendv_epi8(neg_bits, pos_bits, positive));
+}
+// decimal_coord of 4 lanes over their powers of ten: the exact conversion, one correctly rounded
+// division, one rounding to float (the same bits).
+SLIM_INLINE __m128 decimal_coords4(__m128i q, __m256d pow10) {
+  return _mm256_cvtpd_ps(_mm256_div_pd(_mm256_cvtepi32_pd(q), pow10));
+}
+
 // The 8 lanes' vertices at once: the whole vertex (bx + by + bz bits) with one 64-bit gather per
 // lane when it fits 57 bits, else each field with its own gathers (32-bit for fields of up to 25
 // bits, 64-bit for wider ones). The float operations are the scalar decode's, lane by lane (the
@@ -487,18 +500,9 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
     const __m256i code = _mm256_add_epi32(off, anchors[a]);
     __m256 x;
     if constexpr (kLossless) {
-      if (mode) {  // decimal_coord lane by lane: exact conversion, division, rounding to float
-        const __m128 lo = _mm256_cvtpd_ps(
-            _mm256_div_pd(_mm256_cvtepi32_pd(_mm256_castsi256_si128(code)), pow10[a]));
-        const __m128 hi = _mm256_cvtpd_ps(
-            _mm256_div_pd(_mm256_cvtepi32_pd(_mm256_extracti128_si256(code, 1)), pow10[a]));
-        _mm256_store_ps(d.v[k][a], _mm256_set_m128(hi, lo));
-        return;
-      }
-      const __m256i neg = _mm256_srai_epi32(code, 31);  // key's top bit: a positive float
-      const __m256i pos_bits = _mm256_and_si256(code, _mm256_set1_epi32(0x7fffffff));
-      const __m256i neg_bits = _mm256_xor_si256(code, _mm256_set1_epi32(-1));
-      x = _mm256_castsi256_ps(_mm256_blendv_epi8(neg_bits, pos_bits, neg));
+      x = mode ? _mm256_set_m128(decimal_coords4(_mm256_extracti128_si256(code, 1), pow10[a]),
+                                 decimal_coords4(_mm256_castsi256_si128(code), pow10[a]))
+               : key_floats8(code);
     } else {
       // q < 2^24: the signed conversion is the scalar float(q).
       x = _mm256_add_ps(origins[a], _mm256_mul_ps(_mm256_cvtepi32_ps(code), step));
@@ -696,14 +700,11 @@ SLIM_INLINE void exact_box_start(const uint8_t* data, float* start) {
   // the keys; exact conversion, one correctly rounded division, one rounding for decimals).
   const __m128i code = _mm_loadu_si128(reinterpret_cast<const __m128i*>(bits));
   if (coord_mode(h) == 0) {
-    const __m128i positive = _mm_srai_epi32(code, 31);  // key's top bit: a positive float
-    const __m128i pos_bits = _mm_and_si128(code, _mm_set1_epi32(0x7fffffff));
-    const __m128i neg_bits = _mm_xor_si128(code, _mm_set1_epi32(-1));
-    _mm_storeu_ps(start, _mm_castsi128_ps(_mm_blendv_epi8(neg_bits, pos_bits, positive)));
+    _mm_storeu_ps(start, _mm256_castps256_ps128(key_floats8(_mm256_castsi128_si256(code))));
   } else {
     const __m256d pow10 = _mm256_setr_pd(kPow10[axis_digits(h, 0)], kPow10[axis_digits(h, 1)],
                                          kPow10[axis_digits(h, 2)], 1.0);
-    _mm_storeu_ps(start, _mm256_cvtpd_ps(_mm256_div_pd(_mm256_cvtepi32_pd(code), pow10)));
+    _mm_storeu_ps(start, decimal_coords4(code, pow10));
   }
 #else
   for (int a = 0; a < 3; ++a) {

@@ -460,8 +460,9 @@ std::pair<int, int> flip_sections(const Scene& built, const std::string& what,
       b[at] = char(b[at] ^ (1 + int(rng.uniform() * 254.0f)));
       const std::string msg = try_open(bad, b, oo, rays);
       ++tried;
-      if (sec.name == "(header)")
+      if (sec.name == "(header)") {
         EXPECT_FALSE(msg.empty()) << what << ": header flip at " << at << " opened";
+      }
       if (!msg.empty()) {
         ++errors;
         EXPECT_NE(msg.find(bad), std::string::npos) << msg;

@@ -767,7 +767,17 @@ struct DecodeCache {
     return e[h >> (64 - kLogEntries)];
   }
 };
-DecodeCache& decode_cache();  // this thread's (cluster.cpp)
+// This thread's cache, read on every multi-leaf visit a ray enters: a plain thread_local pointer
+// (constant-initialized: no guard, no call), set by allocate_decode_cache (cluster.cpp) at the
+// thread's first cluster ray, which also frees the cache at thread exit.
+inline thread_local DecodeCache* t_decode_cache = nullptr;
+DecodeCache* allocate_decode_cache();
+SLIM_INLINE DecodeCache& decode_cache() {
+  DecodeCache* c = t_decode_cache;
+  if (!c) [[unlikely]]
+    c = allocate_decode_cache();
+  return *c;
+}
 // A tag no scene had before (1, 2, ...).
 uint64_t next_cache_tag();
 

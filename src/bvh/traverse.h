@@ -269,11 +269,9 @@ bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& 
         const auto* n = reinterpret_cast<const QNode8*>(np);
         mask = detail::intersect_quant8(&n->boxes, ray, dist);
         child = n->child;
-        // Rounding padding can let an empty slot (lo > hi) through; drop those.
-        for (uint32_t m = mask; m;) {
-          int i = simd::pop_lowest(m);
-          if (child[i] == 0) mask &= ~(1u << i);
-        }
+        // Rounding padding can let an empty slot (lo > hi) through; drop those (all 8 slots'
+        // references compared at once).
+        if (mask) mask &= ~simd::zero_mask8(child);
       }
       st.node(8);
       if (mask == 0) goto pop;

@@ -96,15 +96,9 @@ SLIM_INLINE vfloat8 operator/(vfloat8 a, vfloat8 b) { return _mm256_div_ps(a.v, 
 SLIM_INLINE vfloat8 min(vfloat8 a, vfloat8 b) { return _mm256_min_ps(a.v, b.v); }
 SLIM_INLINE vfloat8 max(vfloat8 a, vfloat8 b) { return _mm256_max_ps(a.v, b.v); }
 // a*b + c, a*b - c, c - a*b, each with one rounding.
-SLIM_INLINE vfloat8 fmadd(vfloat8 a, vfloat8 b, vfloat8 c) {
-  return _mm256_fmadd_ps(a.v, b.v, c.v);
-}
-SLIM_INLINE vfloat8 fmsub(vfloat8 a, vfloat8 b, vfloat8 c) {
-  return _mm256_fmsub_ps(a.v, b.v, c.v);
-}
-SLIM_INLINE vfloat8 fnmadd(vfloat8 a, vfloat8 b, vfloat8 c) {
-  return _mm256_fnmadd_ps(a.v, b.v, c.v);
-}
+SLIM_INLINE vfloat8 fmadd(vfloat8 a, vfloat8 b, vfloat8 c) { return _mm256_fmadd_ps(a.v, b.v, c.v); }
+SLIM_INLINE vfloat8 fmsub(vfloat8 a, vfloat8 b, vfloat8 c) { return _mm256_fmsub_ps(a.v, b.v, c.v); }
+SLIM_INLINE vfloat8 fnmadd(vfloat8 a, vfloat8 b, vfloat8 c) { return _mm256_fnmadd_ps(a.v, b.v, c.v); }
 SLIM_INLINE vfloat8 abs(vfloat8 a) { return _mm256_andnot_ps(_mm256_set1_ps(-0.0f), a.v); }
 SLIM_INLINE vfloat8 signmsk(vfloat8 a) { return _mm256_and_ps(a.v, _mm256_set1_ps(-0.0f)); }
 SLIM_INLINE vfloat8 operator^(vfloat8 a, vfloat8 b) { return _mm256_xor_ps(a.v, b.v); }
@@ -115,9 +109,7 @@ SLIM_INLINE vbool8 operator>=(vfloat8 a, vfloat8 b) { return _mm256_cmp_ps(a.v, 
 SLIM_INLINE vbool8 operator==(vfloat8 a, vfloat8 b) { return _mm256_cmp_ps(a.v, b.v, _CMP_EQ_OQ); }
 SLIM_INLINE vbool8 operator!=(vfloat8 a, vfloat8 b) { return _mm256_cmp_ps(a.v, b.v, _CMP_NEQ_UQ); }
 // m ? a : b
-SLIM_INLINE vfloat8 select(vbool8 m, vfloat8 a, vfloat8 b) {
-  return _mm256_blendv_ps(b.v, a.v, m.m);
-}
+SLIM_INLINE vfloat8 select(vbool8 m, vfloat8 a, vfloat8 b) { return _mm256_blendv_ps(b.v, a.v, m.m); }
 SLIM_INLINE vfloat8 rcp_exact(vfloat8 a) { return _mm256_div_ps(_mm256_set1_ps(1.0f), a.v); }
 SLIM_INLINE float reduce_min(vfloat8 a) {
   __m128 m = _mm_min_ps(_mm256_castps256_ps128(a.v), _mm256_extractf128_ps(a.v, 1));
@@ -219,17 +211,11 @@ struct vboolN {
   SLIM_INLINE uint32_t mask() const { return bits; }
 };
 template <int N>
-SLIM_INLINE vboolN<N> operator&(vboolN<N> a, vboolN<N> b) {
-  return {a.bits & b.bits};
-}
+SLIM_INLINE vboolN<N> operator&(vboolN<N> a, vboolN<N> b) { return {a.bits & b.bits}; }
 template <int N>
-SLIM_INLINE vboolN<N> operator|(vboolN<N> a, vboolN<N> b) {
-  return {a.bits | b.bits};
-}
+SLIM_INLINE vboolN<N> operator|(vboolN<N> a, vboolN<N> b) { return {a.bits | b.bits}; }
 template <int N>
-SLIM_INLINE vboolN<N> andnot(vboolN<N> a, vboolN<N> b) {
-  return {a.bits & ~b.bits};
-}
+SLIM_INLINE vboolN<N> andnot(vboolN<N> a, vboolN<N> b) { return {a.bits & ~b.bits}; }
 
 template <int N>
 struct vfloatN {
@@ -249,12 +235,12 @@ struct vfloatN {
   SLIM_INLINE float operator[](int i) const { return v[i]; }
 };
 
-#define SLIM_SCALAR_BINOP(op)                                      \
-  template <int N>                                                 \
-  SLIM_INLINE vfloatN<N> operator op(vfloatN<N> a, vfloatN<N> b) { \
-    vfloatN<N> r;                                                  \
-    for (int i = 0; i < N; ++i) r.v[i] = a.v[i] op b.v[i];         \
-    return r;                                                      \
+#define SLIM_SCALAR_BINOP(op)                                                 \
+  template <int N>                                                            \
+  SLIM_INLINE vfloatN<N> operator op(vfloatN<N> a, vfloatN<N> b) {            \
+    vfloatN<N> r;                                                             \
+    for (int i = 0; i < N; ++i) r.v[i] = a.v[i] op b.v[i];                    \
+    return r;                                                                 \
   }
 SLIM_SCALAR_BINOP(+)
 SLIM_SCALAR_BINOP(-)
@@ -262,12 +248,12 @@ SLIM_SCALAR_BINOP(*)
 SLIM_SCALAR_BINOP(/)
 #undef SLIM_SCALAR_BINOP
 
-#define SLIM_SCALAR_CMP(op)                                                \
-  template <int N>                                                         \
-  SLIM_INLINE vboolN<N> operator op(vfloatN<N> a, vfloatN<N> b) {          \
-    vboolN<N> r;                                                           \
-    for (int i = 0; i < N; ++i) r.bits |= uint32_t(a.v[i] op b.v[i]) << i; \
-    return r;                                                              \
+#define SLIM_SCALAR_CMP(op)                                                   \
+  template <int N>                                                            \
+  SLIM_INLINE vboolN<N> operator op(vfloatN<N> a, vfloatN<N> b) {             \
+    vboolN<N> r;                                                              \
+    for (int i = 0; i < N; ++i) r.bits |= uint32_t(a.v[i] op b.v[i]) << i;    \
+    return r;                                                                 \
   }
 SLIM_SCALAR_CMP(<)
 SLIM_SCALAR_CMP(<=)
@@ -388,15 +374,13 @@ SLIM_INLINE vint4 to_int_trunc(vfloat4 a) {
   vint4 r;
   for (int i = 0; i < 4; ++i) {
     float x = a.v[i];
-    r.v[i] =
-        x != x || x <= -2147483648.0f || x >= 2147483648.0f ? int32_t(0x80000000u) : int32_t(x);
+    r.v[i] = x != x || x <= -2147483648.0f || x >= 2147483648.0f ? int32_t(0x80000000u) : int32_t(x);
   }
   return r;
 }
 SLIM_INLINE vint4 clamp(vint4 a, vint4 lo, vint4 hi) {
   vint4 r;
-  for (int i = 0; i < 4; ++i)
-    r.v[i] = a.v[i] < lo.v[i] ? lo.v[i] : (a.v[i] > hi.v[i] ? hi.v[i] : a.v[i]);
+  for (int i = 0; i < 4; ++i) r.v[i] = a.v[i] < lo.v[i] ? lo.v[i] : (a.v[i] > hi.v[i] ? hi.v[i] : a.v[i]);
   return r;
 }
 

@@ -704,13 +704,14 @@ SLIM_INLINE void exact_box_start(const uint8_t* data, float* start) {
   if (mode == 0) {
     _mm_storeu_ps(start, _mm256_castps256_ps128(key_floats8(_mm256_castsi128_si256(code))));
   } else {
-    // axis_digits of the 3 axes in lanes 0..2 (lane 3, from ib, is unused), then their powers of
-    // ten with one gather (every 4-bit index lies in kPow10).
-    const __m128i top = _mm_srli_epi32(_mm_cvtepu8_epi32(_mm_cvtsi32_si128(int(hb))), 6);
-    const __m128i k =
-        _mm_and_si128(_mm_sub_epi32(_mm_set1_epi32(int(mode - 1)), top), _mm_set1_epi32(15));
-    const __m256d all = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
-    const __m256d pow10 = _mm256_mask_i32gather_pd(_mm256_setzero_pd(), kPow10, k, all, 8);
+    // axis_digits of the 3 axes, one per byte (SWAR: each byte of 16 + k - 1 - top2 is at least
+    // 13, so no borrow crosses bytes; & 15 keeps any block in kPow10), then 3 scalar loads
+    // (no gather: a short latency ahead of the box test).
+    const uint32_t top = (hb >> 6) & 0x030303u;
+    const uint32_t k = ((mode - 1) * 0x010101u + 0x101010u - top) & 0x0f0f0fu;
+    const __m128d xy = _mm_loadh_pd(_mm_load_sd(&kPow10[k & 0xff]), &kPow10[(k >> 8) & 0xff]);
+    const __m128d z1 = _mm_loadh_pd(_mm_load_sd(&kPow10[k >> 16]), &kPow10[0]);  // lane 3: 1
+    const __m256d pow10 = _mm256_insertf128_pd(_mm256_castpd128_pd256(xy), z1, 1);
     _mm_storeu_ps(start, decimal_coords4(code, pow10));
   }
 #else

@@ -179,14 +179,14 @@ Scene Scene::build(const PolyMesh& mesh, const BuildOptions& opt) {
 Hit Scene::intersect(const Ray& ray) const {
   Hit hit;
   TravRay tr;
-  if (!impl_ || !make_trav_ray(ray, impl_->ray_setup, tr)) return hit;
+  if (!impl_ || !make_box_ray(ray, impl_->ray_setup, tr)) return hit;
   impl_->intersect(tr, hit);
   return hit;
 }
 
 bool Scene::occluded(const Ray& ray) const {
   TravRay tr;
-  if (!impl_ || !make_trav_ray(ray, impl_->ray_setup, tr)) return false;
+  if (!impl_ || !make_box_ray(ray, impl_->ray_setup, tr)) return false;
   return impl_->occluded(tr);
 }
 
@@ -195,7 +195,7 @@ Hit intersect_counted(const Scene& scene, const Ray& ray, TraversalCounters& cou
   counters.rays++;
   TravRay tr;
   const Scene::Impl* impl = scene.impl_.get();
-  if (!impl || !make_trav_ray(ray, impl->ray_setup, tr)) return hit;
+  if (!impl || !make_box_ray(ray, impl->ray_setup, tr)) return hit;
   impl->intersect_counted(tr, hit, counters);
   return hit;
 }

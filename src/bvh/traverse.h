@@ -165,7 +165,7 @@ concept HasMultiLeafParts = requires(const typename L::Source& s) {
 template <LeafFormat Leaf, bool kAny, class Stats>
 SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const uint8_t* p,
                                      uint32_t children, uint32_t block_bytes, TravRay& ray,
-                                     HitRecord& hit, Stats& st) {
+                                     bool& watertight_set, HitRecord& hit, Stats& st) {
   simd::vfloat8 dist;
   uint32_t mask;
   if constexpr (HasMultiLeafBoxes<Leaf>) {
@@ -182,8 +182,11 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
   const uint8_t* blocks = p + multileaf_header_bytes<Leaf>();
   alignas(32) float d[8];
   if constexpr (!kAny) dist.store(d);
-  if constexpr (HasMultiLeafView<Leaf>)
-    if (!mask) return false;  // the view is read for a ray that enters a child only
+  if (!mask) return false;  // the view and the watertight constants: for a ray that enters a child
+  if (!watertight_set) {
+    set_watertight(ray);
+    watertight_set = true;
+  }
   [[maybe_unused]] const auto view = [&] {
     struct NoView {};
     if constexpr (HasMultiLeafView<Leaf>)
@@ -244,6 +247,9 @@ bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& 
   const uint32_t block_bytes = bvh.block_bytes;
   bool found = false;
   uint64_t cur = bvh.root;
+  // The ray's watertight constants (TravRay::wt) are set at its first leaf: the rays that meet
+  // only boxes (most misses) skip them.
+  bool watertight_set = false;
 
   for (;;) {
     // Descend through inner nodes, nearest child first.
@@ -263,11 +269,9 @@ bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& 
         const auto* n = reinterpret_cast<const QNode8*>(np);
         mask = detail::intersect_quant8(&n->boxes, ray, dist);
         child = n->child;
-        // Rounding padding can let an empty slot (lo > hi) through; drop those.
-        for (uint32_t m = mask; m;) {
-          int i = simd::pop_lowest(m);
-          if (child[i] == 0) mask &= ~(1u << i);
-        }
+        // Rounding padding can let an empty slot (lo > hi) through; drop those (all 8 slots'
+        // references compared at once).
+        if (mask) mask &= ~simd::zero_mask8(child);
       }
       st.node(8);
       if (mask == 0) goto pop;
@@ -315,6 +319,10 @@ bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& 
     {
       const uint32_t tag = NodeRef::tag(cur);
       if (tag == kRefLeaf) {
+        if (!watertight_set) {
+          set_watertight(ray);
+          watertight_set = true;
+        }
         if (intersect_leaf_blocks<Leaf, kAny>(ctx, leaves + NodeRef::offset(cur),
                                               NodeRef::blocks(cur), block_bytes, ray, hit, st)) {
           found = true;
@@ -322,7 +330,8 @@ bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& 
         }
       } else if (tag == kRefMulti) {
         if (intersect_multileaf<Leaf, kAny>(ctx, leaves + NodeRef::offset(cur),
-                                            NodeRef::blocks(cur), block_bytes, ray, hit, st)) {
+                                            NodeRef::blocks(cur), block_bytes, ray, watertight_set,
+                                            hit, st)) {
           found = true;
           if constexpr (kAny) return true;
         }

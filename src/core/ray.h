@@ -25,7 +25,7 @@ struct TravRay {
   // Ray Traversal", JCGT 2013, with the bound folded into the constants).
   float c_near[4], c_far[4];  // lane 3 unused (stored 4 at a time)
   uint32_t near_plane[3];     // plane array index (2*a or 2*a+1) of the near plane of axis a
-  WatertightRay wt;
+  WatertightRay wt;  // make_trav_ray, or traverse_bvh8 at the ray's first leaf (make_box_ray)
 };
 
 // Per-scene constants of the ray setup: the largest |coordinate| of the scene box per axis.
@@ -40,10 +40,11 @@ struct RaySetupBounds {
   }
 };
 
-// Prepares a ray. Returns false for rays that cannot hit anything: NaN/Inf origin, NaN or zero
-// direction (every component below kMinDirection), NaN bounds or tnear > tfar (documented
-// behaviour: a miss).
-SLIM_INLINE bool make_trav_ray(const Ray& r, const RaySetupBounds& sb, TravRay& tr) {
+// Prepares a ray for the box tests: every field but wt, which traverse_bvh8 sets at the first leaf
+// the ray reaches (a ray that meets only boxes, as most misses, never needs it). Returns false for
+// rays that cannot hit anything: NaN/Inf origin, NaN or zero direction (every component below
+// kMinDirection), NaN bounds or tnear > tfar (documented behaviour: a miss).
+SLIM_INLINE bool make_box_ray(const Ray& r, const RaySetupBounds& sb, TravRay& tr) {
   using namespace simd;
   static_assert(offsetof(Ray, tnear) == 12 && offsetof(Ray, dir) == 16 && offsetof(Ray, tfar) == 28,
                 "Ray is (org, tnear), (dir, tfar): two 4-float loads");
@@ -78,7 +79,14 @@ SLIM_INLINE bool make_trav_ray(const Ray& r, const RaySetupBounds& sb, TravRay& 
   (c - err).storeu(tr.c_far);
   const uint32_t neg = (rd < vfloat4(0.0f)).mask();
   for (uint32_t a = 0; a < 3; ++a) tr.near_plane[a] = 2 * a + ((neg >> a) & 1);
-  tr.wt = WatertightRay(r.org, r.dir, tr.rdir);
+  return true;
+}
+// The watertight test's constants of a ray make_box_ray prepared.
+SLIM_INLINE void set_watertight(TravRay& tr) { tr.wt = WatertightRay(tr.org, tr.dir, tr.rdir); }
+// make_box_ray and the watertight constants: a ray ready for the leaf tests as well.
+SLIM_INLINE bool make_trav_ray(const Ray& r, const RaySetupBounds& sb, TravRay& tr) {
+  if (!make_box_ray(r, sb, tr)) return false;
+  set_watertight(tr);
   return true;
 }
 

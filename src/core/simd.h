@@ -42,6 +42,22 @@ SLIM_INLINE int pop_lowest(uint32_t& m) {
 
 SLIM_INLINE void prefetch(const void* p) { __builtin_prefetch(p, 0, 3); }
 
+// Bit i (i < 8) set where the 64-bit word p[i] is zero.
+SLIM_INLINE uint32_t zero_mask8(const uint64_t* p) {
+#if defined(SLIM_SIMD_AVX2)
+  const __m256i z = _mm256_setzero_si256();
+  const __m256i lo = _mm256_cmpeq_epi64(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)), z);
+  const __m256i hi =
+      _mm256_cmpeq_epi64(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + 4)), z);
+  return uint32_t(_mm256_movemask_pd(_mm256_castsi256_pd(lo))) |
+         uint32_t(_mm256_movemask_pd(_mm256_castsi256_pd(hi))) << 4;
+#else
+  uint32_t m = 0;
+  for (int i = 0; i < 8; ++i) m |= uint32_t(p[i] == 0) << i;
+  return m;
+#endif
+}
+
 #if defined(SLIM_SIMD_AVX2)
 
 // ------------------------------------------------------------------------------------------------

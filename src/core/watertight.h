@@ -26,11 +26,13 @@ SLIM_INLINE float fnmadd(float a, float b, float c) { return std::fma(-a, b, c);
 SLIM_INLINE float fmadd(float a, float b, float c) { return std::fma(a, b, c); }
 
 // Per-ray constants of the watertight test (paper, section 3.1 / Listing 1).
+// The default constructor leaves them unset (TravRay::wt is set only when the ray reaches a leaf:
+// no stores for the rays that never do).
 struct WatertightRay {
   Vec3f org;
-  int kx = 0, ky = 1, kz = 2;
-  float Sx = 0, Sy = 0, Sz = 1;
-  float ox = 0, oy = 0, oz = 0;  // org[kx], org[ky], org[kz]
+  int kx, ky, kz;
+  float Sx, Sy, Sz;
+  float ox, oy, oz;  // org[kx], org[ky], org[kz]
 
   WatertightRay() = default;
   WatertightRay(const Vec3f& o, const Vec3f& d) : org(o) {

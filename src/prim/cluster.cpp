@@ -92,11 +92,16 @@ bool decimal_axes(const uint32_t* keys, uint32_t nv, uint32_t& k, uint32_t (&ka)
 
 }  // namespace
 
-DecodeCache& decode_cache() {
-  static thread_local std::unique_ptr<DecodeCache> cache;
-  if (!cache) [[unlikely]]
-    cache = std::make_unique<DecodeCache>();
-  return *cache;
+DecodeCache* allocate_decode_cache() {
+  // Owns the thread's cache; at thread exit frees it and clears the pointer.
+  struct Owner {
+    std::unique_ptr<DecodeCache> cache;
+    ~Owner() { t_decode_cache = nullptr; }
+  };
+  static thread_local Owner owner;
+  if (!owner.cache) owner.cache = std::make_unique<DecodeCache>();
+  t_decode_cache = owner.cache.get();
+  return t_decode_cache;
 }
 uint64_t next_cache_tag() {
   static std::atomic<uint64_t> next{1};

@@ -690,37 +690,55 @@ bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f
 // The frame of the ExactBoxes8 at p (4 floats each, the 4th unused), the lossless cluster's data
 // right behind it: the start its anchors decoded in the cluster's mode, the extents the bfloat16s.
 // The one computation of it, for the builder (exact_box_start on the encoded cluster) and the
-// traversal.
+// traversal, which reads it on every multi-leaf visit.
 SLIM_INLINE void exact_box_start(const uint8_t* data, float* start) {
-  ClusterHeader h;
-  std::memcpy(&h, data, sizeof(h));
   const uint8_t* bits = data + sizeof(ClusterHeader);  // 3 x 32-bit anchors, then more stream
 #if defined(SLIM_SIMD_AVX2)
   // decode_coord's operations on the three axes at once (the same bits: exact bit operations for
   // the keys; exact conversion, one correctly rounded division, one rounding for decimals).
+  uint32_t hb;  // the header's bits[0..2] (their top 2 bits: the axes' digits below k) and ib
+  std::memcpy(&hb, data + offsetof(ClusterHeader, bits), 4);
+  static_assert(offsetof(ClusterHeader, ib) == offsetof(ClusterHeader, bits) + 3, "bits[3], ib");
   const __m128i code = _mm_loadu_si128(reinterpret_cast<const __m128i*>(bits));
-  if (coord_mode(h) == 0) {
+  const uint32_t mode = hb >> 28;  // coord_mode
+  if (mode == 0) {
     _mm_storeu_ps(start, _mm256_castps256_ps128(key_floats8(_mm256_castsi128_si256(code))));
   } else {
-    const __m256d pow10 = _mm256_setr_pd(kPow10[axis_digits(h, 0)], kPow10[axis_digits(h, 1)],
-                                         kPow10[axis_digits(h, 2)], 1.0);
+    // axis_digits of the 3 axes, one per byte (SWAR: each byte of 16 + k - 1 - top2 is at least
+    // 13, so no borrow crosses bytes; & 15 keeps any block in kPow10), then 3 scalar loads
+    // (no gather: a short latency ahead of the box test).
+    const uint32_t top = (hb >> 6) & 0x030303u;
+    const uint32_t k = ((mode - 1) * 0x010101u + 0x101010u - top) & 0x0f0f0fu;
+    const __m128d xy = _mm_loadh_pd(_mm_load_sd(&kPow10[k & 0xff]), &kPow10[(k >> 8) & 0xff]);
+    const __m128d z1 = _mm_loadh_pd(_mm_load_sd(&kPow10[k >> 16]), &kPow10[0]);  // lane 3: 1
+    const __m256d pow10 = _mm256_insertf128_pd(_mm256_castpd128_pd256(xy), z1, 1);
     _mm_storeu_ps(start, decimal_coords4(code, pow10));
   }
 #else
+  ClusterHeader h;
+  std::memcpy(&h, data, sizeof(h));
   for (int a = 0; a < 3; ++a) {
     uint32_t code;
     std::memcpy(&code, bits + 4 * a, 4);  // 32-bit anchors, LSB first: little-endian words
     start[a] = decode_coord<true>(ClusterLattice{}, a, code, axis_mode(h, a));
   }
-#endif
   start[3] = 0.0f;
+#endif
 }
 SLIM_INLINE void exact_box_frame(const uint8_t* p, float* start, float* extent) {
   exact_box_start(p + sizeof(ExactBoxes8), start);
+#if defined(SLIM_SIMD_AVX2)
+  // The 3 bfloat16s (and the header's first 2 bytes, lane 3, unused) widened and shifted at once.
+  uint64_t e;
+  std::memcpy(&e, p + offsetof(ExactBoxes8, extent), 8);
+  _mm_storeu_ps(extent, _mm_castsi128_ps(
+                            _mm_slli_epi32(_mm_cvtepu16_epi32(_mm_cvtsi64_si128(int64_t(e))), 16)));
+#else
   uint16_t e[3];
   std::memcpy(e, p + offsetof(ExactBoxes8, extent), sizeof(e));
   for (int a = 0; a < 3; ++a) extent[a] = bfloat16_float(e[a]);
   extent[3] = 0.0f;
+#endif
 }
 // The builder's side: writes the extents into `boxes` for the lossless cluster at `data` whose
 // vertices lie in `box`, and returns the frame as exact_box_frame decodes it. False if no normal
@@ -750,7 +768,17 @@ struct DecodeCache {
     return e[h >> (64 - kLogEntries)];
   }
 };
-DecodeCache& decode_cache();  // this thread's (cluster.cpp)
+// This thread's cache, read on every multi-leaf visit a ray enters: a plain thread_local pointer
+// (constant-initialized: no guard, no call), set by allocate_decode_cache (cluster.cpp) at the
+// thread's first cluster ray, which also frees the cache at thread exit.
+inline thread_local DecodeCache* t_decode_cache = nullptr;
+DecodeCache* allocate_decode_cache();
+SLIM_INLINE DecodeCache& decode_cache() {
+  DecodeCache* c = t_decode_cache;
+  if (!c) [[unlikely]]
+    c = allocate_decode_cache();
+  return *c;
+}
 // A tag no scene had before (1, 2, ...).
 uint64_t next_cache_tag();
 
@@ -972,13 +1000,19 @@ struct ClusterLeaf {
     uint32_t children;
     cluster::DecodeCache* cache;
     mutable bool read = false;
-    mutable cluster::View v;
+    // The view, written at the first get(): left uninitialized until then, since most visits
+    // never read it (a default View would be some 30 stores per visit).
+    union Lazy {
+      Lazy() {}
+      cluster::View v;
+    };
+    mutable Lazy lazy;
     SLIM_INLINE const cluster::View& get() const {
       if (!read) {
-        v = cluster::view<kLossless>(data, children);
+        lazy.v = cluster::view<kLossless>(data, children);
         read = true;
       }
-      return v;
+      return lazy.v;
     }
   };
   static SLIM_INLINE MultiLeafView multileaf_view(const Context&, const uint8_t* data,

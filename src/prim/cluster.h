@@ -49,7 +49,7 @@
 //     the per-cluster offsets are the low bits below the shared high bits (about 21-22 bits per
 //     coordinate on scans);
 //   mode 1 + k (k <= 9), decimal: the coordinate is the 32-bit signed integer q with
-//     decimal_coord(q, k_a) = float(double(q) / 10^k_a) equal to it bit for bit, the anchor the
+//     decimal_coord(q, k_a) = float(double(q) x 10^-k_a) equal to it bit for bit, the anchor the
 //     per-axis minimum q (two's complement); axis a has k_a = k - d_a digits, d_a <= 3 in the top
 //     2 bits of the header's bits[a]. Meshes stored as text with few decimals (OBJ files printed
 //     with %f: `v -0.777853 2.740647 3.930020`, or with %g: x near 100 with 4 decimals, z near 5
@@ -58,7 +58,7 @@
 //     q = round(f x 10^k_a) decodes to every coordinate f of the axis in the cluster (verified
 //     with decimal_coord itself; k_a at least k - 3), and this mode only when it takes fewer
 //     vertex bits than the keys; the decoders (scalar and AVX2) compute decimal_coord's
-//     operations (an exact int-to-double conversion, one correctly rounded division, one rounding
+//     operations (an exact int-to-double conversion, one correctly rounded product, one rounding
 //     to float), so both give the encoder's bits. The mode lives in spare header bits: the header
 //     stays 17 bytes and a float-key cluster is the same bytes as before the mode existed.
 //
@@ -142,7 +142,7 @@ SLIM_INLINE uint32_t coord_mode(const ClusterHeader& h) { return uint32_t(h.ib) 
 // Bits of axis a's vertex offsets.
 SLIM_INLINE uint32_t axis_bits(const ClusterHeader& h, int a) { return h.bits[a] & 63u; }
 // Decimal mode: the digits of axis a, the cluster's k less the axis's top 2 bits of bits[a]
-// (taken mod 16: a block check() rejects still indexes kPow10).
+// (taken mod 16: a block check() rejects still indexes kInvPow10).
 SLIM_INLINE uint32_t axis_digits(const ClusterHeader& h, int a) {
   return (coord_mode(h) - 1 - (uint32_t(h.bits[a]) >> 6)) & 15u;
 }
@@ -152,16 +152,23 @@ SLIM_INLINE uint32_t axis_mode(const ClusterHeader& h, int a) {
 }
 constexpr uint32_t kMaxDecimalDigits = 9;  // mode 1 + k: up to a float's 9 significant digits
 
-// 10^k, exact in a double for k <= 22. 16 entries: any 4-bit mode indexes inside the table, so a
-// block that check() would reject (mode 11..15, a scene file opened without the structure check)
-// decodes wrong positions, never reads beyond it.
+// 10^k, exact in a double for k <= 22 (the encoder's q = round(f x 10^k)), and 10^-k, the double
+// nearest to it (the decoders multiply by it: a multiplication's latency is a quarter of a
+// division's, and the decoders sit ahead of the box and triangle tests). 16 entries: any 4-bit
+// mode indexes inside the tables, so a block that check() would reject (mode 11..15, a scene file
+// opened without the structure check) decodes wrong positions, never reads beyond them.
 inline constexpr double kPow10[16] = {1e0, 1e1, 1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
                                       1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15};
+inline constexpr double kInvPow10[16] = {1e0,  1e-1, 1e-2,  1e-3,  1e-4,  1e-5,  1e-6,  1e-7,
+                                         1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 1e-14, 1e-15};
 // The one decoding of a decimal-mode coordinate (the encoder's verification, the scalar and the
-// AVX2 decoders compute these operations): q (two's complement) over 10^k. The conversion of q is
-// exact, the division correctly rounded, then one rounding to float.
+// AVX2 decoders compute these operations): q (two's complement) times 10^-k. The conversion of q
+// is exact, the product correctly rounded, then one rounding to float. (The product can round to
+// the other side of a float's rounding boundary than the exact quotient would; the encoder keeps
+// a coordinate in decimal mode only if this function gives back its float, so such a cluster
+// keeps its float keys.)
 SLIM_INLINE float decimal_coord(uint32_t q, uint32_t k) {
-  return float(double(int32_t(q)) / kPow10[k]);
+  return float(double(int32_t(q)) * kInvPow10[k]);
 }
 
 // The one decoding of a lossy coordinate (build and traversal use this function only).
@@ -444,10 +451,10 @@ SLIM_INLINE __m256 key_floats8(__m256i code) {
   const __m256i neg_bits = _mm256_xor_si256(code, _mm256_set1_epi32(-1));
   return _mm256_castsi256_ps(_mm256_blendv_epi8(neg_bits, pos_bits, positive));
 }
-// decimal_coord of 4 lanes over their powers of ten: the exact conversion, one correctly rounded
-// division, one rounding to float (the same bits).
-SLIM_INLINE __m128 decimal_coords4(__m128i q, __m256d pow10) {
-  return _mm256_cvtpd_ps(_mm256_div_pd(_mm256_cvtepi32_pd(q), pow10));
+// decimal_coord of 4 lanes times their powers of ten 10^-k: the exact conversion, one correctly
+// rounded product, one rounding to float (the same bits).
+SLIM_INLINE __m128 decimal_coords4(__m128i q, __m256d inv_pow10) {
+  return _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_cvtepi32_pd(q), inv_pow10));
 }
 
 // The 8 lanes' vertices at once: the whole vertex (bx + by + bz bits) with one 64-bit gather per
@@ -493,15 +500,15 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
   }
   const __m256 step = _mm256_set1_ps(lat.step);
   const uint32_t mode = coord_mode(h);
-  __m256d pow10[3] = {};
+  __m256d inv_pow10[3] = {};
   if (kLossless && mode)
-    for (int a = 0; a < 3; ++a) pow10[a] = _mm256_set1_pd(kPow10[axis_digits(h, a)]);
+    for (int a = 0; a < 3; ++a) inv_pow10[a] = _mm256_set1_pd(kInvPow10[axis_digits(h, a)]);
   auto store = [&](int k, int a, __m256i off) {
     const __m256i code = _mm256_add_epi32(off, anchors[a]);
     __m256 x;
     if constexpr (kLossless) {
-      x = mode ? _mm256_set_m128(decimal_coords4(_mm256_extracti128_si256(code, 1), pow10[a]),
-                                 decimal_coords4(_mm256_castsi256_si128(code), pow10[a]))
+      x = mode ? _mm256_set_m128(decimal_coords4(_mm256_extracti128_si256(code, 1), inv_pow10[a]),
+                                 decimal_coords4(_mm256_castsi256_si128(code), inv_pow10[a]))
                : key_floats8(code);
     } else {
       // q < 2^24: the signed conversion is the scalar float(q).
@@ -695,7 +702,7 @@ SLIM_INLINE void exact_box_start(const uint8_t* data, float* start) {
   const uint8_t* bits = data + sizeof(ClusterHeader);  // 3 x 32-bit anchors, then more stream
 #if defined(SLIM_SIMD_AVX2)
   // decode_coord's operations on the three axes at once (the same bits: exact bit operations for
-  // the keys; exact conversion, one correctly rounded division, one rounding for decimals).
+  // the keys; exact conversion, one correctly rounded product, one rounding for decimals).
   uint32_t hb;  // the header's bits[0..2] (their top 2 bits: the axes' digits below k) and ib
   std::memcpy(&hb, data + offsetof(ClusterHeader, bits), 4);
   static_assert(offsetof(ClusterHeader, ib) == offsetof(ClusterHeader, bits) + 3, "bits[3], ib");
@@ -705,14 +712,14 @@ SLIM_INLINE void exact_box_start(const uint8_t* data, float* start) {
     _mm_storeu_ps(start, _mm256_castps256_ps128(key_floats8(_mm256_castsi128_si256(code))));
   } else {
     // axis_digits of the 3 axes, one per byte (SWAR: each byte of 16 + k - 1 - top2 is at least
-    // 13, so no borrow crosses bytes; & 15 keeps any block in kPow10), then 3 scalar loads
+    // 13, so no borrow crosses bytes; & 15 keeps any block in kInvPow10), then 3 scalar loads
     // (no gather: a short latency ahead of the box test).
     const uint32_t top = (hb >> 6) & 0x030303u;
     const uint32_t k = ((mode - 1) * 0x010101u + 0x101010u - top) & 0x0f0f0fu;
-    const __m128d xy = _mm_loadh_pd(_mm_load_sd(&kPow10[k & 0xff]), &kPow10[(k >> 8) & 0xff]);
-    const __m128d z1 = _mm_loadh_pd(_mm_load_sd(&kPow10[k >> 16]), &kPow10[0]);  // lane 3: 1
-    const __m256d pow10 = _mm256_insertf128_pd(_mm256_castpd128_pd256(xy), z1, 1);
-    _mm_storeu_ps(start, decimal_coords4(code, pow10));
+    const __m128d xy = _mm_loadh_pd(_mm_load_sd(&kInvPow10[k & 0xff]), &kInvPow10[(k >> 8) & 0xff]);
+    const __m128d z1 = _mm_loadh_pd(_mm_load_sd(&kInvPow10[k >> 16]), &kInvPow10[0]);  // lane 3
+    const __m256d inv_pow10 = _mm256_insertf128_pd(_mm256_castpd128_pd256(xy), z1, 1);
+    _mm_storeu_ps(start, decimal_coords4(code, inv_pow10));
   }
 #else
   ClusterHeader h;

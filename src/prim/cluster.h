@@ -458,19 +458,13 @@ SLIM_INLINE __m128 decimal_coords4(__m128i q, __m256d inv_pow10) {
 }
 
 // The 8 lanes' vertices at once: the whole vertex (bx + by + bz bits) with one 64-bit gather per
-// lane when it fits 57 bits, else each field with its own gathers (32-bit for fields of up to 25
-// bits, 64-bit for wider ones). The float operations are the scalar decode's, lane by lane (the
+// lane when it fits 57 bits, else with two (the float keys of lossless clusters: about 21 bits an
+// axis). The float operations are the scalar decode's, lane by lane (the
 // same conversion, product and sum), so both give the same bits.
 template <bool kLossless>
 SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHeader& h,
                                       const uint8_t* bits, const Layout& L, const uint32_t* anchor,
                                       const uint32_t (&tri)[8], Decoded8& d) {
-  const auto* base = reinterpret_cast<const int*>(bits);
-  auto field = [&](__m256i pos, uint32_t w) {
-    const __m256i word = _mm256_i32gather_epi32(base, _mm256_srli_epi32(pos, 3), 1);
-    const __m256i v = _mm256_srlv_epi32(word, _mm256_and_si256(pos, _mm256_set1_epi32(7)));
-    return _mm256_and_si256(v, _mm256_set1_epi32(int((1u << w) - 1)));
-  };
   // The 64 bits from bit `pos` of each lane (lanes 0-3 in lo, 4-7 in hi): two 64-bit gathers.
   const auto* base64 = reinterpret_cast<const long long*>(bits);
   auto gather64 = [&](__m256i pos, __m256i& lo, __m256i& hi) {
@@ -526,25 +520,19 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
         _mm256_and_si256(_mm256_srli_epi32(packed, 8 * k), _mm256_set1_epi32(0xff));  // corner k
     __m256i vpos = _mm256_add_epi32(_mm256_set1_epi32(int(L.verts)),
                                     _mm256_mullo_epi32(vi, _mm256_set1_epi32(int(L.vbits))));
-    if (L.vbits <= 57) {
-      __m256i lo, hi;
-      gather64(vpos, lo, hi);
-      uint32_t shift = 0;
-      for (int a = 0; a < 3; ++a) {
-        store(k, a, _mm256_and_si256(low32(lo, hi, shift), masks[a]));
-        shift += axis_bits(h, a);
-      }
-      continue;
-    }
+    // 64-bit windows of the vertex's bits: one for vertices of up to 57 bits, a second from the
+    // first axis the first does not hold (axes are at most 32 bits: a window holds any axis whole).
+    __m256i lo, hi;
+    gather64(vpos, lo, hi);
+    uint32_t start = 0, off = 0;  // the window's first bit and the axis's, from the vertex's
     for (int a = 0; a < 3; ++a) {
-      if (axis_bits(h, a) <= 25) {
-        store(k, a, field(vpos, axis_bits(h, a)));
-      } else {
-        __m256i lo, hi;
-        gather64(vpos, lo, hi);
-        store(k, a, _mm256_and_si256(low32(lo, hi, 0), masks[a]));
+      const uint32_t w = axis_bits(h, a);
+      if (off + w - start > 57) {
+        gather64(_mm256_add_epi32(vpos, _mm256_set1_epi32(int(off))), lo, hi);
+        start = off;
       }
-      vpos = _mm256_add_epi32(vpos, _mm256_set1_epi32(int(axis_bits(h, a))));
+      store(k, a, _mm256_and_si256(low32(lo, hi, off - start), masks[a]));
+      off += w;
     }
   }
 }

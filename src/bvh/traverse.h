@@ -183,10 +183,7 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
   alignas(32) float d[8];
   if constexpr (!kAny) dist.store(d);
   if (!mask) return false;  // the view and the watertight constants: for a ray that enters a child
-  if (!watertight_set) {
-    set_watertight(ray);
-    watertight_set = true;
-  }
+  set_watertight_once(ray, watertight_set);
   [[maybe_unused]] const auto view = [&] {
     struct NoView {};
     if constexpr (HasMultiLeafView<Leaf>)
@@ -319,10 +316,7 @@ bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& 
     {
       const uint32_t tag = NodeRef::tag(cur);
       if (tag == kRefLeaf) {
-        if (!watertight_set) {
-          set_watertight(ray);
-          watertight_set = true;
-        }
+        set_watertight_once(ray, watertight_set);
         if (intersect_leaf_blocks<Leaf, kAny>(ctx, leaves + NodeRef::offset(cur),
                                               NodeRef::blocks(cur), block_bytes, ray, hit, st)) {
           found = true;

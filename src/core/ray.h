@@ -83,6 +83,13 @@ SLIM_INLINE bool make_box_ray(const Ray& r, const RaySetupBounds& sb, TravRay& t
 }
 // The watertight test's constants of a ray make_box_ray prepared.
 SLIM_INLINE void set_watertight(TravRay& tr) { tr.wt = WatertightRay(tr.org, tr.dir, tr.rdir); }
+// set_watertight unless `done` says it ran (a traversal's first leaf sets them, later leaves not).
+SLIM_INLINE void set_watertight_once(TravRay& tr, bool& done) {
+  if (!done) {
+    set_watertight(tr);
+    done = true;
+  }
+}
 // make_box_ray and the watertight constants: a ray ready for the leaf tests as well.
 SLIM_INLINE bool make_trav_ray(const Ray& r, const RaySetupBounds& sb, TravRay& tr) {
   if (!make_box_ray(r, sb, tr)) return false;

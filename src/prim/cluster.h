@@ -459,8 +459,8 @@ SLIM_INLINE __m128 decimal_coords4(__m128i q, __m256d inv_pow10) {
 
 // The 8 lanes' vertices at once: the whole vertex (bx + by + bz bits) with one 64-bit gather per
 // lane when it fits 57 bits, else with two (the float keys of lossless clusters: about 21 bits an
-// axis). The float operations are the scalar decode's, lane by lane (the
-// same conversion, product and sum), so both give the same bits.
+// axis). The float operations are the scalar decode's, lane by lane (the same conversion, product
+// and sum), so both give the same bits.
 template <bool kLossless>
 SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHeader& h,
                                       const uint8_t* bits, const Layout& L, const uint32_t* anchor,

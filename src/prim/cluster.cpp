@@ -167,22 +167,20 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
 
   // Strips: per child, the greedy strip from each start triangle (the next triangle is the first
   // left that continues the last one, else a restart); the one with the fewest restarts wins.
-  // steps: (index into `tris`, p, e) in decode order; p = 3 for a strip's first triangle.
+  // steps: (index into `tris`, p, e) in decode order; p = 3 for a strip's first triangle. A step
+  // after a step with p = q may not take the previous step's edge q + 1 (the one it came in by:
+  // its 1-bit edge names q or q + 2).
   struct Step {
     uint32_t i;
     uint8_t p, e;
   };
-  auto continues = [&](uint32_t prev, uint32_t t, uint8_t& p, uint8_t& e) {
+  // The corner p of t at which t continues prev over prev's edge e, else 3.
+  auto continues = [&](uint32_t prev, uint32_t t, int ee) {
     const auto& P = corners[prev];
     const auto& T = corners[t];
     for (int pp = 0; pp < 3; ++pp)
-      for (int ee = 0; ee < 3; ++ee)
-        if (T[(pp + 1) % 3] == P[(ee + 1) % 3] && T[(pp + 2) % 3] == P[ee]) {
-          p = uint8_t(pp);
-          e = uint8_t(ee);
-          return true;
-        }
-    return false;
+      if (T[(pp + 1) % 3] == P[(ee + 1) % 3] && T[(pp + 2) % 3] == P[ee]) return uint8_t(pp);
+    return uint8_t(3);
   };
   thread_local std::vector<Step> steps;
   steps.clear();
@@ -190,10 +188,11 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   uint32_t child_step[9] = {};  // first step of each child (k <= 8)
   for (int c = 0, first = 0; c < k; first += int(counts[c]), ++c) {
     const uint32_t n = counts[c];
-    // How triangle b of the child continues triangle a: bit b of cont[a], with p and e in
-    // cont_p[a][b], cont_e[a][b]. Every start tries the same pairs, so each pair is tested once
-    // here (8 x 8 tests, not up to 8 x 8 x 8), and the search takes the lowest unused triangle
-    // that continues (else the lowest unused) as a bit scan.
+    // How triangle b of the child continues triangle a over a's edge e: bit b of cont[x][a] for
+    // the lowest such e other than x (x = 3: any edge), with p in cont_p[a][b][e]. Every start
+    // tries the same pairs, so each pair is tested once here (8 x 8 tests, not up to 8 x 8 x 8),
+    // and the search takes the lowest unused triangle that continues (else the lowest unused) as
+    // a bit scan.
     // A pair shares an edge only if two corners of b are corners of a. With each corner as bit
     // (vertex mod 64) of a mask, a triangle b whose three bits differ shares two corners with a
     // only if its mask and a's have two bits in common: other pairs skip the test.
@@ -203,15 +202,19 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       mask[a] = (uint64_t(1) << (T[0] & 63)) | (uint64_t(1) << (T[1] & 63)) |
                 (uint64_t(1) << (T[2] & 63));
     }
-    uint32_t cont[8] = {};
-    uint8_t cont_p[8][8], cont_e[8][8];
+    uint32_t cont[4][8] = {};
+    uint8_t cont_p[8][8][3];
     for (uint32_t a = 0; a < n; ++a)
       for (uint32_t b = 0; b < n; ++b) {
         if (a == b) continue;
         if (__builtin_popcountll(mask[b]) == 3 && __builtin_popcountll(mask[a] & mask[b]) < 2)
           continue;
-        if (continues(uint32_t(first) + a, uint32_t(first) + b, cont_p[a][b], cont_e[a][b]))
-          cont[a] |= 1u << b;
+        for (int ee = 0; ee < 3; ++ee) {
+          cont_p[a][b][ee] = continues(uint32_t(first) + a, uint32_t(first) + b, ee);
+          if (cont_p[a][b][ee] == 3) continue;
+          for (int x = 0; x < 4; ++x)
+            if (x != ee) cont[x][a] |= 1u << b;
+        }
       }
     const uint32_t all = (1u << n) - 1;
     Step best[8], cur[8];
@@ -222,11 +225,15 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       uint32_t last = start;  // the child's index of cur[j - 1]
       cur[0] = {uint32_t(first) + start, 3, 0};
       for (uint32_t j = 1; j < n; ++j) {
-        const uint32_t go = cont[last] & ~used;
+        // The edge the last triangle came in by (3: none).
+        const uint32_t x = cur[j - 1].p == 3 ? 3 : (cur[j - 1].p + 1u) % 3;
+        const uint32_t go = cont[x][last] & ~used;
         if (go) {
-          const uint32_t q = uint32_t(__builtin_ctz(go));
-          cur[j] = {uint32_t(first) + q, cont_p[last][q], cont_e[last][q]};
-          last = q;
+          const uint32_t b = uint32_t(__builtin_ctz(go));
+          int ee = 0;
+          while (ee == int(x) || cont_p[last][b][ee] == 3) ++ee;
+          cur[j] = {uint32_t(first) + b, cont_p[last][b][ee], uint8_t(ee)};
+          last = b;
         } else {
           last = uint32_t(__builtin_ctz(all & ~used));
           cur[j] = {uint32_t(first) + last, 3, 0};
@@ -280,11 +287,16 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   child_refs[k] = uint32_t(refs.size());
   const uint32_t ib = bit_width(max_back);
   h.ib = uint8_t(ib);
-  // Topology bits per child: 2 bits a restart, 4 a strip step, 1 or 1 + ib a reference.
+  // The control bits of step j (not a child's first): 2 a restart, 4 a strip step after a
+  // restart or a first triangle, 3 after a strip step.
+  auto control_bits = [&](uint32_t j) {
+    return steps[j].p == 3 ? 2u : steps[j - 1].p == 3 ? 4u : 3u;
+  };
+  // Topology bits per child: the control bits, 1 or 1 + ib a reference.
   uint32_t child_off[9] = {};
   for (int c = 0; c < k; ++c) {
     uint32_t b = 0;
-    for (uint32_t j = child_step[c] + 1; j < child_step[c + 1]; ++j) b += steps[j].p == 3 ? 2 : 4;
+    for (uint32_t j = child_step[c] + 1; j < child_step[c + 1]; ++j) b += control_bits(j);
     for (uint32_t r = child_refs[c]; r < child_refs[c + 1]; ++r) b += refs[r] < 0 ? 1 : 1 + ib;
     child_off[c + 1] = child_off[c] + b;
   }
@@ -420,7 +432,11 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   for (int c = 0; c < k; ++c)
     for (uint32_t j = child_step[c]; j < child_step[c + 1]; ++j) {
       const Step& st = steps[j];
-      if (j > child_step[c]) w.put(uint32_t(st.p) | uint32_t(st.e) << 2, st.p == 3 ? 2 : 4);
+      if (j > child_step[c]) {
+        const uint32_t q = steps[j - 1].p;  // the edge after a step: q (b = 0) or q + 2 (b = 1)
+        const uint32_t e = st.p == 3 || q == 3 ? st.e : uint32_t(st.e) != q;
+        w.put(uint32_t(st.p) | e << 2, control_bits(j));
+      }
       for (int q = 0; q < (st.p == 3 ? 3 : 1); ++q) put_ref();
     }
   if (w.pos != L.end || r != refs.size()) throw std::logic_error("cluster: stream size mismatch");

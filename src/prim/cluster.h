@@ -29,10 +29,12 @@
 // order, triangles in strip order), so a vertex reference is 1 bit "new" (the next number) or 0
 // followed by ib bits d (the vertex cnt - 1 - d, cnt being the count of vertices numbered so far).
 // A child's first triangle is three references (corners 0, 1, 2). Every later triangle starts
-// with 2 bits p: 3 restarts (three references); otherwise 2 bits e follow, and the triangle is the
-// previous one's edge e (its corners e and e + 1, mod 3) reversed, at corners p + 2 and p + 1, with
-// one reference at corner p: the strip step of a consistently oriented mesh.
-//
+// with 2 bits p: 3 restarts (three references); otherwise the edge e of the previous triangle
+// follows, and the triangle is that edge (the previous triangle's corners e and e + 1, mod 3)
+// reversed, at corners p + 2 and p + 1, with one reference at corner p: the strip step of a
+// consistently oriented mesh. After a child's first triangle or a restart e takes 2 bits (0..2);
+// after a strip step with p = q it takes 1 bit b, e = q + 2b (mod 3): a step's edge q + 1 is the
+// one it was entered by, so the next step shares edge q or q + 2.
 // The primID runs: input faces are not stored in a cluster's order (they are the user's), but
 // neighbouring faces often have nearby numbers (scan rows, quads split in two, terrain rows), so a
 // cluster's sorted ids fall into few runs of width 2^ob; on meshes in random order the encoder
@@ -289,7 +291,7 @@ SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, bool lossles
 // Decodes the strip of child c (n triangles) into idx[corner][lane], lanes < n. get(pos, w) reads
 // w <= 32 bits at bit pos of the stream (one read per triangle: a restart's 2 + 3 x 9 bits at
 // most); *end receives the bit after the strip's last. kCheck: returns false if a reused vertex
-// lies before vertex 0 or a strip step names edge 3. The checker runs this; the decoders run
+// lies before vertex 0 or a 2-bit edge is 3. The checker runs this; the decoders run
 // decode_strip_packed (below: the same triangles) on checked blocks only.
 template <bool kCheck, class Get>
 SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get, uint32_t c,
@@ -316,6 +318,7 @@ SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get
     return v;
   };
   uint32_t v0 = 0, v1 = 0, v2 = 0;
+  uint32_t q = 3;  // the previous triangle's p (3: a first triangle or a restart)
   for (uint32_t j = 0; j < n; ++j) {
     uint32_t x = get(pos, 32), used = 0;
     const uint32_t p = j ? x & 3 : 3;
@@ -327,10 +330,17 @@ SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get
       v1 = ref(x, used);
       v2 = ref(x, used);
     } else {
-      const uint32_t e = (x >> 2) & 3;
-      if constexpr (kCheck) ok &= e < 3;
-      x >>= 4;
-      used = 4;
+      uint32_t e;
+      if (q == 3) {
+        e = (x >> 2) & 3;
+        if constexpr (kCheck) ok &= e < 3;
+        x >>= 4;
+        used = 4;
+      } else {
+        e = (q + 2 * ((x >> 2) & 1)) % 3;
+        x >>= 3;
+        used = 3;
+      }
       // Corner p + 1 takes the previous corner e + 1, corner p + 2 the previous corner e (edge 3
       // reads as edge 0).
       const uint32_t a = e == 1 ? v1 : e == 2 ? v2 : v0, b = e == 1 ? v2 : e == 2 ? v0 : v1;
@@ -339,6 +349,7 @@ SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get
       v1 = p == 1 ? r : p == 2 ? a : b;
       v2 = p == 2 ? r : p == 0 ? a : b;
     }
+    q = p;
     pos += used;
     idx[0][j] = v0;
     idx[1][j] = v1;
@@ -349,34 +360,38 @@ SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get
 }
 
 // The decoders' strip step as a byte shuffle: the triangle is packed in a word (corner k's vertex
-// in byte k) with the step's new vertex in byte 3, and control c = p | e << 2 (p < 3) picks the
-// new corners: corner p the new vertex, corner p + 1 the previous corner e + 1, corner p + 2 the
-// previous corner e (edge 3 reads as edge 0, as in decode_strip). Bytes 3..15 are 0x80 (zero), so
-// the table serves pshufb (AVX2 path) and the scalar shifts alike. Entries with p = 3 (a restart)
-// are unused.
+// in byte k) with the step's new vertex in byte 3; entry q << 4 | c, q the previous triangle's p
+// and c the step's next 4 bits (p | e << 2 after a first triangle or a restart, q = 3; p | b << 2
+// and one bit of the reference after a step, q < 3, e = q + 2b), picks the new corners: corner p
+// the new vertex, corner p + 1 the previous corner e + 1, corner p + 2 the previous corner e (edge
+// 3 reads as edge 0, as in decode_strip). Byte 3 is 0x80 (zero): an entry is a pshufb control's
+// low 4 bytes (AVX2 path; the control's other bytes pick byte 0, outside the result's low word)
+// and the scalar shifts' byte numbers alike. Entries with p = 3 (a restart) are unused.
 struct StepShuffle {
-  alignas(16) uint8_t b[16][16];
+  uint32_t b[64];
   constexpr StepShuffle() : b{} {
-    for (int c = 0; c < 16; ++c) {
-      for (int i = 0; i < 16; ++i) b[c][i] = 0x80;
-      const int p = c & 3, e = (c >> 2) == 3 ? 0 : c >> 2;
+    for (int i = 0; i < 64; ++i) {
+      const int q = i >> 4, p = i & 3, x = (i >> 2) & 3;
+      const int e = q == 3 ? (x == 3 ? 0 : x) : (q + 2 * (x & 1)) % 3;
       if (p == 3) continue;
-      b[c][p] = 3;
-      b[c][(p + 1) % 3] = uint8_t((e + 1) % 3);
-      b[c][(p + 2) % 3] = uint8_t(e);
+      uint8_t t[4] = {0, 0, 0, 0x80};
+      t[p] = 3;
+      t[(p + 1) % 3] = uint8_t((e + 1) % 3);
+      t[(p + 2) % 3] = uint8_t(e);
+      b[i] = uint32_t(t[0]) | uint32_t(t[1]) << 8 | uint32_t(t[2]) << 16 | uint32_t(t[3]) << 24;
     }
   }
 };
 inline constexpr StepShuffle kStepShuffle{};
 
 SLIM_INLINE uint32_t step_triangle(uint32_t t4, uint32_t c) {
+  const uint32_t s = kStepShuffle.b[c];
 #if defined(SLIM_SIMD_AVX2)
-  const __m128i sh = _mm_load_si128(reinterpret_cast<const __m128i*>(kStepShuffle.b[c]));
+  const __m128i sh = _mm_cvtsi32_si128(int(s));
   return uint32_t(_mm_cvtsi128_si32(_mm_shuffle_epi8(_mm_cvtsi32_si128(int(t4)), sh)));
 #else
-  const uint8_t* s = kStepShuffle.b[c];
-  return ((t4 >> (8 * s[0])) & 0xff) | ((t4 >> (8 * s[1])) & 0xff) << 8 |
-         ((t4 >> (8 * s[2])) & 0xff) << 16;
+  return ((t4 >> (8 * (s & 0xff))) & 0xff) | ((t4 >> (8 * ((s >> 8) & 0xff))) & 0xff) << 8 |
+         ((t4 >> (8 * ((s >> 16) & 0xff))) & 0xff) << 16;
 #endif
 }
 
@@ -421,17 +436,20 @@ SLIM_INLINE void decode_strip_packed(const ClusterHeader& h, const Layout& L, co
   uint32_t t = restart(load(), s);
   pos += s;
   tri[0] = t;
+  uint32_t q = 3;  // the previous triangle's p
   for (uint32_t j = 1; j < n; ++j) {
     const uint64_t x = load();
-    if ((x & 3) == 3) {
+    const uint32_t p = uint32_t(x) & 3;
+    if (p == 3) {
       s = 2;
       t = restart(x, s);
     } else {
-      s = 4;
-      uint32_t y = uint32_t(x >> 4);
+      s = q == 3 ? 4 : 3;  // p and a 2-bit edge after a restart, a 1-bit edge after a step
+      uint32_t y = uint32_t(x >> s);
       const uint32_t r = ref(y, s);
-      t = step_triangle(t | r << 24, uint32_t(x) & 15);
+      t = step_triangle(t | r << 24, q << 4 | (uint32_t(x) & 15));
     }
+    q = p;
     pos += s;
     tri[j] = t;
   }

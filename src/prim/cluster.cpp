@@ -300,8 +300,32 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     for (uint32_t r = child_refs[c]; r < child_refs[c + 1]; ++r) b += refs[r] < 0 ? 1 : 1 + ib;
     child_off[c + 1] = child_off[c] + b;
   }
-  if (child_off[k] > 0xffff) throw std::logic_error("cluster: topology beyond 65535 bits");
-  h.tbits = uint16_t(child_off[k]);
+  if (child_off[k] > 0x7ff) throw std::logic_error("cluster: topology beyond 2047 bits");
+  // The child table: per field the narrowest residual width of the linear prediction (to, vo
+  // below the plain codes), else the plain values (Layout: the same slopes and biases).
+  {
+    const uint32_t inv = kInvTris.v[ntris];
+    const uint32_t ts = (child_off[k] * inv) >> 4, vs = (nv * inv) >> 4;
+    int32_t tlo = 0, thi = 0, vlo = 0, vhi = 0;
+    for (int c = 1, first = 0; c < k; ++c) {
+      first += int(counts[c - 1]);
+      const int32_t tr = int32_t(child_off[c]) - int32_t((uint32_t(first) * ts) >> 12);
+      const int32_t vr = int32_t(child_cnt[c]) - int32_t((uint32_t(first) * vs) >> 12);
+      tlo = std::min(tlo, tr);
+      thi = std::max(thi, tr);
+      vlo = std::min(vlo, vr);
+      vhi = std::max(vhi, vr);
+    }
+    // The residuals lo..hi fit w bits with bias 2^(w - 1).
+    auto fits = [](int32_t lo, int32_t hi, uint32_t w) {
+      const int32_t b = int32_t(1u << (w - 1));
+      return lo >= -b && hi <= int32_t((1u << w) - 1) - b;
+    };
+    uint32_t to = 0, vo = 0;
+    while (to < kPlainOffsetCode && !fits(tlo, thi, to + 2)) ++to;
+    while (vo < kPlainVertexCode && !fits(vlo, vhi, vo + 3)) ++vo;
+    h.tbits = uint16_t(child_off[k] | to << 11 | vo << 14);
+  }
 
   uint32_t anchor[3];
   for (int a = 0; a < 3; ++a) {
@@ -407,8 +431,9 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   w.put(prim_base, h.bb);
   w.put(glo, h.hb);
   for (int c = 1; c < k; ++c) {
-    w.put(child_off[c], L.tb);
-    w.put(child_cnt[c], L.vbw);
+    const uint32_t first = child_first(sizes, uint32_t(c));
+    w.put(child_off[c] - ((first * L.ts) >> 12) + L.tbias, L.tb);
+    w.put(child_cnt[c] - ((first * L.vs) >> 12) + L.vbias, L.vbw);
   }
   for (uint32_t i = 0; i < nv; ++i)
     for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], axis_bits(h, a));
@@ -448,7 +473,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     st.triangles += ntris;
     st.vertices += nv;
     st.position_bits += uint64_t(nv) * L.vbits;
-    st.topology_bits += h.tbits + (L.verts - L.table) + 8 * (sizeof(h.sizes) + sizeof(h.tbits));
+    st.topology_bits +=
+        topology_bits(h) + (L.verts - L.table) + 8 * (sizeof(h.sizes) + sizeof(h.tbits));
     st.id_bits += (L.topo - L.runs) + h.bb + h.hb + 6 * 8;  // + pb, gb, nruns, ob, bb, hb
     st.header_bits += 6 * 8 + 3 * L.aw;                     // nverts, ntris, bits, ib; anchors
     st.decimal_clusters += coord_mode(h) != 0;

@@ -13,8 +13,8 @@
 //   bit stream, LSB first from the byte after the header:
 //     anchors:  3 x aw bits (aw = 24 lossy, 32 lossless)
 //     bases:    prim_base (bb bits), geom_base (hb bits)
-//     children: for children 1..k-1, the child's topology offset (tb = bit_width(tbits) bits,
-//               from the topology start) and its first new vertex (vbw = bit_width(nverts) bits)
+//     children: for children 1..k-1, the child's topology offset (tb bits) and its first new
+//               vertex (vbw bits), each a residual of a linear prediction (below)
 //     vertices: per vertex bx + by + bz bits (offsets from the anchor)
 //     id runs:  nruns run starts of pb bits (start - prim_base)
 //     ids:      per triangle rb = bit_width(nruns - 1) bits run index, ob bits offset in the
@@ -23,6 +23,16 @@
 // Child c holds 1 + sizes[c] triangles (3 bits each); k, the child count, is the multi-leaf's.
 // Children with fewer than 8 triangles repeat their last triangle in the padding lanes (the
 // duplicate gives the same hit).
+//
+// The child table: child c starts after T = child_first(c) triangles, and its fields predict the
+// topology offset and the first new vertex as proportional to T: with the slopes
+// ts = (tbits x kInvTris[ntris]) >> 4 and vs = (nverts x kInvTris[ntris]) >> 4 (kInvTris[n] =
+// 2^16 / n, integer: a product, no division), the offset is ((T x ts) >> 12) + x - 2^(tb - 1)
+// for the tb-bit field x, and the first new vertex ((T x vs) >> 12) + y - 2^(vbw - 1) for the
+// vbw-bit field y. The widths come from the top 5 bits of the header's tbits: 3 bits to, tb = to +
+// 2 (2..8), and 2 bits vo, vbw = vo + 3 (3..5); to = 7 and vo = 3 store the plain value instead
+// (slope and bias 0; tb = bit_width(tbits), vbw = bit_width(nverts)), for clusters whose
+// residuals take more bits.
 //
 // Topology (DGF section 3.2, with the corners kept in the input order, which u, v and the
 // watertight test's rounding depend on): vertices are numbered in order of first use (children in
@@ -108,7 +118,8 @@ struct ClusterHeader {
   uint8_t ob;        // bits per primID offset in its run (<= 32)
   uint8_t bb, hb;    // bits of prim_base / geom_base in the stream (<= 32)
   uint8_t sizes[3];  // child c holds 1 + (the 3 bits at 3c) triangles
-  uint16_t tbits;    // bits of the topology stream
+  uint16_t tbits;    // low 11 bits: bits of the topology stream (<= 1854: 27 + 63 x 29); top 5
+                     // bits: the child table's widths (3 bits to, 2 bits vo; see above)
 };
 #pragma pack(pop)
 static_assert(sizeof(ClusterHeader) == 17, "cluster header is 17 bytes");
@@ -140,6 +151,19 @@ SLIM_INLINE float key_float(uint32_t k) {
 // The header's ib byte: bits of a reused vertex's distance back, and the lossless coordinate mode
 // (0: float keys; 1 + k: decimal with k digits).
 SLIM_INLINE uint32_t index_bits(const ClusterHeader& h) { return h.ib & 15u; }
+// Bits of the topology stream; the child table's width codes (above).
+SLIM_INLINE uint32_t topology_bits(const ClusterHeader& h) { return h.tbits & 0x7ffu; }
+SLIM_INLINE uint32_t table_offset_code(const ClusterHeader& h) { return (h.tbits >> 11) & 7u; }
+SLIM_INLINE uint32_t table_vertex_code(const ClusterHeader& h) { return uint32_t(h.tbits) >> 14; }
+constexpr uint32_t kPlainOffsetCode = 7, kPlainVertexCode = 3;
+// 2^16 / n for n = 1..64 (entry 0 unused): the child table's slopes without a division.
+struct InvTris {
+  uint32_t v[65];
+  constexpr InvTris() : v{} {
+    for (uint32_t n = 1; n <= 64; ++n) v[n] = 65536u / n;
+  }
+};
+inline constexpr InvTris kInvTris{};
 SLIM_INLINE uint32_t coord_mode(const ClusterHeader& h) { return uint32_t(h.ib) >> 4; }
 // Bits of axis a's vertex offsets.
 SLIM_INLINE uint32_t axis_bits(const ClusterHeader& h, int a) { return h.bits[a] & 63u; }
@@ -265,14 +289,23 @@ struct Layout {
   uint32_t aw = 0;                                                      // bits per anchor
   uint32_t vbits = 0;                                                   // bits per vertex
   uint32_t tb = 0, vbw = 0;     // bits per child topology offset / first new vertex
+  uint32_t ts = 0, tbias = 0;   // the offset's slope (x 2^-12 per triangle) and bias
+  uint32_t vs = 0, vbias = 0;   // the first new vertex's slope and bias
   uint32_t rb = 0, idbits = 0;  // bits per run index; per triangle's ids (rb + ob + gb)
 };
 SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, bool lossless) {
   Layout l;
   l.aw = lossless ? 32 : 24;
   l.vbits = axis_bits(h, 0) + axis_bits(h, 1) + axis_bits(h, 2);
-  l.tb = bit_width(h.tbits);
-  l.vbw = bit_width(h.nverts);
+  const uint32_t tbits = topology_bits(h), to = table_offset_code(h), vo = table_vertex_code(h);
+  const uint32_t inv = h.ntris <= 64 ? kInvTris.v[h.ntris] : 0;
+  const bool tplain = to == kPlainOffsetCode, vplain = vo == kPlainVertexCode;
+  l.tb = tplain ? bit_width(tbits) : to + 2;
+  l.ts = tplain ? 0 : (tbits * inv) >> 4;
+  l.tbias = tplain ? 0 : 1u << (l.tb - 1);
+  l.vbw = vplain ? bit_width(h.nverts) : vo + 3;
+  l.vs = vplain ? 0 : (uint32_t(h.nverts) * inv) >> 4;
+  l.vbias = vplain ? 0 : 1u << (l.vbw - 1);
   l.rb = h.nruns ? bit_width(uint32_t(h.nruns) - 1) : 0;
   l.idbits = l.rb + h.ob + h.gb;
   l.table = 3 * l.aw + uint32_t(h.bb) + h.hb;
@@ -280,7 +313,7 @@ SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, bool lossless) {
   l.runs = l.verts + uint64_t(h.nverts) * l.vbits;
   l.ids = l.runs + uint64_t(h.nruns) * h.pb;
   l.topo = l.ids + uint64_t(h.ntris) * l.idbits;
-  l.end = l.topo + h.tbits;
+  l.end = l.topo + tbits;
   return l;
 }
 // Total bytes of a cluster's data (header + stream), without the read slack.
@@ -299,10 +332,13 @@ SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get
   uint64_t pos = L.topo;
   uint32_t cnt = 0;
   if (c) {
+    const uint32_t first = child_first(child_sizes(h), c);
     const uint64_t e = L.table + uint64_t(c - 1) * (L.tb + L.vbw);
     const uint32_t x = get(e, L.tb + L.vbw);
-    pos += x & ((1u << L.tb) - 1);
-    cnt = x >> L.tb;
+    // A wrong residual gives an offset or count beyond the stream or the vertices (the 32-bit
+    // wrap of a negative one too): the checker's end and index tests reject it.
+    pos += uint32_t((x & ((1u << L.tb) - 1)) + ((first * L.ts) >> 12) - L.tbias);
+    cnt = (x >> L.tb) + ((first * L.vs) >> 12) - L.vbias;
   }
   bool ok = true;
   const uint32_t ib = index_bits(h), dmask = (1u << ib) - 1;
@@ -400,13 +436,13 @@ SLIM_INLINE uint32_t step_triangle(uint32_t t4, uint32_t c) {
 // at most 2 + 3 x 9 bits of the 57 it holds); a strip step is the table's byte shuffle of the
 // previous triangle plus one reference.
 SLIM_INLINE void decode_strip_packed(const ClusterHeader& h, const Layout& L, const uint8_t* bits,
-                                     uint32_t c, uint32_t n, uint32_t (&tri)[8]) {
+                                     uint32_t c, uint32_t first, uint32_t n, uint32_t (&tri)[8]) {
   uint64_t pos = L.topo;
   uint32_t cnt = 0;
   if (c) {
     const uint32_t x = read_bits(bits, L.table + uint64_t(c - 1) * (L.tb + L.vbw), L.tb + L.vbw);
-    pos += x & ((1u << L.tb) - 1);
-    cnt = x >> L.tb;
+    pos += (x & ((1u << L.tb) - 1)) + ((first * L.ts) >> 12) - L.tbias;
+    cnt = (x >> L.tb) + ((first * L.vs) >> 12) - L.vbias;
   }
   const uint32_t ib = index_bits(h), dmask = (1u << ib) - 1;
   // One reference from the low bits of y: the vertex; y shifted past it, its width added to s.
@@ -585,7 +621,7 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const View& v, int chil
   d.first = int(child_first(v.sizes, uint32_t(child)));
   d.n = int(child_size(v.sizes, uint32_t(child)));
   alignas(32) uint32_t tri[8];
-  decode_strip_packed(h, L, v.bits, uint32_t(child), uint32_t(d.n), tri);
+  decode_strip_packed(h, L, v.bits, uint32_t(child), uint32_t(d.first), uint32_t(d.n), tri);
 #if defined(SLIM_SIMD_AVX2)
   decode_vertices_avx2<kLossless>(lat, h, v.bits, L, v.anchor, tri, d);
 #else

@@ -19,20 +19,21 @@
 //     id runs:  nruns run starts of pb bits (start - prim_base)
 //     ids:      per triangle rb = bit_width(nruns - 1) bits run index, ob bits offset in the
 //               run (primID = prim_base + start + offset), gb bits geomID - geom_base
-//     topology: tbits bits, each child a generalized strip (below)
+//     topology: topology_bits(h) bits, each child a generalized strip (below)
 // Child c holds 1 + sizes[c] triangles (3 bits each); k, the child count, is the multi-leaf's.
 // Children with fewer than 8 triangles repeat their last triangle in the padding lanes (the
 // duplicate gives the same hit).
 //
-// The child table: child c starts after T = child_first(c) triangles, and its fields predict the
-// topology offset and the first new vertex as proportional to T: with the slopes
-// ts = (tbits x kInvTris[ntris]) >> 4 and vs = (nverts x kInvTris[ntris]) >> 4 (kInvTris[n] =
-// 2^16 / n, integer: a product, no division), the offset is ((T x ts) >> 12) + x - 2^(tb - 1)
-// for the tb-bit field x, and the first new vertex ((T x vs) >> 12) + y - 2^(vbw - 1) for the
-// vbw-bit field y. The widths come from the top 5 bits of the header's tbits: 3 bits to, tb = to +
-// 2 (2..8), and 2 bits vo, vbw = vo + 3 (3..5); to = 7 and vo = 3 store the plain value instead
-// (slope and bias 0; tb = bit_width(tbits), vbw = bit_width(nverts)), for clusters whose
-// residuals take more bits.
+// The child table: child c starts after T = child_first(c) triangles, and its fields are
+// residuals of predictions proportional to T, with the slopes (kInvTris[n] = 2^16 / n, integer:
+// a product, no division)
+//   ts = (topology_bits(h) x kInvTris[ntris]) >> 4,   vs = (nverts x kInvTris[ntris]) >> 4:
+//   the topology offset (from the topology start) = ((T x ts) >> 12) + x - 2^(tb - 1),
+//   the first new vertex                          = ((T x vs) >> 12) + y - 2^(vbw - 1),
+// x and y the entry's tb-bit and vbw-bit fields. The widths come from the top 5 bits of the
+// header's tbits: 3 bits to, tb = to + 2 (2..8), and 2 bits vo, vbw = vo + 3 (3..5). to = 7 and
+// vo = 3 store the plain values instead (slope and bias 0, tb = bit_width(topology_bits(h)),
+// vbw = bit_width(nverts)), for clusters whose residuals need more bits.
 //
 // Topology (DGF section 3.2, with the corners kept in the input order, which u, v and the
 // watertight test's rounding depend on): vertices are numbered in order of first use (children in
@@ -45,6 +46,7 @@
 // consistently oriented mesh. After a child's first triangle or a restart e takes 2 bits (0..2);
 // after a strip step with p = q it takes 1 bit b, e = q + 2b (mod 3): a step's edge q + 1 is the
 // one it was entered by, so the next step shares edge q or q + 2.
+//
 // The primID runs: input faces are not stored in a cluster's order (they are the user's), but
 // neighbouring faces often have nearby numbers (scan rows, quads split in two, terrain rows), so a
 // cluster's sorted ids fall into few runs of width 2^ob; on meshes in random order the encoder

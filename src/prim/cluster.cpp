@@ -301,8 +301,9 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     child_off[c + 1] = child_off[c] + b;
   }
   if (child_off[k] > 0x7ff) throw std::logic_error("cluster: topology beyond 2047 bits");
-  // The child table: per field the narrowest residual width of the linear prediction (to, vo
-  // below the plain codes), else the plain values (Layout: the same slopes and biases).
+  // The child table: per field the narrowest residual width of the linear prediction (12 bits
+  // hold any offset residual; the first new vertex plain if 5 bits do not hold its residuals),
+  // with Layout's slopes and biases.
   {
     const uint32_t inv = kInvTris.v[ntris];
     const uint32_t ts = (child_off[k] * inv) >> 4, vs = (nv * inv) >> 4;
@@ -322,7 +323,9 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       return lo >= -b && hi <= int32_t((1u << w) - 1) - b;
     };
     uint32_t to = 0, vo = 0;
-    while (to < kPlainOffsetCode && !fits(tlo, thi, to + 2)) ++to;
+    while (to < 7 && !fits(tlo, thi, to + 5)) ++to;
+    if (!fits(tlo, thi, to + 5))  // |residual| <= child_off[k] < 2^11: 12 bits hold it
+      throw std::logic_error("cluster: child table offset beyond 12 bits");
     while (vo < kPlainVertexCode && !fits(vlo, vhi, vo + 3)) ++vo;
     h.tbits = uint16_t(child_off[k] | to << 11 | vo << 14);
   }

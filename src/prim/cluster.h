@@ -31,9 +31,10 @@
 //   the topology offset (from the topology start) = ((T x ts) >> 12) + x - 2^(tb - 1),
 //   the first new vertex                          = ((T x vs) >> 12) + y - 2^(vbw - 1),
 // x and y the entry's tb-bit and vbw-bit fields. The widths come from the top 5 bits of the
-// header's tbits: 3 bits to, tb = to + 2 (2..8), and 2 bits vo, vbw = vo + 3 (3..5). to = 7 and
-// vo = 3 store the plain values instead (slope and bias 0, tb = bit_width(topology_bits(h)),
-// vbw = bit_width(nverts)), for clusters whose residuals need more bits.
+// header's tbits: 3 bits to, tb = to + 5 (5..12: 12 bits hold any offset residual, at most
+// topology_bits(h) <= 1854 either way), and 2 bits vo, vbw = vo + 3 (3..5); vo = 3 stores the
+// plain first new vertex instead (slope and bias 0, vbw = bit_width(nverts)), for clusters whose
+// residuals need more bits.
 //
 // Topology (DGF section 3.2, with the corners kept in the input order, which u, v and the
 // watertight test's rounding depend on): vertices are numbered in order of first use (children in
@@ -157,10 +158,11 @@ SLIM_INLINE uint32_t index_bits(const ClusterHeader& h) { return h.ib & 15u; }
 SLIM_INLINE uint32_t topology_bits(const ClusterHeader& h) { return h.tbits & 0x7ffu; }
 SLIM_INLINE uint32_t table_offset_code(const ClusterHeader& h) { return (h.tbits >> 11) & 7u; }
 SLIM_INLINE uint32_t table_vertex_code(const ClusterHeader& h) { return uint32_t(h.tbits) >> 14; }
-constexpr uint32_t kPlainOffsetCode = 7, kPlainVertexCode = 3;
-// 2^16 / n for n = 1..64 (entry 0 unused): the child table's slopes without a division.
+constexpr uint32_t kPlainVertexCode = 3;
+// 2^16 / n for n = 1..64 (entries 0 and 65..127 0: any 7 bits of a header's ntris index inside,
+// the checker rejects ntris > 64): the child table's slopes without a division.
 struct InvTris {
-  uint32_t v[65];
+  uint32_t v[128];
   constexpr InvTris() : v{} {
     for (uint32_t n = 1; n <= 64; ++n) v[n] = 65536u / n;
   }
@@ -300,11 +302,11 @@ SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, bool lossless) {
   l.aw = lossless ? 32 : 24;
   l.vbits = axis_bits(h, 0) + axis_bits(h, 1) + axis_bits(h, 2);
   const uint32_t tbits = topology_bits(h), to = table_offset_code(h), vo = table_vertex_code(h);
-  const uint32_t inv = h.ntris <= 64 ? kInvTris.v[h.ntris] : 0;
-  const bool tplain = to == kPlainOffsetCode, vplain = vo == kPlainVertexCode;
-  l.tb = tplain ? bit_width(tbits) : to + 2;
-  l.ts = tplain ? 0 : (tbits * inv) >> 4;
-  l.tbias = tplain ? 0 : 1u << (l.tb - 1);
+  const uint32_t inv = kInvTris.v[h.ntris & 127u];
+  const bool vplain = vo == kPlainVertexCode;
+  l.tb = to + 5;
+  l.ts = (tbits * inv) >> 4;
+  l.tbias = 1u << (to + 4);
   l.vbw = vplain ? bit_width(h.nverts) : vo + 3;
   l.vs = vplain ? 0 : (uint32_t(h.nverts) * inv) >> 4;
   l.vbias = vplain ? 0 : 1u << (l.vbw - 1);
@@ -474,20 +476,24 @@ SLIM_INLINE void decode_strip_packed(const ClusterHeader& h, const Layout& L, co
   uint32_t t = restart(load(), s);
   pos += s;
   tri[0] = t;
-  uint32_t q = 3;  // the previous triangle's p
+  // The previous triangle's p as the table's row (q << 4), and the bits of a step's p and edge
+  // after it (4 after a first triangle or a restart, 3 after a step).
+  uint32_t row = 3 << 4, w = 4;
   for (uint32_t j = 1; j < n; ++j) {
     const uint64_t x = load();
-    const uint32_t p = uint32_t(x) & 3;
-    if (p == 3) {
+    if ((x & 3) == 3) {
       s = 2;
       t = restart(x, s);
+      row = 3 << 4;
+      w = 4;
     } else {
-      s = q == 3 ? 4 : 3;  // p and a 2-bit edge after a restart, a 1-bit edge after a step
-      uint32_t y = uint32_t(x >> s);
+      s = w;
+      uint32_t y = uint32_t(x >> w);
       const uint32_t r = ref(y, s);
-      t = step_triangle(t | r << 24, q << 4 | (uint32_t(x) & 15));
+      t = step_triangle(t | r << 24, row | (uint32_t(x) & 15));
+      row = (uint32_t(x) & 3) << 4;
+      w = 3;
     }
-    q = p;
     pos += s;
     tri[j] = t;
   }

@@ -174,13 +174,22 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     uint32_t i;
     uint8_t p, e;
   };
-  // The corner p of t at which t continues prev over prev's edge e, else 3.
-  auto continues = [&](uint32_t prev, uint32_t t, int ee) {
+  // The edges e of prev over which t continues it (bit e of the result), with the corner p of t
+  // in p[e]: t's corners p + 1 and p + 2 are prev's e + 1 and e.
+  auto continues = [&](uint32_t prev, uint32_t t, uint8_t(&p)[3]) {
     const auto& P = corners[prev];
     const auto& T = corners[t];
-    for (int pp = 0; pp < 3; ++pp)
-      if (T[(pp + 1) % 3] == P[(ee + 1) % 3] && T[(pp + 2) % 3] == P[ee]) return uint8_t(pp);
-    return uint8_t(3);
+    int at[3];  // the corner of prev at t's corner m, else -1
+    for (int m = 0; m < 3; ++m) at[m] = T[m] == P[0] ? 0 : T[m] == P[1] ? 1 : T[m] == P[2] ? 2 : -1;
+    uint32_t edges = 0;
+    for (int pp = 0; pp < 3; ++pp) {
+      const int e = at[(pp + 2) % 3];
+      if (e >= 0 && at[(pp + 1) % 3] == (e + 1) % 3) {
+        p[e] = uint8_t(pp);
+        edges |= 1u << e;
+      }
+    }
+    return edges;
   };
   thread_local std::vector<Step> steps;
   steps.clear();
@@ -188,11 +197,12 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   uint32_t child_step[9] = {};  // first step of each child (k <= 8)
   for (int c = 0, first = 0; c < k; first += int(counts[c]), ++c) {
     const uint32_t n = counts[c];
-    // How triangle b of the child continues triangle a over a's edge e: bit b of cont[x][a] for
-    // the lowest such e other than x (x = 3: any edge), with p in cont_p[a][b][e]. Every start
-    // tries the same pairs, so each pair is tested once here (8 x 8 tests, not up to 8 x 8 x 8),
-    // and the search takes the lowest unused triangle that continues (else the lowest unused) as
-    // a bit scan.
+    // How triangle b of the child continues triangle a: over a's edges cont_e[a][b] (a bit each),
+    // with p in cont_p[a][b][e]; bit b of cont[x][a] if over an edge other than x (x = 3: any
+    // edge), a step entered by edge x then taking the lowest such edge. Every start tries the
+    // same pairs, so each pair is tested once here (8 x 8 tests, not up to 8 x 8 x 8), and the
+    // search takes the lowest unused triangle that continues (else the lowest unused) as a bit
+    // scan.
     // A pair shares an edge only if two corners of b are corners of a. With each corner as bit
     // (vertex mod 64) of a mask, a triangle b whose three bits differ shares two corners with a
     // only if its mask and a's have two bits in common: other pairs skip the test.
@@ -203,18 +213,16 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
                 (uint64_t(1) << (T[2] & 63));
     }
     uint32_t cont[4][8] = {};
-    uint8_t cont_p[8][8][3];
+    uint8_t cont_p[8][8][3], cont_e[8][8];
     for (uint32_t a = 0; a < n; ++a)
       for (uint32_t b = 0; b < n; ++b) {
         if (a == b) continue;
         if (__builtin_popcountll(mask[b]) == 3 && __builtin_popcountll(mask[a] & mask[b]) < 2)
           continue;
-        for (int ee = 0; ee < 3; ++ee) {
-          cont_p[a][b][ee] = continues(uint32_t(first) + a, uint32_t(first) + b, ee);
-          if (cont_p[a][b][ee] == 3) continue;
-          for (int x = 0; x < 4; ++x)
-            if (x != ee) cont[x][a] |= 1u << b;
-        }
+        const uint32_t edges = continues(uint32_t(first) + a, uint32_t(first) + b, cont_p[a][b]);
+        cont_e[a][b] = uint8_t(edges);
+        for (int x = 0; x < 4; ++x)
+          if (edges & ~(1u << x)) cont[x][a] |= 1u << b;
       }
     const uint32_t all = (1u << n) - 1;
     Step best[8], cur[8];
@@ -223,20 +231,21 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       uint32_t used = 1u << start;
       uint32_t restarts = 0;
       uint32_t last = start;  // the child's index of cur[j - 1]
+      uint32_t x = 3;         // the edge cur[j - 1] came in by (3: none)
       cur[0] = {uint32_t(first) + start, 3, 0};
       for (uint32_t j = 1; j < n; ++j) {
-        // The edge the last triangle came in by (3: none).
-        const uint32_t x = cur[j - 1].p == 3 ? 3 : (cur[j - 1].p + 1u) % 3;
         const uint32_t go = cont[x][last] & ~used;
         if (go) {
           const uint32_t b = uint32_t(__builtin_ctz(go));
-          int ee = 0;
-          while (ee == int(x) || cont_p[last][b][ee] == 3) ++ee;
-          cur[j] = {uint32_t(first) + b, cont_p[last][b][ee], uint8_t(ee)};
+          const uint32_t ee = uint32_t(__builtin_ctz(cont_e[last][b] & ~(1u << x)));
+          const uint8_t pp = cont_p[last][b][ee];
+          cur[j] = {uint32_t(first) + b, pp, uint8_t(ee)};
           last = b;
+          x = pp == 2 ? 0 : pp + 1u;
         } else {
           last = uint32_t(__builtin_ctz(all & ~used));
           cur[j] = {uint32_t(first) + last, 3, 0};
+          x = 3;
           restarts++;
         }
         used |= 1u << last;

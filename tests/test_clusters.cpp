@@ -662,6 +662,22 @@ TEST(ClusterScene, StatisticsAndSizes) {
   }
 }
 
+// The clusters come out nearly full (scene_clusters.cpp: the BVH2's small nodes split at counts
+// that need no extra cluster, Bvh2BuildConfig::full_blocks_below): on smooth surfaces and on a
+// regular grid, whose SAH splits alone give clusters of about 50 triangles of the 64.
+TEST(ClusterScene, ClustersAreNearlyFull) {
+  for (const char* scene : {"torus:256", "terrain:256", "canyon:256"}) {
+    PolyMesh m = load(scene);
+    for (const char* config : {"cluster", "cluster-lossless"}) {
+      Scene s = Scene::build(m, BuildOptions::from_config(config));
+      const double tris = double(s.stats().triangles);
+      EXPECT_GE(detail(s, "avg_triangles_per_cluster"), 58.0) << scene << " " << config;
+      EXPECT_LE(detail(s, "avg_triangles_per_cluster"), 64.0) << scene << " " << config;
+      EXPECT_GE(detail(s, "clusters"), std::ceil(tris / 64)) << scene << " " << config;
+    }
+  }
+}
+
 // The lossy multi-leaf boxes' extent: scale byte e << 3 | m is (8 + m) 2^e lattice steps / 8
 // (computed on the step's float bits), growing with the byte.
 TEST(ClusterCodec, BoxExtentIsTheScaleInSteps) {

@@ -351,18 +351,27 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   h.bb = uint8_t(bit_width(prim_base));
   h.hb = uint8_t(bit_width(glo));
   // PrimID runs: a run starts at the first sorted id that is 2^ob or more past the current start;
-  // ob is the width with the fewest bits (run starts + per triangle run index and offset). The
-  // widest ob gives one run: the plain base + offset, for meshes whose ids are in random order.
+  // run i >= 1 stores e_i = start_i - prim_base - i x 2^ob (Elias-Fano: pb low bits, the high
+  // part in unary). ob and pb are the widths with the fewest bits (run lows and highs + per
+  // triangle run index and offset). The widest ob gives one run: the plain base + offset, for
+  // meshes whose ids are in random order.
   auto runs_of = [&](uint32_t ob, std::vector<uint32_t>& starts) {
     starts.clear();
     for (uint32_t id : ids)
       if (starts.empty() || uint64_t(id - starts.back()) >= (uint64_t(1) << ob))
         starts.push_back(id);
   };
+  // The Elias-Fano bits of m = nruns - 1 values of largest e_max at low width pb (~0: the highs
+  // do not fit kMaxRunHighBits).
+  auto ef_bits = [](uint64_t m, uint64_t e_max, uint32_t pb) {
+    if (m == 0) return uint64_t(0);
+    const uint64_t highs = m + (e_max >> pb);
+    return highs > kMaxRunHighBits ? ~uint64_t(0) : m * pb + highs;
+  };
   // The sizing pass counts the runs and finds the last start without storing them. Once one run
   // takes every id, a wider ob costs ntris bits more each and cannot win: the search stops there.
   uint64_t best_bits = ~uint64_t(0);
-  uint32_t best_ob = 0;
+  uint32_t best_ob = 0, best_pb = 0;
   for (uint32_t ob = 0; ob <= 32; ++ob) {
     uint64_t nstarts = 0;
     uint32_t last = 0;
@@ -371,12 +380,20 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       last = start ? id : last;
       nstarts += start;
     }
-    if (nstarts > 255) continue;
-    const uint64_t bits = nstarts * uint64_t(bit_width(last - prim_base)) +
-                          ntris * uint64_t(bit_width(uint32_t(nstarts) - 1) + ob);
+    const uint64_t m = nstarts - 1;
+    const uint64_t e_max = uint64_t(last - prim_base) - (m << ob);
+    uint64_t ef = ~uint64_t(0);
+    uint32_t pb = 0;
+    for (uint32_t b = 0; b <= 32; ++b)
+      if (ef_bits(m, e_max, b) < ef) {
+        ef = ef_bits(m, e_max, b);
+        pb = b;
+      }
+    const uint64_t bits = ef + ntris * uint64_t(bit_width(uint32_t(m)) + ob);
     if (bits < best_bits) {
       best_bits = bits;
       best_ob = ob;
+      best_pb = pb;
     }
     if (nstarts == 1) break;
   }
@@ -385,10 +402,15 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   runs_of(best_ob, starts);
   h.nruns = uint8_t(starts.size());
   h.ob = uint8_t(best_ob);
-  h.pb = uint8_t(bit_width(starts.back() - prim_base));
+  h.pb = uint8_t(best_pb);
+  // e_i of run i (i >= 1) and the run highs' length.
+  auto run_e = [&](size_t i) { return uint64_t(starts[i] - prim_base) - (uint64_t(i) << best_ob); };
+  const uint64_t highs =
+      starts.size() > 1 ? (starts.size() - 1) + (run_e(starts.size() - 1) >> best_pb) : 0;
 
   const Layout L = layout(h, uint32_t(k), s.lossless);
-  std::vector<uint8_t> out(data_bytes(h, uint32_t(k), s.lossless) + 8, 0);  // 8: 64-bit stores
+  const uint64_t bytes = data_bytes(h, uint32_t(k), s.lossless, highs);
+  std::vector<uint8_t> out(bytes + 8, 0);  // 8: 64-bit stores
   std::memcpy(out.data(), &h, sizeof(h));
   BitWriter w{out, sizeof(ClusterHeader)};
   for (int a = 0; a < 3; ++a) w.put(anchor[a], L.aw);
@@ -400,7 +422,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   }
   for (uint32_t i = 0; i < nv; ++i)
     for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], axis_bits(h, a));
-  for (uint32_t st : starts) w.put(st - prim_base, h.pb);
+  for (size_t i = 1; i < starts.size(); ++i) w.put(uint32_t(run_e(i)), h.pb);
   for (uint32_t t : order) {
     const uint32_t id = s.prim_ids[t];
     const uint32_t run =
@@ -424,7 +446,12 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       for (int q = 0; q < (st.p == 3 ? 3 : 1); ++q) put_ref();
     }
   if (w.pos != L.end || r != refs.size()) throw std::logic_error("cluster: stream size mismatch");
-  out.resize(data_bytes(h, uint32_t(k), s.lossless) + (slack ? kClusterReadSlack : 0));
+  // Run highs: run i's one bit at (e_i >> pb) + i - 1.
+  for (size_t i = 1; i < starts.size(); ++i) {
+    const uint64_t pos = 8 * sizeof(ClusterHeader) + L.end + (run_e(i) >> h.pb) + i - 1;
+    out[pos >> 3] |= uint8_t(1u << (pos & 7));
+  }
+  out.resize(bytes + (slack ? kClusterReadSlack : 0));
   if (s.stats) {
     std::lock_guard<std::mutex> lock(s.stats->m);
     EncodeStats& st = *s.stats;
@@ -433,8 +460,9 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     st.vertices += nv;
     st.position_bits += uint64_t(nv) * L.vbits;
     st.topology_bits += h.tbits + (L.verts - L.table) + 8 * (sizeof(h.sizes) + sizeof(h.tbits));
-    st.id_bits += (L.topo - L.runs) + h.bb + h.hb + 6 * 8;  // + pb, gb, nruns, ob, bb, hb
-    st.header_bits += 6 * 8 + 3 * L.aw;                     // nverts, ntris, bits, ib; anchors
+    // Run lows and per-triangle ids, run highs, the bases, and pb, gb, nruns, ob, bb, hb.
+    st.id_bits += (L.topo - L.runs) + highs + h.bb + h.hb + 6 * 8;
+    st.header_bits += 6 * 8 + 3 * L.aw;  // nverts, ntris, bits, ib; anchors
     st.decimal_clusters += coord_mode(h) != 0;
   }
   return out;
@@ -541,7 +569,7 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
   if (child_first(sizes, children) != h.ntris) return fail("children do not cover the triangles");
   if (children < 8 && (sizes >> (3 * children)) != 0)
     return fail("sizes given for children beyond the child count");
-  if (data_bytes(h, children, lossless) > size) return fail("stream runs past the data");
+  if (data_bytes(h, children, lossless, 0) > size) return fail("stream runs past the data");
   const uint8_t* bits = data + sizeof(ClusterHeader);
   const Layout L = layout(h, children, lossless);
   // Bits at or beyond L.end (inside `size` or not) read as 0 here; the decoders may read them
@@ -566,6 +594,15 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
   for (uint32_t t = 0; t < h.ntris; ++t) {
     const uint32_t run = get(L.ids + uint64_t(t) * L.idbits, L.rb);
     if (run >= h.nruns) return fail("run index " + std::to_string(run) + " >= run count");
+  }
+  // The run highs: nruns - 1 one bits within kMaxRunHighBits bits and `size` (the stream's end).
+  const uint64_t avail = 8 * (size - sizeof(ClusterHeader));
+  uint64_t pos = L.end;
+  for (uint32_t ones = 0; ones + 1 < h.nruns; ++pos) {
+    if (pos >= avail) return fail("stream runs past the data (run highs)");
+    if (pos - L.end >= kMaxRunHighBits)
+      return fail("run highs beyond " + std::to_string(kMaxRunHighBits) + " bits");
+    ones += (bits[pos >> 3] >> (pos & 7)) & 1;
   }
   return true;
 }

@@ -17,9 +17,12 @@
 //               from the topology start) and its first new vertex (vbw = bit_width(nverts) bits)
 //     vertices: per vertex bx + by + bz bits (offsets from the anchor)
 //     run lows: for runs 1..nruns-1, the low pb bits of the run's e (below)
-//     ids:      per triangle rb = bit_width(nruns - 1) bits run index, ob bits offset in the
-//               run (primID = prim_base + start + offset), gb bits geomID - geom_base
+//     repeats:  if the header's repeat bit (top bit of ob) is set, ntris bits: bit t set if
+//               triangle t has triangle t - 1's ids (never triangle 0's)
 //     topology: tbits bits, each child a generalized strip (below)
+//     ids:      per triangle without its repeat bit (all without the repeat bit) rb =
+//               bit_width(nruns - 1) bits run index, ob bits offset in the run (primID =
+//               prim_base + start + offset), gb bits geomID - geom_base
 //     run highs: for runs 1..nruns-1 in order, e >> pb in unary (that many 0 bits, then a 1);
 //               the stream ends after their nruns-1 one bits (at most kMaxRunHighBits bits)
 // Child c holds 1 + sizes[c] triangles (3 bits each); k, the child count, is the multi-leaf's.
@@ -47,6 +50,10 @@
 // popcount per 64-bit word, then a select in the word) and gets e_i's high part as its position
 // less i - 1. The encoder takes, for each ob, the pb with the fewest bits ((nruns - 1) x (pb + 1)
 // + (e_max >> pb), where the highs fit kMaxRunHighBits), and the ob with the fewest id bits.
+// The repeats: a face split into triangles (a quad into two) gives them one primID, and they are
+// often neighbours in the strip; with the repeat bits, triangle t's ids are those of the entry
+// t - (repeat bits 1..t set), one popcount away. The encoder sets the repeat bit in the header
+// when the bits save more than their ntris bits cost.
 //
 // Lossy (`cluster`): a vertex's code is its lattice integer q = round((x - origin) / step) per
 // axis, decoded as origin + float(q) * step. Every cluster decodes a vertex with the same float
@@ -113,7 +120,7 @@ struct ClusterHeader {
                      // lossless coordinate mode (0 float keys, 1 + k decimal q x 10^-k, k <= 9)
   uint8_t pb, gb;    // bits per primID run start's low part (Elias-Fano) / geomID offset (<= 32)
   uint8_t nruns;     // primID runs, 1..ntris
-  uint8_t ob;        // bits per primID offset in its run (<= 32)
+  uint8_t ob;        // low 6 bits: bits per primID offset in its run (<= 32); top bit: repeats
   uint8_t bb, hb;    // bits of prim_base / geom_base in the stream (<= 32)
   uint8_t sizes[3];  // child c holds 1 + (the 3 bits at 3c) triangles
   uint16_t tbits;    // bits of the topology stream
@@ -153,6 +160,9 @@ SLIM_INLINE float key_float(uint32_t k) {
 // (0: float keys; 1 + k: decimal with k digits).
 SLIM_INLINE uint32_t index_bits(const ClusterHeader& h) { return h.ib & 15u; }
 SLIM_INLINE uint32_t coord_mode(const ClusterHeader& h) { return uint32_t(h.ib) >> 4; }
+// Bits of a primID's offset in its run; whether the cluster has repeat bits.
+SLIM_INLINE uint32_t offset_bits(const ClusterHeader& h) { return h.ob & 63u; }
+SLIM_INLINE bool has_repeats(const ClusterHeader& h) { return h.ob >> 7; }
 // Bits of axis a's vertex offsets.
 SLIM_INLINE uint32_t axis_bits(const ClusterHeader& h, int a) { return h.bits[a] & 63u; }
 // Decimal mode: the digits of axis a, the cluster's k less the axis's top 2 bits of bits[a]
@@ -272,8 +282,10 @@ SLIM_INLINE uint32_t child_first(uint32_t sizes, uint32_t c) {
 }
 
 // Bit positions of the streams of a cluster of k children.
-// end: the topology's end, where the run highs begin (they end after their nruns - 1 one bits:
-// the stream's length depends on them, so check() and the encoder find it, not the layout).
+// ids: the repeat bits; end: the topology's end, where the ids' entries begin (as many as
+// triangles without their repeat bit: one popcount), then the run highs (they end after their
+// nruns - 1 one bits). The stream's length depends on both, so check() and the encoder find it,
+// not the layout.
 struct Layout {
   uint64_t table = 0, verts = 0, runs = 0, ids = 0, topo = 0, end = 0;  // from the stream start
   uint32_t aw = 0;                                                      // bits per anchor
@@ -288,19 +300,19 @@ SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, bool lossless) {
   l.tb = bit_width(h.tbits);
   l.vbw = bit_width(h.nverts);
   l.rb = h.nruns ? bit_width(uint32_t(h.nruns) - 1) : 0;
-  l.idbits = l.rb + h.ob + h.gb;
+  l.idbits = l.rb + offset_bits(h) + h.gb;
   l.table = 3 * l.aw + uint32_t(h.bb) + h.hb;
   l.verts = l.table + uint64_t(k ? k - 1 : 0) * (l.tb + l.vbw);
   l.runs = l.verts + uint64_t(h.nverts) * l.vbits;
   l.ids = l.runs + uint64_t(h.nruns ? h.nruns - 1 : 0) * h.pb;
-  l.topo = l.ids + uint64_t(h.ntris) * l.idbits;
+  l.topo = l.ids + (has_repeats(h) ? h.ntris : 0);
   l.end = l.topo + h.tbits;
   return l;
 }
-// Bytes of a cluster's data (header + stream) with run highs of `highs` bits, without the read
-// slack.
-SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, bool lossless, uint64_t highs) {
-  return sizeof(ClusterHeader) + (layout(h, k, lossless).end + highs + 7) / 8;
+// Bytes of a cluster's data (header + stream) with `tail` bits of ids' entries and run highs,
+// without the read slack.
+SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, bool lossless, uint64_t tail) {
+  return sizeof(ClusterHeader) + (layout(h, k, lossless).end + tail + 7) / 8;
 }
 
 // Decodes the strip of child c (n triangles) into idx[corner][lane], lanes < n. get(pos, w) reads
@@ -610,25 +622,30 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, ui
 // What the ids of a child's triangles take from the cluster's view (kept with a decoded child in
 // the DecodeCache, so that a hit in a cached child needs no view).
 struct ChildIds {
-  uint64_t ids = 0;    // bit of the child's first triangle's ids
-  uint64_t runs = 0;   // bit of the run starts' low parts
-  uint64_t highs = 0;  // bit of the run highs
+  uint64_t repeats = 0;  // bit of the repeat bits
+  uint64_t entries = 0;  // bit of the ids' entries
+  uint64_t runs = 0;     // bit of the run starts' low parts
   uint32_t prim_base = 0, geom_base = 0;
   uint8_t idbits = 0, rb = 0, ob = 0, gb = 0, pb = 0;
+  uint8_t first = 0, ntris = 0;  // the child's first triangle; the cluster's triangles
+  bool has_repeats = false;
 };
 // The ids of the triangles from triangle `first` of the cluster `v` on.
 SLIM_INLINE ChildIds child_ids(const View& v, uint32_t first) {
   const ClusterHeader& h = v.h;
   const Layout& L = v.L;
   ChildIds c;
-  c.ids = L.ids + uint64_t(first) * L.idbits;
+  c.repeats = L.ids;
+  c.entries = L.end;
   c.runs = L.runs;
-  c.highs = L.end;
+  c.first = uint8_t(first);
+  c.ntris = h.ntris;
+  c.has_repeats = has_repeats(h);
   c.prim_base = read_bits(v.bits, 3 * L.aw, h.bb);
   c.geom_base = read_bits(v.bits, 3 * L.aw + h.bb, h.hb);
   c.idbits = uint8_t(L.idbits);
   c.rb = uint8_t(L.rb);
-  c.ob = h.ob;
+  c.ob = uint8_t(offset_bits(h));
   c.gb = h.gb;
   c.pb = h.pb;
   return c;
@@ -638,10 +655,11 @@ SLIM_INLINE ChildIds child_ids(const View& v, uint32_t first) {
 // The scan reads 64-bit words from the byte of its position (the first word's bits below the
 // position shifted out), at most the words that cover kMaxRunHighBits bits: a block check()
 // accepted has the bit there, and none makes the scan read further.
-SLIM_INLINE uint32_t run_start(const uint8_t* bits, const ChildIds& c, uint32_t run) {
+SLIM_INLINE uint32_t run_start(const uint8_t* bits, const ChildIds& c, uint64_t highs,
+                               uint32_t run) {
   if (run == 0) return 0;
   const uint32_t i = run - 1;
-  uint64_t pos = c.highs;
+  uint64_t pos = highs;
   uint32_t k = i, high = 0;
   constexpr uint32_t kWords = 1 + (kMaxRunHighBits - 57 + 63) / 64;  // the first word: >= 57 bits
   for (uint32_t w = 0; w < kWords; ++w) {
@@ -650,7 +668,7 @@ SLIM_INLINE uint32_t run_start(const uint8_t* bits, const ChildIds& c, uint32_t 
     x >>= pos & 7;
     const uint32_t n = uint32_t(__builtin_popcountll(x));
     if (k < n) {
-      high = uint32_t(pos - c.highs) + simd::select_bit(x, k) - i;
+      high = uint32_t(pos - highs) + simd::select_bit(x, k) - i;
       break;
     }
     k -= n;
@@ -659,12 +677,24 @@ SLIM_INLINE uint32_t run_start(const uint8_t* bits, const ChildIds& c, uint32_t 
   const uint64_t e = (uint64_t(high) << c.pb) + read_bits(bits, c.runs + uint64_t(i) * c.pb, c.pb);
   return uint32_t(e + (uint64_t(run) << c.ob));
 }
-// primID and geomID of triangle `first + l` (bits: the cluster's stream).
+// primID and geomID of triangle `first + l` (bits: the cluster's stream). With repeat bits,
+// triangle t's entry is t less the repeat bits of triangles 1..t (triangle 0's is ignored: an
+// entry index never underflows), and the entries are ntris less all of them.
 SLIM_INLINE void decode_ids(const uint8_t* bits, const ChildIds& c, uint32_t l, uint32_t& geom,
                             uint32_t& prim) {
-  const uint64_t pos = c.ids + uint64_t(l) * c.idbits;
+  const uint32_t t = (uint32_t(c.first) + l) & 63;
+  uint32_t entry = t, entries = c.ntris;
+  if (c.has_repeats) {
+    uint64_t all = read_bits(bits, c.repeats, 32);  // the second read only inside the bits
+    if (c.ntris > 32) all |= uint64_t(read_bits(bits, c.repeats + 32, 32)) << 32;
+    const uint64_t r = all & ((uint64_t(2) << ((uint32_t(c.ntris) - 1) & 63)) - 1) & ~uint64_t(1);
+    entry = t - uint32_t(__builtin_popcountll(r & ((uint64_t(2) << t) - 1)));
+    entries -= uint32_t(__builtin_popcountll(r));
+  }
+  const uint64_t highs = c.entries + uint64_t(entries) * c.idbits;
+  const uint64_t pos = c.entries + uint64_t(entry) * c.idbits;
   const uint32_t run = read_bits(bits, pos, c.rb);
-  prim = c.prim_base + run_start(bits, c, run) + read_bits(bits, pos + c.rb, c.ob);
+  prim = c.prim_base + run_start(bits, c, highs, run) + read_bits(bits, pos + c.rb, c.ob);
   geom = c.geom_base + read_bits(bits, pos + c.rb + c.ob, c.gb);
 }
 // primID and geomID of triangle t of the cluster `v`.

@@ -396,11 +396,12 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     const uint64_t e_max = uint64_t(last - prim_base) - (m << ob);
     // ef_bits falls with pb while a wider pb takes more than m bits off the highs: that gain,
     // (e_max >> pb) - (e_max >> (pb + 1)), falls with pb, so the fewest bits are at the first pb
-    // (from where the highs fit) that gains no more. Below bit_width(e_max) - 8 the gain is at
-    // least 64 > m.
+    // (from where the highs fit) that gains no more. At pb <= bit_width(e_max) - bit_width(m) - 2,
+    // e_max >> pb >= 2^(bit_width(m) + 1) > 2m, so the gain is more than m: the search starts
+    // there.
     uint32_t pb = 0;
     if (m) {
-      pb = uint32_t(std::max(0, int(bit_width(uint32_t(e_max))) - 8));
+      pb = uint32_t(std::max(0, int(bit_width(uint32_t(e_max))) - int(bit_width(uint32_t(m))) - 2));
       while (pb < 32 &&
              (m + (e_max >> pb) > kMaxRunHighBits || (e_max >> pb) - (e_max >> (pb + 1)) > m))
         ++pb;

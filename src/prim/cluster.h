@@ -20,9 +20,10 @@
 //     repeats:  if the header's repeat bit (top bit of ob) is set, ntris bits: bit t set if
 //               triangle t has triangle t - 1's ids (never triangle 0's)
 //     topology: tbits bits, each child a generalized strip (below)
-//     ids:      per triangle without its repeat bit (all without the repeat bit) rb =
-//               bit_width(nruns - 1) bits run index, ob bits offset in the run (primID =
-//               prim_base + start + offset), gb bits geomID - geom_base
+//     ids:      in triangle order, an entry per triangle whose repeat bit is clear (every
+//               triangle without repeat bits): rb = bit_width(nruns - 1) bits run index, ob (the
+//               header's ob less its top bit) bits offset in the run (primID = prim_base + start +
+//               offset), gb bits geomID - geom_base
 //     run highs: for runs 1..nruns-1 in order, e >> pb in unary (that many 0 bits, then a 1);
 //               the stream ends after their nruns-1 one bits (at most kMaxRunHighBits bits)
 // Child c holds 1 + sizes[c] triangles (3 bits each); k, the child count, is the multi-leaf's.

@@ -369,10 +369,15 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     return highs > kMaxRunHighBits ? ~uint64_t(0) : m * pb + highs;
   };
   // Repeats: triangles with the previous one's ids (the ids' entries needed: ntris less them).
-  uint32_t nrep = 0;
-  for (size_t i = 1; i < order.size(); ++i)
-    nrep += s.prim_ids[order[i]] == s.prim_ids[order[i - 1]] &&
-            s.geom_ids[order[i]] == s.geom_ids[order[i - 1]];
+  // Bit i of rep_mask: triangle i (decode order) has triangle i - 1's ids. (Local pointers: the
+  // thread_local vectors cost a TLS look-up at each use.)
+  const uint32_t* ord = order.data();
+  uint64_t rep_mask = 0;
+  for (uint32_t i = 1; i < ntris; ++i)
+    rep_mask |= uint64_t(s.prim_ids[ord[i]] == s.prim_ids[ord[i - 1]] &&
+                         s.geom_ids[ord[i]] == s.geom_ids[ord[i - 1]])
+                << i;
+  const uint32_t nrep = uint32_t(__builtin_popcountll(rep_mask));
   // Bits of the ids' entries at `entry` bits each, and whether the repeat bits make them fewer.
   auto entry_bits = [&](uint64_t entry, bool& repeats) {
     const uint64_t plain = ntris * entry, with = ntris + (ntris - nrep) * entry;
@@ -424,9 +429,10 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   h.ob = uint8_t(best_ob | (repeats ? 0x80 : 0));
   h.pb = uint8_t(best_pb);
   // e_i of run i (i >= 1) and the run highs' length.
-  auto run_e = [&](size_t i) { return uint64_t(starts[i] - prim_base) - (uint64_t(i) << best_ob); };
-  const uint64_t highs =
-      starts.size() > 1 ? (starts.size() - 1) + (run_e(starts.size() - 1) >> best_pb) : 0;
+  const uint32_t* st = starts.data();
+  const size_t nst = starts.size();
+  auto run_e = [&](size_t i) { return uint64_t(st[i] - prim_base) - (uint64_t(i) << best_ob); };
+  const uint64_t highs = nst > 1 ? (nst - 1) + (run_e(nst - 1) >> best_pb) : 0;
   const uint32_t nentries = repeats ? ntris - nrep : ntris;
 
   const Layout L = layout(h, uint32_t(k), s.lossless);
@@ -444,13 +450,10 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   }
   for (uint32_t i = 0; i < nv; ++i)
     for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], axis_bits(h, a));
-  for (size_t i = 1; i < starts.size(); ++i) w.put(uint32_t(run_e(i)), h.pb);
-  auto repeated = [&](size_t i) {
-    return repeats && i > 0 && s.prim_ids[order[i]] == s.prim_ids[order[i - 1]] &&
-           s.geom_ids[order[i]] == s.geom_ids[order[i - 1]];
-  };
+  for (size_t i = 1; i < nst; ++i) w.put(uint32_t(run_e(i)), h.pb);
+  auto repeated = [&](uint32_t i) { return repeats && ((rep_mask >> i) & 1); };
   if (repeats)
-    for (size_t i = 0; i < order.size(); ++i) w.put(repeated(i), 1);
+    for (uint32_t i = 0; i < ntris; ++i) w.put(repeated(i), 1);
   size_t r = 0;
   auto put_ref = [&] {
     const int32_t d = refs[r++];
@@ -466,18 +469,17 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       for (int q = 0; q < (st.p == 3 ? 3 : 1); ++q) put_ref();
     }
   if (w.pos != L.end || r != refs.size()) throw std::logic_error("cluster: stream size mismatch");
-  for (size_t i = 0; i < order.size(); ++i) {
+  for (uint32_t i = 0; i < ntris; ++i) {
     if (repeated(i)) continue;
-    const uint32_t id = s.prim_ids[order[i]];
-    const uint32_t run =
-        uint32_t(std::upper_bound(starts.begin(), starts.end(), id) - starts.begin()) - 1;
+    const uint32_t id = s.prim_ids[ord[i]];
+    const uint32_t run = uint32_t(std::upper_bound(st, st + nst, id) - st) - 1;
     w.put(run, L.rb);
-    w.put(id - starts[run], best_ob);
-    w.put(s.geom_ids[order[i]] - glo, h.gb);
+    w.put(id - st[run], best_ob);
+    w.put(s.geom_ids[ord[i]] - glo, h.gb);
   }
   if (w.pos != L.end + entries) throw std::logic_error("cluster: id entries size mismatch");
   // Run highs: run i's one bit at (e_i >> pb) + i - 1.
-  for (size_t i = 1; i < starts.size(); ++i) {
+  for (size_t i = 1; i < nst; ++i) {
     const uint64_t pos = 8 * sizeof(ClusterHeader) + w.pos + (run_e(i) >> h.pb) + i - 1;
     out[pos >> 3] |= uint8_t(1u << (pos & 7));
   }

@@ -368,9 +368,9 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     const uint64_t highs = m + (e_max >> pb);
     return highs > kMaxRunHighBits ? ~uint64_t(0) : m * pb + highs;
   };
-  // Repeats: triangles with the previous one's ids (the ids' entries needed: ntris less them).
-  // Bit i of rep_mask: triangle i (decode order) has triangle i - 1's ids. (Local pointers: the
-  // thread_local vectors cost a TLS look-up at each use.)
+  // Repeats: bit i of rep_mask if triangle i (decode order) has triangle i - 1's ids (the ids'
+  // entries needed: ntris less them). (Local pointers: the thread_local vectors cost a TLS
+  // look-up at each use.)
   const uint32_t* ord = order.data();
   uint64_t rep_mask = 0;
   for (uint32_t i = 1; i < ntris; ++i)

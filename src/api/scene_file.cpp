@@ -38,11 +38,10 @@ namespace slim {
 namespace {
 
 constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
-// Version 4: the clusters' multi-leaf boxes from their anchors, the lossless clusters' decimal
-// coordinates decoded as q x 10^-k (prim/cluster.h). Any change of a section's layout (a node,
-// block or context struct), of what its bytes decode to, or of the header needs a new version:
-// the sections are the in-memory structs byte for byte.
-constexpr uint32_t kVersion = 4;
+// Version 5: the clusters' primID run starts as Elias-Fano sequences (prim/cluster.h). Any change
+// of a section's layout (a node, block or context struct), of what its bytes decode to, or of the
+// header needs a new version: the sections are the in-memory structs byte for byte.
+constexpr uint32_t kVersion = 5;
 constexpr uint32_t kByteOrder = 0x01020304;
 constexpr uint64_t kAlign = 64;
 // Bounds the table before it is read (the header size check then bounds it by the file size): a

@@ -33,21 +33,18 @@ void decode_all(const uint8_t* block, uint32_t children) {
   ClusterLattice lat;
   lat.origin[0] = 1.0f;
   lat.step = 0.25f;
-  ClusterHeader h;
-  std::memcpy(&h, block, sizeof(h));
-  const cluster::Layout L = cluster::layout(h, children, kLossless);
-  const uint32_t prim_base = cluster::read_bits(block + sizeof(h), 3 * L.aw, h.bb);
+  const cluster::View view = cluster::view<kLossless>(block, children);
   for (uint32_t c = 0; c < children; ++c) {
     cluster::Decoded8 d;
     cluster::decode_child<kLossless>(lat, block, children, int(c), d);
     SLIM_FUZZ_CHECK(d.n >= 1 && d.n <= 8, "child size");
+    const cluster::ChildIds ids = cluster::child_ids(view, uint32_t(d.first));
     for (int l = 0; l < d.n; ++l) {
-      uint32_t g, p;
+      uint32_t g, p, gc, pc;
       cluster::decode_ids<kLossless>(block, children, uint32_t(d.first + l), g, p);
-      // primID = prim_base + a run start (pb bits) + an offset in the run (ob bits).
-      SLIM_FUZZ_CHECK(
-          uint64_t(p - prim_base) <= ((uint64_t(1) << h.pb) - 1) + ((uint64_t(1) << h.ob) - 1),
-          "prim offset width");
+      // The traversal's path (the child's ids kept in the decode cache) gives the same ids.
+      cluster::decode_ids(view.bits, ids, uint32_t(l), gc, pc);
+      SLIM_FUZZ_CHECK(g == gc && p == pc, "ids differ between the decode paths");
     }
   }
 }

@@ -97,7 +97,8 @@ void check_multileaf_boxes(const std::vector<uint8_t>& data, const ClusterLattic
 // for bit. *decimal (if given) receives the count of clusters in the lossless decimal mode,
 // *clusters the count of clusters.
 void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32_t seed,
-                 bool shuffle, size_t* decimal = nullptr, size_t* clusters_out = nullptr) {
+                 bool shuffle, size_t* decimal = nullptr, size_t* clusters_out = nullptr,
+                 std::vector<ClusterHeader>* headers = nullptr) {
   const cluster::Quantized z = cluster::quantize(
       tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(), rel_error, lossless);
   ClusterSource src = source_of(tm, z, lossless);
@@ -127,6 +128,7 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
       ASSERT_EQ(cluster::coord_mode(hdr), 0u);
     }
     if (decimal) *decimal += cluster::coord_mode(hdr) != 0;
+    if (headers) headers->push_back(hdr);
     // The multi-leaf boxes as the builder writes them, right ahead of the cluster.
     Box3f boxes[8], all;
     for (int c = 0; c < kk; ++c) {
@@ -238,6 +240,56 @@ TEST(ClusterCodec, DecodeEqualsEncodeRandomMeshes) {
     check_codec(tm, lossless, 1e-5, 1, true);
     check_codec(tm, lossless, 1e-5, 2, false);
     check_codec(tm, lossless, 1e-2, 3, false);
+  }
+}
+
+// The primID runs (cluster.h): every triangle's ids decode to the input's where a cluster's ids
+// fall into long runs of nearby ids far apart (several runs of width 2^ob > 1, Elias-Fano run
+// starts with low bits and high parts), in random order (one run per triangle), near the top of
+// the id range, and with ids shared by neighbouring triangles (quads: the repeat bits).
+TEST(ClusterCodec, DecodeEqualsEncodeIdRuns) {
+  PolyMesh soup = random_soup(2000, 41);
+  PolyMesh sphere = icosphere(3);
+  TriangleMesh tm = triangulate_fan({&soup, &sphere});
+  struct Case {
+    uint32_t run, stride, gap, base;  // face f's id: runs of `run` ids `stride` apart, the runs
+                                      // `gap` apart from `base` on (mod 2^32)
+    bool shuffle;
+    uint32_t share = 1;  // triangles t of one face f = t / share
+  };
+  for (const Case& k : {Case{6, 1, 100000, 7, false}, Case{4, 3, 777, 0, false},
+                        Case{5, 2, 1u << 20, 0xfff00000u, false}, Case{1, 1, 1, 0, true},
+                        Case{8, 1, 40, 12345, true}, Case{3, 1, 5000, 9, false, 2},
+                        Case{1, 1, 1, 0, false, 3}, Case{1, 1, 1, 0, true, 2}}) {
+    for (size_t t = 0; t < tm.tri_count(); ++t) {
+      const uint32_t f = uint32_t(t / k.share);
+      tm.prim_ids[t] = k.base + (f / k.run) * k.gap + (f % k.run) * k.stride;
+    }
+    for (bool lossless : {false, true}) {
+      std::vector<ClusterHeader> headers;
+      check_codec(tm, lossless, 1e-5, 5 + k.run, k.shuffle, nullptr, nullptr, &headers);
+      ASSERT_FALSE(::testing::Test::HasFatalFailure());
+      size_t wide = 0, highs = 0, repeats = 0;
+      for (const ClusterHeader& h : headers) {
+        wide += h.nruns > 1 && cluster::offset_bits(h) > 0;
+        highs += h.nruns > 2;
+        repeats += cluster::has_repeats(h);
+      }
+      // In order: runs of ids; shuffled (dense ids): one run (base + offset) in most clusters.
+      if (!k.shuffle && k.run > 1) {
+        EXPECT_GT(wide, headers.size() / 2) << k.run << " " << k.gap;
+        EXPECT_GT(highs, headers.size() / 2) << k.run << " " << k.gap;
+      }
+      if (k.share > 1 && !k.shuffle) {
+        EXPECT_GT(repeats, headers.size() / 2) << k.share;
+      }
+      if (k.share == 1 || k.shuffle) {
+        EXPECT_EQ(repeats, 0u);
+      }
+      if (k.run > 1 || k.shuffle) {
+        EXPECT_GT(highs, 0u) << k.run << " " << k.gap;
+      }
+    }
   }
 }
 
@@ -427,6 +479,41 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
       EXPECT_NE(why.find("axis 1"), std::string::npos) << why;
     }
   }
+  // The run highs (the stream's last bits): nruns - 1 one bits inside the data. Ids in pairs far
+  // apart: 8 runs.
+  TriangleMesh rtm = tm;
+  for (size_t i = 0; i < rtm.tri_count(); ++i) rtm.prim_ids[i] = uint32_t(i / 2) * 100000 + i % 2;
+  src = source_of(rtm, z, false);
+  const std::vector<uint8_t> rgood = cluster::encode(src, prims, counts, 2, false);
+  ClusterHeader rh;
+  std::memcpy(&rh, rgood.data(), sizeof(rh));
+  ASSERT_EQ(rh.nruns, 8);
+  ASSERT_TRUE(cluster::check(rgood.data(), rgood.size(), 2, false, &why)) << why;
+  std::vector<uint8_t> b = rgood;
+  b.back() = 0;  // the last run's one bit gone
+  EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, false, &why));
+  EXPECT_NE(why.find("run highs"), std::string::npos) << why;
+  b.resize(b.size() + kMaxRunHighBits / 8 + 1, 0);  // its one bit beyond kMaxRunHighBits bits
+  b.back() = 0x80;
+  EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, false, &why));
+  EXPECT_NE(why.find("run highs beyond"), std::string::npos) << why;
+  // The repeat bits (each child's triangles with one primID and one geomID): never on triangle 0.
+  for (size_t i = 0; i < rtm.tri_count(); ++i) {
+    rtm.prim_ids[i] = uint32_t(i / 8) * 100000;
+    rtm.geom_ids[i] = uint32_t(i / 8) * 1000;
+  }
+  src = source_of(rtm, z, false);
+  const std::vector<uint8_t> qgood = cluster::encode(src, prims, counts, 2, false);
+  ClusterHeader qh;
+  std::memcpy(&qh, qgood.data(), sizeof(qh));
+  ASSERT_TRUE(cluster::has_repeats(qh));
+  ASSERT_TRUE(cluster::check(qgood.data(), qgood.size(), 2, false, &why)) << why;
+  const cluster::Layout ql = cluster::layout(qh, 2, false);
+  b = qgood;
+  b[sizeof(ClusterHeader) + (ql.ids >> 3)] |= uint8_t(1u << (ql.ids & 7));
+  EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, false, &why));
+  EXPECT_NE(why.find("repeat bit on triangle 0"), std::string::npos) << why;
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 0x40));  // bit 6 of ob: no field
 }
 
 struct Built {
@@ -659,6 +746,22 @@ TEST(ClusterScene, StatisticsAndSizes) {
     Scene o = Scene::build(torus, BuildOptions::from_config(config));
     EXPECT_GT(detail(o, "multileaf_count"), 0) << config;
     EXPECT_EQ(detail(o, "multileaf_bytes"), 72.0 * detail(o, "multileaf_count")) << config;
+  }
+}
+
+// The clusters come out nearly full (scene_clusters.cpp: the BVH2's small nodes split at counts
+// that need no extra cluster, Bvh2BuildConfig::full_blocks_below): on smooth surfaces and on a
+// regular grid, whose SAH splits alone give clusters of about 50 triangles of the 64.
+TEST(ClusterScene, ClustersAreNearlyFull) {
+  for (const char* scene : {"torus:256", "terrain:256", "canyon:256"}) {
+    PolyMesh m = load(scene);
+    for (const char* config : {"cluster", "cluster-lossless"}) {
+      Scene s = Scene::build(m, BuildOptions::from_config(config));
+      const double tris = double(s.stats().triangles);
+      EXPECT_GE(detail(s, "avg_triangles_per_cluster"), 58.0) << scene << " " << config;
+      EXPECT_LE(detail(s, "avg_triangles_per_cluster"), 64.0) << scene << " " << config;
+      EXPECT_GE(detail(s, "clusters"), std::ceil(tris / 64)) << scene << " " << config;
+    }
   }
 }
 

@@ -217,6 +217,7 @@ class BvhScene : public Scene::Impl {
   // ends_prepare is false, and its phases are named "bvh2" and "collapse" plus phase_suffix.
   struct Bvh2Hooks {
     uint32_t max_leaf_size = 0, block_prims = 0;  // override the BVH2 config when nonzero
+    uint32_t full_blocks_below = 0;               // Bvh2BuildConfig::full_blocks_below
     bool quantized_inner = false;  // CompressedLeaf with QNode8 inner nodes (QCompressedLeaf)
     std::function<void(Bvh2&)> reshape;
     // Bvh2BuildConfig::thin_stack, for leaves whose primitives hold several triangles.
@@ -249,6 +250,7 @@ class BvhScene : public Scene::Impl {
     cfg.block_prims = Leaf::kBlockPrims;
     if (hooks.max_leaf_size) cfg.max_leaf_size = hooks.max_leaf_size;
     if (hooks.block_prims) cfg.block_prims = hooks.block_prims;
+    cfg.full_blocks_below = hooks.full_blocks_below;
     cfg.threads = opt.threads;
     std::unique_ptr<PhaseProgress> progress;
     if (opt.progress) {

@@ -1,14 +1,19 @@
 // Compressed triangle clusters: `cluster` (lossy, one scene-wide power-of-two lattice) and
 // `cluster-lossless` (exact floats). Format: prim/cluster.h.
 //
-// Clusters come from the SAH BVH2, built with leaves of up to 63 triangles (the multi-leaf limit
-// of the compressed-leaf BVH, < 8 x 8) whose SAH cost counts one block per leaf, so that leaves
-// come out near that size: every maximal subtree of at most 63 triangles (in practice a leaf) is
-// one cluster (49-52 triangles on average on the benchmark scenes); its triangles are re-split by
-// SAH into at most 8 leaves of at most 8 triangles (left sizes multiples of 8, so that ceil(n / 8)
-// leaves suffice), and the collapse turns each such subtree into one multi-leaf whose data is
-// the cluster (LeafEncoder::encode_multileaf). The inner nodes above the clusters are QBVH8 nodes
-// (136 B instead of 256 B: 3.8 bits per triangle less on koala).
+// Clusters come from the SAH BVH2, built with leaves of up to 64 triangles (the multi-leaf limit
+// of the compressed-leaf BVH, 8 x 8) whose SAH cost counts one block per leaf, so that leaves
+// come out near that size: every maximal subtree of at most 64 triangles (in practice a leaf) is
+// one cluster. The binned SAH splits alone leave clusters of about 50 triangles (a node of 65 to
+// 128 triangles becomes two clusters, whatever its count), so nodes of at most
+// kFullClustersBelow triangles split at the nearest count that needs no extra cluster (the
+// builder's full_blocks_below): CLUSTER_FILL triangles a cluster on the benchmark scenes, each
+// cluster's header, anchors, boxes and child table shared by more triangles. A cluster's
+// triangles are re-split by SAH into at most 8 leaves of at most 8 triangles (left sizes
+// multiples of 8, so that ceil(n / 8) leaves suffice), and the collapse turns each such subtree
+// into one multi-leaf whose data is the cluster (LeafEncoder::encode_multileaf). The inner nodes
+// above the clusters are QBVH8 nodes (136 B instead of 256 B: 3.8 bits per triangle less on
+// koala).
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -29,7 +34,10 @@ namespace slim {
 
 namespace {
 
-constexpr uint32_t kClusterMax = 63;  // < 8 x kBlockPrims (bvh8.cpp multileaf_candidate)
+constexpr uint32_t kClusterMax = 64;  // 8 x kBlockPrims (bvh8.cpp multileaf_candidate)
+// BVH2 nodes of at most this many triangles split at counts that need no extra cluster
+// (Bvh2BuildConfig::full_blocks_below).
+constexpr uint32_t kFullClustersBelow = 4 * kClusterMax;
 
 // Re-cuts the BVH2 into clusters (see the file comment). The clusters are split and encoded in
 // parallel; encode_multileaf then takes each cluster's block from ClusterSource::encoded.
@@ -407,10 +415,11 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   BuildOptions o = opt;
   o.nodes = Nodes::CompressedLeaf;
   o.max_leaf_size = 8;
-  // The BVH2's leaves are the clusters: the SAH leaf cost counts whole clusters of up to 63
+  // The BVH2's leaves are the clusters: the SAH leaf cost counts whole clusters of up to 64
   // triangles, so leaves come out near that size; reshape then splits each into its children.
   typename BvhScene<Leaf>::Bvh2Hooks hooks;
   hooks.max_leaf_size = hooks.block_prims = kClusterMax;
+  hooks.full_blocks_below = kFullClustersBelow;
   hooks.quantized_inner = true;
   hooks.reshape = [&](Bvh2& b2) {
     std::vector<uint32_t> dropped = std::move(b2.dropped);  // duplicates outside every cluster

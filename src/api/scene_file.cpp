@@ -38,11 +38,11 @@ namespace slim {
 namespace {
 
 constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
-// Version 5: the clusters' strip steps with a 1-bit edge after a step, their child table as
+// Version 6: the clusters' strip steps with a 1-bit edge after a step, their child table as
 // residuals of linear predictions (prim/cluster.h). Any change of a section's layout (a node,
 // block or context struct), of what its bytes decode to, or of the header needs a new version:
 // the sections are the in-memory structs byte for byte.
-constexpr uint32_t kVersion = 5;
+constexpr uint32_t kVersion = 6;
 constexpr uint32_t kByteOrder = 0x01020304;
 constexpr uint64_t kAlign = 64;
 // Bounds the table before it is read (the header size check then bounds it by the file size): a

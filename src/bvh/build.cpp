@@ -381,7 +381,10 @@ class Builder {
         median = true;
       } else {
         mid = partition(b, s, begin, end, left, right);
-        if (mid == begin || mid == end) median = true;
+        if (mid == begin || mid == end)
+          median = true;
+        else if (n <= cfg_.full_blocks_below)
+          full_blocks(b, s, begin, end, mid, left, right);
       }
     } else if (n <= cfg_.max_leaf_size) {
       return false;
@@ -399,6 +402,41 @@ class Builder {
       right = range_of(mid, end);
     }
     return true;
+  }
+
+  // Nodes of at most full_blocks_below primitives (the clusters: leaves of up to B = block_prims
+  // primitives, a block being a whole cluster): a node of n = q B + s primitives (0 < s <= B)
+  // needs ceil(n / B) = q + 1 blocks, and its children need no more if and only if the left count
+  // l = a B + b (0 < b <= B) has b >= s. The binned split rarely lands on such a count (a node of
+  // up to 2B primitives has 4 + n / 20 bins), and each extra block is a cluster of its own, half
+  // empty on average. So a split that needs one more block moves to the nearest count that does
+  // not (the refs partitioned there by their centroids on the split axis) when the SAH, blocks
+  // counted, says the move costs no more. Where every split moves, a node of n primitives holds
+  // ceil(n / B) clusters; above full_blocks_below the splits stay the SAH's.
+  void full_blocks(const Binner& bins, const Split& split, uint32_t begin, uint32_t end,
+                   uint32_t& mid, Range& left, Range& right) {
+    const uint32_t B = cfg_.block_prims, n = end - begin, l = mid - begin;
+    const uint32_t s = (n - 1) % B + 1, b = (l - 1) % B + 1;
+    if (b >= s) return;
+    const uint32_t down = l - b, up = l + (s - b);  // multiples of B / b = s
+    const uint32_t nl = down == 0 || (up < n && up - l <= l - down) ? up : down;
+    if (nl == 0 || nl >= n) return;
+    auto cost = [&](const Range& x, const Range& y, uint32_t nx) {
+      return x.box.half_area() * blocks(nx) + y.box.half_area() * blocks(n - nx);
+    };
+    const float before = cost(left, right, l);
+    const int axis = split.axis;
+    Ref* refs = refs_.data();
+    std::nth_element(refs + begin, refs + begin + nl, refs + end,
+                     [axis](const Ref& x, const Ref& y) { return x.c2(axis) < y.c2(axis); });
+    Range l2 = range_of(begin, begin + nl), r2 = range_of(begin + nl, end);
+    if (cost(l2, r2, nl) <= before) {
+      mid = begin + nl;
+      left = l2;
+      right = r2;
+    } else {
+      mid = partition(bins, split, begin, end, left, right);  // the SAH's split back
+    }
   }
 
   // Whether refs [begin, end) may hold duplicates to drop: more than a leaf takes, all with one

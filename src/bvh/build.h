@@ -32,8 +32,11 @@ struct Bvh2BuildConfig {
   uint32_t max_leaf_size = 4;  // leaves never hold more primitives than this
   uint32_t block_prims = 4;    // leaf cost counts blocks of this many primitives (SIMD width)
   float trav_cost = 1.0f;      // cost of one node visit relative to one primitive block test
-  int max_depth = 96;          // deeper nodes are split at the object median
-  int threads = 0;             // 0 = all
+  // Nonzero: nodes of at most this many primitives split where their children need no more
+  // leaf blocks than they do, ceil(n / block_prims), if the SAH allows (Builder::full_blocks).
+  uint32_t full_blocks_below = 0;
+  int max_depth = 96;  // deeper nodes are split at the object median
+  int threads = 0;     // 0 = all
   // Optional: receives 2 x count units, count as the references are made and count as the
   // primitives are placed in leaves (one add per chunk of references or per subtree, never per
   // primitive); throws slim::Cancelled out of build_bvh2 when the build is cancelled.

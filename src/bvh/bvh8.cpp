@@ -243,7 +243,10 @@ class Collapser {
     // Benthin et al. 2018, section 4.3 "Builder Modifications": subtrees of fewer than N x M
     // primitives; each of their (at most 8) leaves must fit one block so that child blocks are
     // addressed implicitly.
-    return prims_[i] < 8 * enc_.block_prims && leaves_[i] * enc_.parts_per_block <= 8 &&
+    // The clusters (QCompressedLeaf) take 8 full leaves too: 64 triangles, 8 x 8 in the
+    // clusters' 8-wide tests.
+    const uint64_t most = 8 * enc_.block_prims - (kind_ == NodeKind::QCompressedLeaf ? 0 : 1);
+    return prims_[i] <= most && leaves_[i] * enc_.parts_per_block <= 8 &&
            max_leaf_[i] <= enc_.block_prims;
   }
 

@@ -42,6 +42,17 @@ SLIM_INLINE int pop_lowest(uint32_t& m) {
 
 SLIM_INLINE void prefetch(const void* p) { __builtin_prefetch(p, 0, 3); }
 
+// The index of the set bit of rank k (k = 0: the lowest) of x, which has more than k set bits.
+// BMI2 (with the AVX2 path): one deposit of bit k into x's set bits; otherwise k of them cleared.
+SLIM_INLINE uint32_t select_bit(uint64_t x, uint32_t k) {
+#if defined(SLIM_SIMD_AVX2) && defined(__BMI2__)
+  return uint32_t(__builtin_ctzll(_pdep_u64(uint64_t(1) << k, x)));
+#else
+  for (; k; --k) x &= x - 1;
+  return uint32_t(__builtin_ctzll(x));
+#endif
+}
+
 // Bit i (i < 8) set where the 64-bit word p[i] is zero.
 SLIM_INLINE uint32_t zero_mask8(const uint64_t* p) {
 #if defined(SLIM_SIMD_AVX2)

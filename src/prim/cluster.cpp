@@ -399,18 +399,44 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   h.bb = uint8_t(bit_width(prim_base));
   h.hb = uint8_t(bit_width(glo));
   // PrimID runs: a run starts at the first sorted id that is 2^ob or more past the current start;
-  // ob is the width with the fewest bits (run starts + per triangle run index and offset). The
-  // widest ob gives one run: the plain base + offset, for meshes whose ids are in random order.
+  // run i >= 1 stores e_i = start_i - prim_base - i x 2^ob (Elias-Fano: pb low bits, the high
+  // part in unary). ob and pb are the widths with the fewest bits (run lows and highs + per
+  // triangle run index and offset). The widest ob gives one run: the plain base + offset, for
+  // meshes whose ids are in random order.
   auto runs_of = [&](uint32_t ob, std::vector<uint32_t>& starts) {
     starts.clear();
     for (uint32_t id : ids)
       if (starts.empty() || uint64_t(id - starts.back()) >= (uint64_t(1) << ob))
         starts.push_back(id);
   };
+  // The Elias-Fano bits of m = nruns - 1 values of largest e_max at low width pb (~0: the highs
+  // do not fit kMaxRunHighBits).
+  auto ef_bits = [](uint64_t m, uint64_t e_max, uint32_t pb) {
+    if (m == 0) return uint64_t(0);
+    const uint64_t highs = m + (e_max >> pb);
+    return highs > kMaxRunHighBits ? ~uint64_t(0) : m * pb + highs;
+  };
+  // Repeats: bit i of rep_mask if triangle i (decode order) has triangle i - 1's ids (the ids'
+  // entries needed: ntris less them). (Local pointers: the thread_local vectors cost a TLS
+  // look-up at each use.)
+  const uint32_t* ord = order.data();
+  uint64_t rep_mask = 0;
+  for (uint32_t i = 1; i < ntris; ++i)
+    rep_mask |= uint64_t(s.prim_ids[ord[i]] == s.prim_ids[ord[i - 1]] &&
+                         s.geom_ids[ord[i]] == s.geom_ids[ord[i - 1]])
+                << i;
+  const uint32_t nrep = uint32_t(__builtin_popcountll(rep_mask));
+  // Bits of the ids' entries at `entry` bits each, and whether the repeat bits make them fewer.
+  auto entry_bits = [&](uint64_t entry, bool& repeats) {
+    const uint64_t plain = ntris * entry, with = ntris + (ntris - nrep) * entry;
+    repeats = with < plain;
+    return repeats ? with : plain;
+  };
   // The sizing pass counts the runs and finds the last start without storing them. Once one run
-  // takes every id, a wider ob costs ntris bits more each and cannot win: the search stops there.
+  // takes every id, a wider ob costs more bits each entry and cannot win: the search stops there.
   uint64_t best_bits = ~uint64_t(0);
-  uint32_t best_ob = 0;
+  uint32_t best_ob = 0, best_pb = 0;
+  bool repeats = false;
   for (uint32_t ob = 0; ob <= 32; ++ob) {
     uint64_t nstarts = 0;
     uint32_t last = 0;
@@ -419,12 +445,28 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       last = start ? id : last;
       nstarts += start;
     }
-    if (nstarts > 255) continue;
-    const uint64_t bits = nstarts * uint64_t(bit_width(last - prim_base)) +
-                          ntris * uint64_t(bit_width(uint32_t(nstarts) - 1) + ob);
+    const uint64_t m = nstarts - 1;
+    const uint64_t e_max = uint64_t(last - prim_base) - (m << ob);
+    // ef_bits falls with pb while a wider pb takes more than m bits off the highs: that gain,
+    // (e_max >> pb) - (e_max >> (pb + 1)), falls with pb, so the fewest bits are at the first pb
+    // (from where the highs fit) that gains no more. At pb <= bit_width(e_max) - bit_width(m) - 2,
+    // e_max >> pb >= 2^(bit_width(m) + 1) > 2m, so the gain is more than m: the search starts
+    // there.
+    uint32_t pb = 0;
+    if (m) {
+      pb = uint32_t(std::max(0, int(bit_width(uint32_t(e_max))) - int(bit_width(uint32_t(m))) - 2));
+      while (pb < 32 &&
+             (m + (e_max >> pb) > kMaxRunHighBits || (e_max >> pb) - (e_max >> (pb + 1)) > m))
+        ++pb;
+    }
+    const uint64_t ef = ef_bits(m, e_max, pb);
+    bool with_repeats;
+    const uint64_t bits = ef + entry_bits(bit_width(uint32_t(m)) + ob + h.gb, with_repeats);
     if (bits < best_bits) {
       best_bits = bits;
       best_ob = ob;
+      best_pb = pb;
+      repeats = with_repeats;
     }
     if (nstarts == 1) break;
   }
@@ -432,11 +474,19 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   starts.reserve(ntris);
   runs_of(best_ob, starts);
   h.nruns = uint8_t(starts.size());
-  h.ob = uint8_t(best_ob);
-  h.pb = uint8_t(bit_width(starts.back() - prim_base));
+  h.ob = uint8_t(best_ob | (repeats ? 0x80 : 0));
+  h.pb = uint8_t(best_pb);
+  // e_i of run i (i >= 1) and the run highs' length.
+  const uint32_t* st = starts.data();
+  const size_t nst = starts.size();
+  auto run_e = [&](size_t i) { return uint64_t(st[i] - prim_base) - (uint64_t(i) << best_ob); };
+  const uint64_t highs = nst > 1 ? (nst - 1) + (run_e(nst - 1) >> best_pb) : 0;
+  const uint32_t nentries = repeats ? ntris - nrep : ntris;
 
   const Layout L = layout(h, uint32_t(k), s.lossless);
-  std::vector<uint8_t> out(data_bytes(h, uint32_t(k), s.lossless) + 8, 0);  // 8: 64-bit stores
+  const uint64_t entries = uint64_t(nentries) * L.idbits;  // bits
+  const uint64_t bytes = data_bytes(h, uint32_t(k), s.lossless, entries + highs);
+  std::vector<uint8_t> out(bytes + 8, 0);  // 8: 64-bit stores
   std::memcpy(out.data(), &h, sizeof(h));
   BitWriter w{out, sizeof(ClusterHeader)};
   for (int a = 0; a < 3; ++a) w.put(anchor[a], L.aw);
@@ -449,15 +499,10 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   }
   for (uint32_t i = 0; i < nv; ++i)
     for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], axis_bits(h, a));
-  for (uint32_t st : starts) w.put(st - prim_base, h.pb);
-  for (uint32_t t : order) {
-    const uint32_t id = s.prim_ids[t];
-    const uint32_t run =
-        uint32_t(std::upper_bound(starts.begin(), starts.end(), id) - starts.begin()) - 1;
-    w.put(run, L.rb);
-    w.put(id - starts[run], h.ob);
-    w.put(s.geom_ids[t] - glo, h.gb);
-  }
+  for (size_t i = 1; i < nst; ++i) w.put(uint32_t(run_e(i)), h.pb);
+  auto repeated = [&](uint32_t i) { return repeats && ((rep_mask >> i) & 1); };
+  if (repeats)
+    for (uint32_t i = 0; i < ntris; ++i) w.put(repeated(i), 1);
   size_t r = 0;
   auto put_ref = [&] {
     const int32_t d = refs[r++];
@@ -477,7 +522,21 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       for (int q = 0; q < (st.p == 3 ? 3 : 1); ++q) put_ref();
     }
   if (w.pos != L.end || r != refs.size()) throw std::logic_error("cluster: stream size mismatch");
-  out.resize(data_bytes(h, uint32_t(k), s.lossless) + (slack ? kClusterReadSlack : 0));
+  for (uint32_t i = 0; i < ntris; ++i) {
+    if (repeated(i)) continue;
+    const uint32_t id = s.prim_ids[ord[i]];
+    const uint32_t run = uint32_t(std::upper_bound(st, st + nst, id) - st) - 1;
+    w.put(run, L.rb);
+    w.put(id - st[run], best_ob);
+    w.put(s.geom_ids[ord[i]] - glo, h.gb);
+  }
+  if (w.pos != L.end + entries) throw std::logic_error("cluster: id entries size mismatch");
+  // Run highs: run i's one bit at (e_i >> pb) + i - 1.
+  for (size_t i = 1; i < nst; ++i) {
+    const uint64_t pos = 8 * sizeof(ClusterHeader) + w.pos + (run_e(i) >> h.pb) + i - 1;
+    out[pos >> 3] |= uint8_t(1u << (pos & 7));
+  }
+  out.resize(bytes + (slack ? kClusterReadSlack : 0));
   if (s.stats) {
     std::lock_guard<std::mutex> lock(s.stats->m);
     EncodeStats& st = *s.stats;
@@ -487,8 +546,9 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     st.position_bits += uint64_t(nv) * L.vbits;
     st.topology_bits +=
         topology_bits(h) + (L.verts - L.table) + 8 * (sizeof(h.sizes) + sizeof(h.tbits));
-    st.id_bits += (L.topo - L.runs) + h.bb + h.hb + 6 * 8;  // + pb, gb, nruns, ob, bb, hb
-    st.header_bits += 6 * 8 + 3 * L.aw;                     // nverts, ntris, bits, ib; anchors
+    // Run lows, repeat bits, entries, run highs, the bases, and pb, gb, nruns, ob, bb, hb.
+    st.id_bits += (L.topo - L.runs) + entries + highs + h.bb + h.hb + 6 * 8;
+    st.header_bits += 6 * 8 + 3 * L.aw;  // nverts, ntris, bits, ib; anchors
     st.decimal_clusters += coord_mode(h) != 0;
   }
   return out;
@@ -574,7 +634,8 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
   for (int a = 0; a < 3; ++a)
     if (axis_bits(h, a) > max_bits || (!lossless && h.bits[a] > max_bits))
       return fail("axis width beyond " + std::to_string(max_bits) + " bits");
-  if (index_bits(h) > 8 || h.pb > 32 || h.gb > 32 || h.ob > 32 || h.bb > 32 || h.hb > 32)
+  if (index_bits(h) > 8 || h.pb > 32 || h.gb > 32 || offset_bits(h) > 32 || (h.ob & 0x40) ||
+      h.bb > 32 || h.hb > 32)
     return fail("index or id width beyond its limit");
   if (const uint32_t mode = coord_mode(h)) {
     if (!lossless) return fail("coordinate mode " + std::to_string(mode) + " in a lossy cluster");
@@ -595,7 +656,7 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
   if (child_first(sizes, children) != h.ntris) return fail("children do not cover the triangles");
   if (children < 8 && (sizes >> (3 * children)) != 0)
     return fail("sizes given for children beyond the child count");
-  if (data_bytes(h, children, lossless) > size) return fail("stream runs past the data");
+  if (data_bytes(h, children, lossless, 0) > size) return fail("stream runs past the data");
   const uint8_t* bits = data + sizeof(ClusterHeader);
   const Layout L = layout(h, children, lossless);
   // Bits at or beyond L.end (inside `size` or not) read as 0 here; the decoders may read them
@@ -617,9 +678,29 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
         if (idx[q][j] >= h.nverts)
           return fail("vertex index " + std::to_string(idx[q][j]) + " >= vertex count");
   }
-  for (uint32_t t = 0; t < h.ntris; ++t) {
-    const uint32_t run = get(L.ids + uint64_t(t) * L.idbits, L.rb);
+  // The repeat bits (none on triangle 0), the ids' entries inside the data, their run indices.
+  uint32_t entries = h.ntris;
+  if (has_repeats(h)) {
+    if (get(L.ids, 1)) return fail("repeat bit on triangle 0");
+    for (uint32_t t = 1; t < h.ntris; ++t) entries -= get(L.ids + t, 1);
+  }
+  if (data_bytes(h, children, lossless, uint64_t(entries) * L.idbits) > size)
+    return fail("stream runs past the data (id entries)");
+  const uint64_t avail = 8 * (size - sizeof(ClusterHeader));
+  auto get_bit = [&](uint64_t pos) { return uint32_t(bits[pos >> 3] >> (pos & 7)) & 1; };
+  for (uint32_t e = 0; e < entries; ++e) {
+    uint32_t run = 0;
+    for (uint32_t b = 0; b < L.rb; ++b) run |= get_bit(L.end + uint64_t(e) * L.idbits + b) << b;
     if (run >= h.nruns) return fail("run index " + std::to_string(run) + " >= run count");
+  }
+  // The run highs: nruns - 1 one bits within kMaxRunHighBits bits and `size` (the stream's end).
+  const uint64_t highs = L.end + uint64_t(entries) * L.idbits;
+  uint64_t pos = highs;
+  for (uint32_t ones = 0; ones + 1 < h.nruns; ++pos) {
+    if (pos >= avail) return fail("stream runs past the data (run highs)");
+    if (pos - highs >= kMaxRunHighBits)
+      return fail("run highs beyond " + std::to_string(kMaxRunHighBits) + " bits");
+    ones += get_bit(pos);
   }
   return true;
 }

@@ -2,7 +2,7 @@
 // Geometry Format (DGF, HPG 2024): positions on one scene-wide integer lattice with a power-of-two
 // step, each cluster an anchor plus per-axis bit widths and bit-packed offsets, topology as
 // generalized triangle strips (DGF's control bits and implicit new-vertex indices), and primIDs as
-// runs (a run start per run, a run index and an offset per triangle).
+// runs (Elias-Fano coded run starts, a run index and an offset per triangle).
 //
 // A cluster is one multi-leaf of the compressed-leaf BVH (bvh8.h; QBVH8 inner nodes above the
 // multi-leaves, NodeKind::QCompressedLeaf): its header holds the quantized boxes of up to 8
@@ -16,10 +16,16 @@
 //     children: for children 1..k-1, the child's topology offset (tb bits) and its first new
 //               vertex (vbw bits), each a residual of a linear prediction (below)
 //     vertices: per vertex bx + by + bz bits (offsets from the anchor)
-//     id runs:  nruns run starts of pb bits (start - prim_base)
-//     ids:      per triangle rb = bit_width(nruns - 1) bits run index, ob bits offset in the
-//               run (primID = prim_base + start + offset), gb bits geomID - geom_base
+//     run lows: for runs 1..nruns-1, the low pb bits of the run's e (below)
+//     repeats:  if the header's repeat bit (top bit of ob) is set, ntris bits: bit t set if
+//               triangle t has triangle t - 1's ids (never triangle 0's)
 //     topology: topology_bits(h) bits, each child a generalized strip (below)
+//     ids:      in triangle order, an entry per triangle whose repeat bit is clear (every
+//               triangle without repeat bits): rb = bit_width(nruns - 1) bits run index, ob (the
+//               header's ob less its top bit) bits offset in the run (primID = prim_base + start +
+//               offset), gb bits geomID - geom_base
+//     run highs: for runs 1..nruns-1 in order, e >> pb in unary (that many 0 bits, then a 1);
+//               the stream ends after their nruns-1 one bits (at most kMaxRunHighBits bits)
 // Child c holds 1 + sizes[c] triangles (3 bits each); k, the child count, is the multi-leaf's.
 // Children with fewer than 8 triangles repeat their last triangle in the padding lanes (the
 // duplicate gives the same hit).
@@ -51,7 +57,19 @@
 // The primID runs: input faces are not stored in a cluster's order (they are the user's), but
 // neighbouring faces often have nearby numbers (scan rows, quads split in two, terrain rows), so a
 // cluster's sorted ids fall into few runs of width 2^ob; on meshes in random order the encoder
-// picks ob = 0 and one run per triangle, close to the plain base + offset.
+// picks ob = 0 and one run per triangle. prim_base is the smallest id; a run starts at the first
+// sorted id 2^ob or more past the current run's start. So run 0 starts at prim_base (nothing
+// stored) and run i's start s_i (i >= 1, from prim_base) is at least i x 2^ob: the code stores
+// e_i = s_i - i x 2^ob, which never decreases with i, as an Elias-Fano sequence: its low pb bits
+// at a fixed place (random access) and its high part e_i >> pb as the run highs, in which run i's
+// one bit lies at bit (e_i >> pb) + i - 1. The decoder finds that bit (the (i-1)-th one: a
+// popcount per 64-bit word, then a select in the word) and gets e_i's high part as its position
+// less i - 1. The encoder takes, for each ob, the pb with the fewest bits ((nruns - 1) x (pb + 1)
+// + (e_max >> pb), where the highs fit kMaxRunHighBits), and the ob with the fewest id bits.
+// The repeats: a face split into triangles (a quad into two) gives them one primID, and they are
+// often neighbours in the strip; with the repeat bits, triangle t's ids are those of the entry
+// t - (repeat bits 1..t set), one popcount away. The encoder sets the repeat bit in the header
+// when the bits save more than their ntris bits cost.
 //
 // Lossy (`cluster`): a vertex's code is its lattice integer q = round((x - origin) / step) per
 // axis, decoded as origin + float(q) * step. Every cluster decodes a vertex with the same float
@@ -116,9 +134,9 @@ struct ClusterHeader {
                      // mode: the top 2 bits are the axis's digits below the cluster's k
   uint8_t ib;        // low 4 bits: bits of a reused vertex's distance back (<= 8); high 4 bits:
                      // lossless coordinate mode (0 float keys, 1 + k decimal q x 10^-k, k <= 9)
-  uint8_t pb, gb;    // bits per primID run start / geomID offset (<= 32)
+  uint8_t pb, gb;    // bits per primID run start's low part (Elias-Fano) / geomID offset (<= 32)
   uint8_t nruns;     // primID runs, 1..ntris
-  uint8_t ob;        // bits per primID offset in its run (<= 32)
+  uint8_t ob;        // low 6 bits: bits per primID offset in its run (<= 32); top bit: repeats
   uint8_t bb, hb;    // bits of prim_base / geom_base in the stream (<= 32)
   uint8_t sizes[3];  // child c holds 1 + (the 3 bits at 3c) triangles
   uint16_t tbits;    // low 11 bits: bits of the topology stream (<= 1854: 27 + 63 x 29); top 5
@@ -129,6 +147,10 @@ static_assert(sizeof(ClusterHeader) == 17, "cluster header is 17 bytes");
 
 // Bytes a decoder may read past the end of a cluster's data (64-bit bit-stream loads).
 constexpr uint32_t kClusterReadSlack = 8;
+// Bits of the primID run starts' high parts at most (the encoder keeps to it, check() enforces it,
+// and the decoder scans no further): nruns - 1 one bits and at most 2 (nruns - 1) zero bits at the
+// Elias-Fano width floor(log2(e_max / (nruns - 1))) fit in it.
+constexpr uint32_t kMaxRunHighBits = 256;
 
 namespace cluster {
 
@@ -169,6 +191,9 @@ struct InvTris {
 };
 inline constexpr InvTris kInvTris{};
 SLIM_INLINE uint32_t coord_mode(const ClusterHeader& h) { return uint32_t(h.ib) >> 4; }
+// Bits of a primID's offset in its run; whether the cluster has repeat bits.
+SLIM_INLINE uint32_t offset_bits(const ClusterHeader& h) { return h.ob & 63u; }
+SLIM_INLINE bool has_repeats(const ClusterHeader& h) { return h.ob >> 7; }
 // Bits of axis a's vertex offsets.
 SLIM_INLINE uint32_t axis_bits(const ClusterHeader& h, int a) { return h.bits[a] & 63u; }
 // Decimal mode: the digits of axis a, the cluster's k less the axis's top 2 bits of bits[a]
@@ -288,6 +313,10 @@ SLIM_INLINE uint32_t child_first(uint32_t sizes, uint32_t c) {
 }
 
 // Bit positions of the streams of a cluster of k children.
+// ids: the repeat bits; end: the topology's end, where the ids' entries begin (as many as
+// triangles without their repeat bit: one popcount), then the run highs (they end after their
+// nruns - 1 one bits). The stream's length depends on both, so check() and the encoder find it,
+// not the layout.
 struct Layout {
   uint64_t table = 0, verts = 0, runs = 0, ids = 0, topo = 0, end = 0;  // from the stream start
   uint32_t aw = 0;                                                      // bits per anchor
@@ -311,18 +340,19 @@ SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, bool lossless) {
   l.vs = vplain ? 0 : (uint32_t(h.nverts) * inv) >> 4;
   l.vbias = vplain ? 0 : 1u << (l.vbw - 1);
   l.rb = h.nruns ? bit_width(uint32_t(h.nruns) - 1) : 0;
-  l.idbits = l.rb + h.ob + h.gb;
+  l.idbits = l.rb + offset_bits(h) + h.gb;
   l.table = 3 * l.aw + uint32_t(h.bb) + h.hb;
   l.verts = l.table + uint64_t(k ? k - 1 : 0) * (l.tb + l.vbw);
   l.runs = l.verts + uint64_t(h.nverts) * l.vbits;
-  l.ids = l.runs + uint64_t(h.nruns) * h.pb;
-  l.topo = l.ids + uint64_t(h.ntris) * l.idbits;
+  l.ids = l.runs + uint64_t(h.nruns ? h.nruns - 1 : 0) * h.pb;
+  l.topo = l.ids + (has_repeats(h) ? h.ntris : 0);
   l.end = l.topo + tbits;
   return l;
 }
-// Total bytes of a cluster's data (header + stream), without the read slack.
-SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, bool lossless) {
-  return sizeof(ClusterHeader) + (layout(h, k, lossless).end + 7) / 8;
+// Bytes of a cluster's data (header + stream) with `tail` bits of ids' entries and run highs,
+// without the read slack.
+SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, bool lossless, uint64_t tail) {
+  return sizeof(ClusterHeader) + (layout(h, k, lossless).end + tail + 7) / 8;
 }
 
 // Decodes the strip of child c (n triangles) into idx[corner][lane], lanes < n. get(pos, w) reads
@@ -655,34 +685,79 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, ui
 // What the ids of a child's triangles take from the cluster's view (kept with a decoded child in
 // the DecodeCache, so that a hit in a cached child needs no view).
 struct ChildIds {
-  uint64_t ids = 0;   // bit of the child's first triangle's ids
-  uint64_t runs = 0;  // bit of the run starts
+  uint64_t repeats = 0;  // bit of the repeat bits
+  uint64_t entries = 0;  // bit of the ids' entries
+  uint64_t runs = 0;     // bit of the run starts' low parts
   uint32_t prim_base = 0, geom_base = 0;
   uint8_t idbits = 0, rb = 0, ob = 0, gb = 0, pb = 0;
+  uint8_t first = 0, ntris = 0;  // the child's first triangle; the cluster's triangles
+  bool has_repeats = false;
 };
 // The ids of the triangles from triangle `first` of the cluster `v` on.
 SLIM_INLINE ChildIds child_ids(const View& v, uint32_t first) {
   const ClusterHeader& h = v.h;
   const Layout& L = v.L;
   ChildIds c;
-  c.ids = L.ids + uint64_t(first) * L.idbits;
+  c.repeats = L.ids;
+  c.entries = L.end;
   c.runs = L.runs;
+  c.first = uint8_t(first);
+  c.ntris = h.ntris;
+  c.has_repeats = has_repeats(h);
   c.prim_base = read_bits(v.bits, 3 * L.aw, h.bb);
   c.geom_base = read_bits(v.bits, 3 * L.aw + h.bb, h.hb);
   c.idbits = uint8_t(L.idbits);
   c.rb = uint8_t(L.rb);
-  c.ob = h.ob;
+  c.ob = uint8_t(offset_bits(h));
   c.gb = h.gb;
   c.pb = h.pb;
   return c;
 }
-// primID and geomID of triangle `first + l` (bits: the cluster's stream).
+// The start of run `run` (from prim_base; bits: the cluster's stream): 0 for run 0, else
+// e + run x 2^ob with e's high part the position of the highs' (run - 1)-th one bit less run - 1.
+// The scan reads 64-bit words from the byte of its position (the first word's bits below the
+// position shifted out), at most the words that cover kMaxRunHighBits bits: a block check()
+// accepted has the bit there, and none makes the scan read further.
+SLIM_INLINE uint32_t run_start(const uint8_t* bits, const ChildIds& c, uint64_t highs,
+                               uint32_t run) {
+  if (run == 0) return 0;
+  const uint32_t i = run - 1;
+  uint64_t pos = highs;
+  uint32_t k = i, high = 0;
+  constexpr uint32_t kWords = 1 + (kMaxRunHighBits - 57 + 63) / 64;  // the first word: >= 57 bits
+  for (uint32_t w = 0; w < kWords; ++w) {
+    uint64_t x;
+    std::memcpy(&x, bits + (pos >> 3), 8);
+    x >>= pos & 7;
+    const uint32_t n = uint32_t(__builtin_popcountll(x));
+    if (k < n) {
+      high = uint32_t(pos - highs) + simd::select_bit(x, k) - i;
+      break;
+    }
+    k -= n;
+    pos += 64 - (pos & 7);
+  }
+  const uint64_t e = (uint64_t(high) << c.pb) + read_bits(bits, c.runs + uint64_t(i) * c.pb, c.pb);
+  return uint32_t(e + (uint64_t(run) << c.ob));
+}
+// primID and geomID of triangle `first + l` (bits: the cluster's stream). With repeat bits,
+// triangle t's entry is t less the repeat bits of triangles 1..t (triangle 0's is ignored: an
+// entry index never underflows), and the entries are ntris less all of them.
 SLIM_INLINE void decode_ids(const uint8_t* bits, const ChildIds& c, uint32_t l, uint32_t& geom,
                             uint32_t& prim) {
-  const uint64_t pos = c.ids + uint64_t(l) * c.idbits;
+  const uint32_t t = (uint32_t(c.first) + l) & 63;
+  uint32_t entry = t, entries = c.ntris;
+  if (c.has_repeats) {
+    uint64_t all = read_bits(bits, c.repeats, 32);  // the second read only inside the bits
+    if (c.ntris > 32) all |= uint64_t(read_bits(bits, c.repeats + 32, 32)) << 32;
+    const uint64_t r = all & ((uint64_t(2) << ((uint32_t(c.ntris) - 1) & 63)) - 1) & ~uint64_t(1);
+    entry = t - uint32_t(__builtin_popcountll(r & ((uint64_t(2) << t) - 1)));
+    entries -= uint32_t(__builtin_popcountll(r));
+  }
+  const uint64_t highs = c.entries + uint64_t(entries) * c.idbits;
+  const uint64_t pos = c.entries + uint64_t(entry) * c.idbits;
   const uint32_t run = read_bits(bits, pos, c.rb);
-  prim = c.prim_base + read_bits(bits, c.runs + uint64_t(run) * c.pb, c.pb) +
-         read_bits(bits, pos + c.rb, c.ob);
+  prim = c.prim_base + run_start(bits, c, highs, run) + read_bits(bits, pos + c.rb, c.ob);
   geom = c.geom_base + read_bits(bits, pos + c.rb + c.ob, c.gb);
 }
 // primID and geomID of triangle t of the cluster `v`.
@@ -841,8 +916,9 @@ uint64_t next_cache_tag();
 
 // Checks that `size` bytes at `data` hold a well-formed cluster of `children` children (header
 // fields in range, child sizes covering the triangles, every strip inside the topology stream with
-// every vertex index below nverts, every run index below nruns, the stream inside `size`). The
-// decoders read only what this accepts (plus kClusterReadSlack bytes).
+// every vertex index below nverts, every run index below nruns, the run highs' nruns - 1 one bits
+// within kMaxRunHighBits bits, the stream inside `size`). The decoders read only what this accepts
+// (plus kClusterReadSlack bytes).
 bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless, std::string* why);
 
 // Per-scene encoding figures (info --clusters). The four parts add up to the clusters' bytes

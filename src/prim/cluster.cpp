@@ -175,20 +175,19 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     uint8_t p, e;
   };
   // The edges e of prev over which t continues it (bit e of the result), with the corner p of t
-  // in p[e]: t's corners p + 1 and p + 2 are prev's e + 1 and e.
+  // in p[e]: t's corners p + 1 and p + 2 are prev's e + 1 and e (every pair of corners tested: a
+  // degenerate triangle, two corners on one lattice point, may continue over several).
   auto continues = [&](uint32_t prev, uint32_t t, uint8_t(&p)[3]) {
     const auto& P = corners[prev];
     const auto& T = corners[t];
-    int at[3];  // the corner of prev at t's corner m, else -1
-    for (int m = 0; m < 3; ++m) at[m] = T[m] == P[0] ? 0 : T[m] == P[1] ? 1 : T[m] == P[2] ? 2 : -1;
     uint32_t edges = 0;
-    for (int pp = 0; pp < 3; ++pp) {
-      const int e = at[(pp + 2) % 3];
-      if (e >= 0 && at[(pp + 1) % 3] == (e + 1) % 3) {
-        p[e] = uint8_t(pp);
-        edges |= 1u << e;
-      }
-    }
+    for (int ee = 0; ee < 3; ++ee)
+      for (int pp = 0; pp < 3; ++pp)
+        if (T[(pp + 1) % 3] == P[(ee + 1) % 3] && T[(pp + 2) % 3] == P[ee]) {
+          p[ee] = uint8_t(pp);
+          edges |= 1u << ee;
+          break;
+        }
     return edges;
   };
   thread_local std::vector<Step> steps;

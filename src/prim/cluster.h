@@ -882,10 +882,10 @@ bool write_exact_box_frame(const uint8_t* data, const Box3f& box, ExactBoxes8& b
 // neighbouring pixels of a tile, a bounce leaving the surface it hit) skip the strip and vertex
 // decoding. Direct-mapped on the child's address; a scene's tag (Context::cache_tag, unique per
 // scene for the process) is part of the key, so a later scene at the same addresses never reads
-// another's entries. One per tracing thread, allocated at its first cluster ray: 256 entries of
-// 384 bytes (96 KiB, within a 512 KiB L2), not scene memory.
+// another's entries. One per tracing thread, allocated at its first cluster ray: 1024 entries of
+// 384 bytes (384 KiB, within a 512 KiB L2), not scene memory.
 struct DecodeCache {
-  static constexpr uint32_t kLogEntries = 8;
+  static constexpr uint32_t kLogEntries = 10;
   struct Entry {
     Decoded8 d;
     ChildIds ids;                   // of d's triangles

@@ -8,7 +8,7 @@
 //      inside its bytes plus kClusterReadSlack (ASan: the block is copied to an exact-size
 //      buffer), for every child, with ids of every triangle;
 //   2. round trip: the input bytes as vertex codes (lossless: float keys, or the keys of decimals
-//      q x 10^-k, cluster.h's decimal mode) and a topology of up to 63 triangles in up to 8
+//      q x 10^-k, cluster.h's decimal mode) and a topology of up to 64 triangles in up to 8
 //      children: encode(), check() accepts it, and every child decodes to its triangles (in the
 //      encoder's strip order), the codes' positions and the ids bit for bit;
 //   3. lossy: the frame of the multi-leaf boxes on the lattice (cluster::LatticeBoxes8) made for
@@ -185,7 +185,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   }
   // 2. Round trip.
   Reader in{data + 1, size - 1};
-  const uint32_t ntris = 1 + std::min<uint32_t>(62, 4 * (mode >> 4) + in.byte() % 4);
+  const uint32_t ntris = 1 + std::min<uint32_t>(63, 4 * (mode >> 4) + in.byte() % 4);
   round_trip(in, ntris, lossless);
   return 0;
 }

@@ -92,13 +92,14 @@ void check_multileaf_boxes(const std::vector<uint8_t>& data, const ClusterLattic
   }
 }
 
-// Encodes the triangles of `tm` in clusters of random shape (1..8 children of 1..8 triangles, in
-// the order of `order`) and checks that every child decodes to the source's positions and ids bit
+// Encodes the triangles of `tm` in clusters of random shape (1..8 children of 1..8 triangles;
+// `full`: 8 children of 8, 64 triangles, as the builder makes most clusters; in the order of
+// `order`) and checks that every child decodes to the source's positions and ids bit
 // for bit. *decimal (if given) receives the count of clusters in the lossless decimal mode,
 // *clusters the count of clusters.
 void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32_t seed,
                  bool shuffle, size_t* decimal = nullptr, size_t* clusters_out = nullptr,
-                 std::vector<ClusterHeader>* headers = nullptr) {
+                 std::vector<ClusterHeader>* headers = nullptr, bool full = false) {
   const cluster::Quantized z = cluster::quantize(
       tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(), rel_error, lossless);
   ClusterSource src = source_of(tm, z, lossless);
@@ -108,12 +109,12 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
   if (shuffle) std::shuffle(order.begin(), order.end(), rng);
   size_t pos = 0, clusters = 0;
   while (pos < order.size()) {
-    const int k = 1 + int(rng() % 8);
+    const int k = full ? 8 : 1 + int(rng() % 8);
     const uint32_t* prims[8];
     uint32_t counts[8];
     int kk = 0;
     for (; kk < k && pos < order.size(); ++kk) {
-      counts[kk] = std::min<uint32_t>(1 + rng() % 8, uint32_t(order.size() - pos));
+      counts[kk] = std::min<uint32_t>(full ? 8 : 1 + rng() % 8, uint32_t(order.size() - pos));
       prims[kk] = &order[pos];
       pos += counts[kk];
     }
@@ -291,6 +292,32 @@ TEST(ClusterCodec, DecodeEqualsEncodeIdRuns) {
       }
     }
   }
+}
+
+// Full clusters (8 children of 8 triangles, the most a cluster holds): decode equals encode, with
+// repeat bits (two triangles a face) and without, in mesh and in random order.
+TEST(ClusterCodec, DecodeEqualsEncodeFullClusters) {
+  PolyMesh sphere = icosphere(4);
+  PolyMesh soup = random_soup(1000, 43);
+  TriangleMesh tm = triangulate_fan({&sphere, &soup});
+  for (uint32_t share : {1u, 2u})
+    for (bool shuffle : {false, true}) {
+      for (size_t t = 0; t < tm.tri_count(); ++t) tm.prim_ids[t] = uint32_t(t / share);
+      for (bool lossless : {false, true}) {
+        std::vector<ClusterHeader> headers;
+        check_codec(tm, lossless, 1e-5, 7 + share, shuffle, nullptr, nullptr, &headers, true);
+        ASSERT_FALSE(::testing::Test::HasFatalFailure());
+        size_t full = 0, repeats = 0;
+        for (const ClusterHeader& h : headers) {
+          full += h.ntris == 64;
+          repeats += cluster::has_repeats(h);
+        }
+        EXPECT_GE(full, headers.size() - 1);
+        if (share == 2 && !shuffle) {
+          EXPECT_GT(repeats, 0u);  // the soup's clusters: its strips follow the input order
+        }
+      }
+    }
 }
 
 // Lossless clusters of decimal coordinates (cluster.h, the decimal mode): meshes whose coordinates

@@ -38,8 +38,9 @@ namespace slim {
 namespace {
 
 constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
-// Version 6: the clusters' strip steps with a 1-bit edge after a step, their child table as
-// residuals of linear predictions (prim/cluster.h). Any change of a section's layout (a node,
+// Version 6: the clusters' primID run starts as Elias-Fano sequences with repeat bits, their strip
+// steps with a 1-bit edge after a step, their child table as residuals of linear predictions
+// (prim/cluster.h), clusters of up to 64 triangles. Any change of a section's layout (a node,
 // block or context struct), of what its bytes decode to, or of the header needs a new version:
 // the sections are the in-memory structs byte for byte.
 constexpr uint32_t kVersion = 6;

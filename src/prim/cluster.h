@@ -22,8 +22,8 @@
 //     topology: topology_bits(h) bits, each child a generalized strip (below)
 //     ids:      in triangle order, an entry per triangle whose repeat bit is clear (every
 //               triangle without repeat bits): rb = bit_width(nruns - 1) bits run index, ob (the
-//               header's ob less its top bit) bits offset in the run (primID = prim_base + start +
-//               offset), gb bits geomID - geom_base
+//               header's ob but its top bit, the repeat bit; bit 6 is 0) bits offset in the run
+//               (primID = prim_base + start + offset), gb bits geomID - geom_base
 //     run highs: for runs 1..nruns-1 in order, e >> pb in unary (that many 0 bits, then a 1);
 //               the stream ends after their nruns-1 one bits (at most kMaxRunHighBits bits)
 // Child c holds 1 + sizes[c] triangles (3 bits each); k, the child count, is the multi-leaf's.
@@ -740,7 +740,8 @@ SLIM_INLINE uint32_t run_start(const uint8_t* bits, const ChildIds& c, uint64_t 
   const uint64_t e = (uint64_t(high) << c.pb) + read_bits(bits, c.runs + uint64_t(i) * c.pb, c.pb);
   return uint32_t(e + (uint64_t(run) << c.ob));
 }
-// primID and geomID of triangle `first + l` (bits: the cluster's stream). With repeat bits,
+// primID and geomID of triangle `first + l` (bits: the cluster's stream; l below the child's
+// triangle count: a padding lane names a triangle of the next child, or none). With repeat bits,
 // triangle t's entry is t less the repeat bits of triangles 1..t (triangle 0's is ignored: an
 // entry index never underflows), and the entries are ntris less all of them.
 SLIM_INLINE void decode_ids(const uint8_t* bits, const ChildIds& c, uint32_t l, uint32_t& geom,

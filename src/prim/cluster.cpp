@@ -493,8 +493,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   w.put(glo, h.hb);
   for (int c = 1; c < k; ++c) {
     const uint32_t first = child_first(sizes, uint32_t(c));
-    w.put(child_off[c] - ((first * L.ts) >> 12) + L.tbias, L.tb);
-    w.put(child_cnt[c] - ((first * L.vs) >> 12) + L.vbias, L.vbw);
+    w.put(child_off[c] - predicted_offset(L, first), L.tb);
+    w.put(child_cnt[c] - predicted_vertex(L, first), L.vbw);
   }
   for (uint32_t i = 0; i < nv; ++i)
     for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], axis_bits(h, a));

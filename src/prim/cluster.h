@@ -349,6 +349,16 @@ SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, bool lossless) {
   l.end = l.topo + tbits;
   return l;
 }
+// The child table's predictions for the child after `first` triangles (the header comment's
+// formula, its bias subtracted, in 32-bit wrapping arithmetic): the entry's fields are the child's
+// topology offset and first new vertex less these (the encoder), and these plus the fields give
+// them back (the decoders).
+SLIM_INLINE uint32_t predicted_offset(const Layout& L, uint32_t first) {
+  return ((first * L.ts) >> 12) - L.tbias;
+}
+SLIM_INLINE uint32_t predicted_vertex(const Layout& L, uint32_t first) {
+  return ((first * L.vs) >> 12) - L.vbias;
+}
 // Bytes of a cluster's data (header + stream) with `tail` bits of ids' entries and run highs,
 // without the read slack.
 SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, bool lossless, uint64_t tail) {
@@ -371,8 +381,8 @@ SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get
     const uint32_t x = get(e, L.tb + L.vbw);
     // A wrong residual gives an offset or count beyond the stream or the vertices (the 32-bit
     // wrap of a negative one too): the checker's end and index tests reject it.
-    pos += uint32_t((x & ((1u << L.tb) - 1)) + ((first * L.ts) >> 12) - L.tbias);
-    cnt = (x >> L.tb) + ((first * L.vs) >> 12) - L.vbias;
+    pos += uint32_t((x & ((1u << L.tb) - 1)) + predicted_offset(L, first));
+    cnt = (x >> L.tb) + predicted_vertex(L, first);
   }
   bool ok = true;
   const uint32_t ib = index_bits(h), dmask = (1u << ib) - 1;
@@ -475,8 +485,8 @@ SLIM_INLINE void decode_strip_packed(const ClusterHeader& h, const Layout& L, co
   uint32_t cnt = 0;
   if (c) {
     const uint32_t x = read_bits(bits, L.table + uint64_t(c - 1) * (L.tb + L.vbw), L.tb + L.vbw);
-    pos += (x & ((1u << L.tb) - 1)) + ((first * L.ts) >> 12) - L.tbias;
-    cnt = (x >> L.tb) + ((first * L.vs) >> 12) - L.vbias;
+    pos += uint32_t((x & ((1u << L.tb) - 1)) + predicted_offset(L, first));
+    cnt = (x >> L.tb) + predicted_vertex(L, first);
   }
   const uint32_t ib = index_bits(h), dmask = (1u << ib) - 1;
   // One reference from the low bits of y: the vertex; y shifted past it, its width added to s.

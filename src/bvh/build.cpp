@@ -359,6 +359,11 @@ class Builder {
     }
   }
 
+  // Orders refs by their centroids on axis a (the object median and full_blocks' counts).
+  static auto centroid_less(int a) {
+    return [a](const Ref& x, const Ref& y) { return x.c2(a) < y.c2(a); };
+  }
+
   // The split of the node over refs [begin, end): false if it becomes a leaf, else the refs are
   // partitioned at mid with the children's ranges in left and right.
   bool split(uint32_t begin, uint32_t end, const Range& range, int depth, uint32_t& mid,
@@ -395,8 +400,7 @@ class Builder {
       if (reduce_max(cext) > 0.0f) {
         int a = max_dim(cext);
         Ref* refs = refs_.data();
-        std::nth_element(refs + begin, refs + mid, refs + end,
-                         [a](const Ref& x, const Ref& y) { return x.c2(a) < y.c2(a); });
+        std::nth_element(refs + begin, refs + mid, refs + end, centroid_less(a));
       }
       left = range_of(begin, mid);
       right = range_of(mid, end);
@@ -427,8 +431,7 @@ class Builder {
     const float before = cost(left, right, l);
     const int axis = split.axis;
     Ref* refs = refs_.data();
-    std::nth_element(refs + begin, refs + begin + nl, refs + end,
-                     [axis](const Ref& x, const Ref& y) { return x.c2(axis) < y.c2(axis); });
+    std::nth_element(refs + begin, refs + begin + nl, refs + end, centroid_less(axis));
     Range l2 = range_of(begin, begin + nl), r2 = range_of(begin + nl, end);
     if (cost(l2, r2, nl) <= before) {
       mid = begin + nl;

@@ -658,14 +658,19 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
   if (data_bytes(h, children, lossless, 0) > size) return fail("stream runs past the data");
   const uint8_t* bits = data + sizeof(ClusterHeader);
   const Layout L = layout(h, children, lossless);
-  // Bits at or beyond L.end (inside `size` or not) read as 0 here; the decoders may read them
-  // (with the slack) but use none of them on a block this accepts.
-  auto get = [&](uint64_t pos, uint32_t w) {
-    uint32_t v = 0;
-    for (uint32_t b = 0; b < w && pos + b < L.end; ++b)
-      v |= uint32_t((bits[(pos + b) >> 3] >> ((pos + b) & 7)) & 1) << b;
-    return v;
+  // Readers of w <= 32 bits at pos to which bits at or beyond `limit` read as 0: the strips' and
+  // repeat bits' (limit L.end, inside `size` or not: the decoders may read beyond it, with the
+  // slack, but use none of those bits on a block this accepts) and the id entries' and run highs'
+  // (limit: the data's end).
+  auto reader = [&](uint64_t limit) {
+    return [bits, limit](uint64_t pos, uint32_t w) {
+      uint32_t v = 0;
+      for (uint32_t b = 0; b < w && pos + b < limit; ++b)
+        v |= uint32_t((bits[(pos + b) >> 3] >> ((pos + b) & 7)) & 1) << b;
+      return v;
+    };
   };
+  const auto get = reader(L.end);
   for (uint32_t c = 0; c < children; ++c) {
     const uint32_t n = child_size(sizes, c);
     uint32_t idx[3][8];
@@ -686,10 +691,9 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
   if (data_bytes(h, children, lossless, uint64_t(entries) * L.idbits) > size)
     return fail("stream runs past the data (id entries)");
   const uint64_t avail = 8 * (size - sizeof(ClusterHeader));
-  auto get_bit = [&](uint64_t pos) { return uint32_t(bits[pos >> 3] >> (pos & 7)) & 1; };
+  const auto get_data = reader(avail);
   for (uint32_t e = 0; e < entries; ++e) {
-    uint32_t run = 0;
-    for (uint32_t b = 0; b < L.rb; ++b) run |= get_bit(L.end + uint64_t(e) * L.idbits + b) << b;
+    const uint32_t run = get_data(L.end + uint64_t(e) * L.idbits, L.rb);
     if (run >= h.nruns) return fail("run index " + std::to_string(run) + " >= run count");
   }
   // The run highs: nruns - 1 one bits within kMaxRunHighBits bits and `size` (the stream's end).
@@ -699,7 +703,7 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
     if (pos >= avail) return fail("stream runs past the data (run highs)");
     if (pos - highs >= kMaxRunHighBits)
       return fail("run highs beyond " + std::to_string(kMaxRunHighBits) + " bits");
-    ones += get_bit(pos);
+    ones += get_data(pos, 1);
   }
   return true;
 }

@@ -59,7 +59,7 @@ inline NodeKind node_kind(Nodes n) {
   return NodeKind::Bvh8;
 }
 
-inline CollapseRule collapse_rule(const BuildOptions& opt) {
+inline CollapseRule collapse_rule(const BuildOptions& opt, NodeKind kind) {
   switch (opt.collapse) {
     case Collapse::Optimal:
       return CollapseRule::Optimal;
@@ -68,7 +68,7 @@ inline CollapseRule collapse_rule(const BuildOptions& opt) {
     case Collapse::Auto:
       break;
   }
-  return default_collapse_rule(node_kind(opt.nodes));
+  return default_collapse_rule(kind);
 }
 
 // The structure check of scene files (OpenOptions::check_structure) needs every leaf format to
@@ -308,7 +308,7 @@ class BvhScene : public Scene::Impl {
                                                  2 * uint64_t(prim_count));
     NodeKind kind = node_kind(opt.nodes);
     if (hooks.quantized_inner && kind == NodeKind::CompressedLeaf) kind = NodeKind::QCompressedLeaf;
-    bvh = collapse_bvh8(b2, kind, enc, collapse_rule(opt), progress.get());
+    bvh = collapse_bvh8(b2, kind, enc, collapse_rule(opt, kind), progress.get());
     if (progress) progress->finish();
     double collapse_s = secs(t0);
     bounds = bvh.bounds;

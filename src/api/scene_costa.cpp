@@ -490,7 +490,8 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const MeshList& meshes, const Bui
         throw std::logic_error("costa: a leaf block is not a range of the leaf order");
     std::memcpy(out, &b, sizeof(b));
   };
-  Bvh8 bvh = collapse_bvh8(b2, node_kind(opt.nodes), enc, collapse_rule(opt), progress.get());
+  const NodeKind kind = node_kind(opt.nodes);
+  Bvh8 bvh = collapse_bvh8(b2, kind, enc, collapse_rule(opt, kind), progress.get());
   if (progress) progress->finish();
 
   const uint64_t node_bytes = bvh.node_bytes, multileaf_bytes = bvh.multileaf_bytes;

@@ -301,20 +301,41 @@ class Collapser {
   // cost(n, j) = the least SAH cost of covering subtree n by at most j roots: one root is n
   // itself (a leaf, a multi-leaf, or a wide node over the best 8-root cover of its children),
   // more roots split j between the two children. Costs as sah_cost counts them: node or
-  // multi-leaf visit = 1, leaf block test = 1, areas relative to the root. choice_[n][j-1] = the
-  // roots (left, right) of that cover, (0, 0) for n itself; wide_[n] = those of the 8-root cover
-  // of n's children when n is a wide node. Used instead of the slot rule of gather() for BVH8
-  // and QBVH8 (see run()).
+  // multi-leaf visit = 1, leaf block test = 1, areas relative to the root, and a wide node's
+  // memory node_cost_ (0 but for the clusters: kClusterNodeCost). choice_[n][j-1] = the roots
+  // (left, right) of that cover, (0, 0) for n itself; wide_[n] = those of the 8-root cover of n's
+  // children when n is a wide node. Used instead of the slot rule of gather() by the rule
+  // CollapseRule::Optimal (see run()).
   void optimal_collapse() {
     // Written for the inner nodes only (expand() stops at terminals without reading them): no
     // zero fill of 18 bytes per node.
     const size_t nn = b2_.nodes.size();
     choice_ = LargeArray<std::array<std::array<uint8_t, 2>, 8>>(nn);
     wide_ = LargeArray<std::array<uint8_t, 2>>(nn);
+    if (kind_ == NodeKind::QCompressedLeaf) node_cost_ = kClusterNodeCost * mean_terminal_area();
     optimal_dp(0);
   }
 
   bool terminal(uint32_t i) const { return b2_.nodes[i].is_leaf() || multileaf_candidate(i); }
+
+  // The mean area of the terminals (the collapse's leaves and multi-leaves), relative to the root.
+  float mean_terminal_area() const {
+    double sum = 0;
+    uint64_t count = 0;
+    std::vector<uint32_t> stack{0};
+    while (!stack.empty()) {
+      const uint32_t i = stack.back();
+      stack.pop_back();
+      if (terminal(i)) {
+        sum += double(b2_.nodes[i].box.half_area()) / root_area_;
+        ++count;
+      } else {
+        stack.push_back(b2_.nodes[i].first);
+        stack.push_back(b2_.nodes[i].first + 1);
+      }
+    }
+    return count ? float(sum / double(count)) : 0.0f;
+  }
 
   struct Cover {
     std::array<float, 8> cost;  // cost(n, j), j = 1..8
@@ -355,7 +376,7 @@ class Collapser {
     }
     std::array<float, 8>& C = out.cost;
     std::array<std::array<uint8_t, 2>, 8>& ch = choice_[i];
-    C[0] = a + D[8];
+    C[0] = a + node_cost_ + D[8];
     ch[0] = {0, 0};
     wide_[i] = {K[8], uint8_t(8 - K[8])};
     for (int j = 2; j <= 8; ++j) {
@@ -594,6 +615,7 @@ class Collapser {
   LargeArray<uint64_t> node_size_, leaf_size_;
   std::unordered_map<uint32_t, std::vector<uint8_t>> multi_cache_;
   double root_area_ = 1;
+  float node_cost_ = 0;  // optimal_dp's cost of a wide node beyond its visit (kClusterNodeCost)
   PhaseProgress* progress_ = nullptr;
 };
 

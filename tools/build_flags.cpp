@@ -44,11 +44,12 @@ void add_build_options(CLI::App& app, BuildOptions& tuning) {
       ->check(CLI::Range(0, 4096))
       ->capture_default_str()
       ->group(group);
-  add_choice(app, "--collapse", tuning.collapse,
-             {{"auto", Collapse::Auto}, {"optimal", Collapse::Optimal}, {"slots", Collapse::Slots}},
-             "how the binary BVH becomes 8-wide nodes: optimal (SAH-optimal descendants), slots "
-             "(open the largest child until 8 slots are taken), auto (slots for compressed-leaf "
-             "nodes, optimal otherwise)");
+  add_choice(
+      app, "--collapse", tuning.collapse,
+      {{"auto", Collapse::Auto}, {"optimal", Collapse::Optimal}, {"slots", Collapse::Slots}},
+      "how the binary BVH becomes 8-wide nodes: optimal (SAH-optimal descendants), slots "
+      "(open the largest child until 8 slots are taken), auto (slots for the compressed-leaf "
+      "BVH, optimal otherwise; for the clusters optimal counting a node's memory)");
   app.add_option("--grid-parts", tuning.grid_parts,
                  "grid formats under compressed-leaf nodes: multi-leaf children per sub-grid (1, 2 "
                  "or 4; 0 = 4 under compressed-leaf nodes, 1 otherwise)")

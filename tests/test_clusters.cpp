@@ -769,6 +769,14 @@ TEST(ClusterScene, StatisticsAndSizes) {
   EXPECT_GT(detail(l, "multileaf_count"), 0);
   EXPECT_EQ(detail(l, "multileaf_bytes"),
             double(sizeof(cluster::ExactBoxes8)) * detail(l, "multileaf_count"));
+  // The clusters lie in the leaf arena without padding (ClusterLeaf::kBytePacked), and the memory
+  // counts the arenas as kept: the clusters' data, then the read slack of the leaf arena and of
+  // the (here empty) side arena.
+  for (const Scene* c : {&s, &l}) {
+    ASSERT_EQ(detail(*c, "leaf_count"), detail(*c, "leaves_in_multileaf"));
+    EXPECT_EQ(double(c->memory().geometry_bytes),
+              detail(*c, "leaf_data_bytes") + 2 * kClusterReadSlack);
+  }
   for (const char* config : {"clbvh-tri4v", "clbvh-compact"}) {
     Scene o = Scene::build(torus, BuildOptions::from_config(config));
     EXPECT_GT(detail(o, "multileaf_count"), 0) << config;

@@ -193,10 +193,12 @@ class BvhScene : public Scene::Impl {
   // index side tables check those tables' own fields first (their check_opened).
   void check_bvh(const std::string& p, bool deep) const {
     constexpr uint32_t hb = multileaf_header_bytes<Leaf>();
-    check_bvh_root(bvh, p, Leaf::kBlockBytes, hb);
+    constexpr uint32_t align = leaf_packed<Leaf>() ? 1 : 4;
+    check_bvh_root(bvh, p, Leaf::kBlockBytes, hb, align);
     if (!deep) return;
     BvhWalkHooks h;
     h.multileaf_header_bytes = hb;
+    h.leaf_align = align;
     const uint8_t* leaves = bvh.leaves.data();
     h.block = [&](uint64_t off) { return fault_text(Leaf::check_block(ctx, leaves + off)); };
     if constexpr (HasMultiLeafLayout<Leaf>)
@@ -281,6 +283,7 @@ class BvhScene : public Scene::Impl {
     LeafEncoder enc;
     enc.block_prims = Leaf::kBlockPrims;
     enc.block_bytes = Leaf::kBlockBytes;
+    enc.byte_packed = leaf_packed<Leaf>();
     enc.encode = [&](const uint32_t* prims, uint32_t n, uint8_t* out) {
       Leaf::encode(src, prims, n, out);
     };
@@ -312,8 +315,10 @@ class BvhScene : public Scene::Impl {
     if (progress) progress->finish();
     double collapse_s = secs(t0);
     bounds = bvh.bounds;
-    mem.bvh_bytes = bvh.node_bytes + bvh.multileaf_bytes;
-    mem.geometry_bytes += bvh.leaf_data_bytes;
+    // The arenas as kept: the leaf data with the padding between leaves (the multi-leaf headers
+    // are BVH memory).
+    mem.bvh_bytes = bvh.nodes.size() + bvh.multileaf_bytes;
+    mem.geometry_bytes += bvh.leaves.size() - bvh.multileaf_bytes;
     stats.primitives = prim_count;
     const Bvh8Stats& s = bvh.stats;
     auto& d = stats.details;

@@ -429,6 +429,7 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   s->build(src, uint32_t(tm.tri_count()), o, hooks);
   // The decoders' 64-bit loads may read up to kClusterReadSlack bytes past a cluster's data.
   s->bvh.leaves.append(kClusterReadSlack, 1);
+  s->mem.geometry_bytes += kClusterReadSlack;
   side->resize(side->size() + kClusterReadSlack, 0);
   side->shrink_to_fit();
   s->ctx.lattice = lat;

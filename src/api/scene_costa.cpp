@@ -494,8 +494,10 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const MeshList& meshes, const Bui
   Bvh8 bvh = collapse_bvh8(b2, kind, enc, collapse_rule(opt, kind), progress.get());
   if (progress) progress->finish();
 
-  const uint64_t node_bytes = bvh.node_bytes, multileaf_bytes = bvh.multileaf_bytes;
-  const uint64_t leaf_data_bytes = bvh.leaf_data_bytes;
+  // The arenas as kept: the leaf data with the padding between leaves (the multi-leaf headers are
+  // BVH memory).
+  const uint64_t node_bytes = bvh.nodes.size(), multileaf_bytes = bvh.multileaf_bytes;
+  const uint64_t leaf_data_bytes = bvh.leaves.size() - bvh.multileaf_bytes;
   const Bvh8Stats b8 = bvh.stats;
   const Box3f bounds = bvh.bounds;
   std::unique_ptr<Scene::Impl> s = make_scene(flags, data, std::move(bvh), expected);

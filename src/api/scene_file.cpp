@@ -419,7 +419,7 @@ void restore_figures(const SceneFigures& f, Scene::Impl& s) {
 // ---- the walk of OpenOptions::check_structure -------------------------------------------------
 
 void check_bvh_root(const Bvh8& bvh, const std::string& p, uint32_t block_bytes,
-                    uint32_t multileaf_header_bytes) {
+                    uint32_t multileaf_header_bytes, uint32_t leaf_align) {
   if (bvh.block_bytes != block_bytes)
     throw SectionFault{p + "bvh.meta", 0,
                        "leaf block size " + std::to_string(bvh.block_bytes) + ", the format's is " +
@@ -439,11 +439,11 @@ void check_bvh_root(const Bvh8& bvh, const std::string& p, uint32_t block_bytes,
            bvh.nodes.size() - off >= sizeof(QNode8);
       break;
     case kRefLeaf:
-      ok = NodeRef::blocks(bvh.root) > 0 && off % 4 == 0 && off <= bvh.leaves.size() &&
+      ok = NodeRef::blocks(bvh.root) > 0 && off % leaf_align == 0 && off <= bvh.leaves.size() &&
            bvh.leaves.size() - off >= uint64_t(NodeRef::blocks(bvh.root)) * block_bytes;
       break;
     case kRefMulti:
-      ok = NodeRef::blocks(bvh.root) > 0 && off % 4 == 0 && off <= bvh.leaves.size() &&
+      ok = NodeRef::blocks(bvh.root) > 0 && off % leaf_align == 0 && off <= bvh.leaves.size() &&
            bvh.leaves.size() - off >= multileaf_header_bytes;
       break;
     default:
@@ -507,14 +507,14 @@ struct Walker {
       case kRefLeaf: {
         const uint32_t nb = NodeRef::blocks(ref);
         if (nb == 0) leaves_fault(off, "leaf of zero blocks");
-        if (off % 4 != 0) leaves_fault(off, "misaligned leaf");
+        if (off % h.leaf_align != 0) leaves_fault(off, "misaligned leaf");
         for (uint32_t i = 0; i < nb; ++i) block(off + uint64_t(i) * b.block_bytes);
         return;
       }
       case kRefMulti: {
         const uint32_t k = NodeRef::blocks(ref);
         if (k == 0 || k > 8) leaves_fault(off, "multi-leaf of " + std::to_string(k) + " children");
-        if (off % 4 != 0) leaves_fault(off, "misaligned multi-leaf");
+        if (off % h.leaf_align != 0) leaves_fault(off, "misaligned multi-leaf");
         if (!fits(off, h.multileaf_header_bytes, b.leaves.size()))
           leaves_fault(off, "multi-leaf outside the leaf arena");
         if (h.multi) {

@@ -89,6 +89,8 @@ struct BvhWalkHooks {
   std::function<std::string(uint64_t off)> block;
   std::function<std::string(uint64_t off, uint32_t children)> multi;  // layouts with own data
   uint32_t multileaf_header_bytes = sizeof(MultiLeaf8);  // MultiLeafBoxDecoder::header_bytes
+  uint32_t leaf_align =
+      4;  // leaves and multi-leaves start at multiples of it (traverse.h leaf_packed)
 };
 // A leaf format's check answer as the walk takes it: leaves answer nullptr / an empty string for
 // a good block, else what is wrong.
@@ -97,6 +99,6 @@ inline std::string fault_text(std::string what) { return what; }
 void walk_bvh_checked(const Bvh8& bvh, const std::string& prefix, const BvhWalkHooks& hooks);
 // The cheap check every open runs: root reference and block size.
 void check_bvh_root(const Bvh8& bvh, const std::string& prefix, uint32_t block_bytes,
-                    uint32_t multileaf_header_bytes = sizeof(MultiLeaf8));
+                    uint32_t multileaf_header_bytes = sizeof(MultiLeaf8), uint32_t leaf_align = 4);
 
 }  // namespace slim

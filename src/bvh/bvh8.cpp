@@ -213,12 +213,10 @@ class Collapser {
 
  private:
   static uint64_t round16(uint64_t x) { return (x + 15) & ~uint64_t(15); }
-  // Multi-leaf sizes: 16-byte multiples, but 4-byte ones for QCompressedLeaf (the cluster formats,
-  // whose header, quantized boxes and bit stream are read with unaligned loads; the padding would
-  // cost about 1 bit per triangle).
-  uint64_t round_multileaf(uint64_t x) const {
-    return kind_ == NodeKind::QCompressedLeaf ? (x + 3) & ~uint64_t(3) : round16(x);
-  }
+  // Leaf and multi-leaf sizes: 16-byte multiples, or no padding for layouts that read at any byte
+  // address (LeafEncoder::byte_packed: the clusters, where the padding to 4 bytes cost 1.5 bytes a
+  // cluster).
+  uint64_t round_leaf(uint64_t x) const { return enc_.byte_packed ? x : round16(x); }
 
   // fn(c) for c = 0..k-1: as parallel tasks if the subtree of node i is large (and `parallel`).
   template <class F>
@@ -452,7 +450,7 @@ class Collapser {
       uint32_t blocks = leaf_blocks(i);
       if (blocks > kMaxLeafBlocks) throw std::logic_error("BVH leaf too large");
       node_size_[i] = 0;
-      leaf_size_[i] = round16(uint64_t(blocks) * enc_.block_bytes);
+      leaf_size_[i] = round_leaf(uint64_t(blocks) * enc_.block_bytes);
       s.leaf_data_bytes += uint64_t(blocks) * enc_.block_bytes;
       count_leaf(i, s);
       return s;
@@ -470,7 +468,7 @@ class Collapser {
         data = uint64_t(k) * enc_.block_bytes;
       }
       node_size_[i] = 0;
-      leaf_size_[i] = round_multileaf(enc_.multileaf_header_bytes + data);
+      leaf_size_[i] = round_leaf(enc_.multileaf_header_bytes + data);
       s.leaf_data_bytes += data;
       s.multileaf_bytes += enc_.multileaf_header_bytes;
       s.st.multileaf++;

@@ -167,6 +167,9 @@ struct LeafEncoder {
   uint32_t multileaf_header_bytes = sizeof(MultiLeaf8);
   std::function<void(const uint8_t* data, int k, const Box3f* boxes, uint8_t* header)>
       multileaf_boxes;
+  // The layout reads its leaves and multi-leaves at any byte address (the clusters: unaligned
+  // loads only): the collapse packs them without padding (leaf_packed in traverse.h).
+  bool byte_packed = false;
 };
 
 struct Bvh8Stats {

@@ -144,6 +144,15 @@ constexpr uint32_t multileaf_header_bytes() {
   else
     return sizeof(MultiLeaf8);
 }
+// Its leaves and multi-leaves may start at any byte (L::kBytePacked: the layout reads them with
+// unaligned loads only); others start at 4-byte multiples (the collapse pads them to 16).
+template <class L>
+constexpr bool leaf_packed() {
+  if constexpr (requires { L::kBytePacked; })
+    return L::kBytePacked;
+  else
+    return false;
+}
 // Its multi-leaf data is written by L::encode_multileaf (clbvh-compact's vertex dictionary).
 template <class L>
 concept HasMultiLeafEncoder = requires {

@@ -1011,6 +1011,9 @@ struct ClusterLeaf {
   static constexpr uint32_t kBlockPrims = 8;
   static constexpr uint32_t kBlockBytes = 8;
   static constexpr bool kMultiLeafLayout = true;
+  // Every read of a cluster, its boxes and its isolated leaves' blocks is an unaligned load or a
+  // memcpy: the collapse packs them without padding (traverse.h leaf_packed).
+  static constexpr bool kBytePacked = true;
 
   // Scene files' structure check (OpenOptions::check_structure): the cluster a multi-leaf holds
   // (`avail` bytes from `data` to the end of the leaf arena, whose last kClusterReadSlack bytes
@@ -1112,15 +1115,22 @@ struct ClusterLeaf {
   static constexpr bool kMultiLeafBoxes = true;
   static constexpr uint32_t kMultiLeafHeaderBytes =
       kLossless ? sizeof(cluster::ExactBoxes8) : sizeof(cluster::LatticeBoxes8);
+  // Multi-leaves lie at any byte (kBytePacked): the boxes are written through a copy (an
+  // ExactBoxes8's extents are 2-byte fields).
   static void write_multileaf_frame(const ClusterSource& s, const uint8_t* data, const Box3f& box,
                                     uint8_t* header, float* start, float* extent) {
     bool ok;
-    if constexpr (kLossless)
-      ok = cluster::write_exact_box_frame(
-          data, box, *reinterpret_cast<cluster::ExactBoxes8*>(header), start, extent);
-    else
-      ok = cluster::write_box_frame(
-          s.lattice, data, box, *reinterpret_cast<cluster::LatticeBoxes8*>(header), start, extent);
+    if constexpr (kLossless) {
+      cluster::ExactBoxes8 b;
+      std::memcpy(&b, header, sizeof(b));
+      ok = cluster::write_exact_box_frame(data, box, b, start, extent);
+      std::memcpy(header, &b, sizeof(b));
+    } else {
+      cluster::LatticeBoxes8 b;
+      std::memcpy(&b, header, sizeof(b));
+      ok = cluster::write_box_frame(s.lattice, data, box, b, start, extent);
+      std::memcpy(header, &b, sizeof(b));
+    }
     if (!ok)
       throw Error(
           "cluster: a cluster's box does not fit its multi-leaf frame (coordinates near the "

@@ -699,9 +699,12 @@ SLIM_INLINE View view(const ClusterLattice& lat, const uint8_t* data, uint32_t c
   v.bits = data + sizeof(ClusterHeader);
   v.L = layout(v.h, children, lat, kLossless);
   v.sizes = child_sizes(v.h);
-  v.anchor[0] = read_bits(v.bits, 0, v.L.aw[0]);
-  v.anchor[1] = read_bits(v.bits, v.L.aw[0], v.L.aw[1]);
-  v.anchor[2] = read_bits(v.bits, v.L.aw[0] + v.L.aw[1], v.L.aw[2]);
+  uint64_t x;  // anchors 0 and 1 (at most 64 bits together)
+  std::memcpy(&x, v.bits, 8);
+  const uint32_t aw0 = v.L.aw[0], aw1 = v.L.aw[1];
+  v.anchor[0] = uint32_t(x & ((uint64_t(1) << aw0) - 1));
+  v.anchor[1] = uint32_t((x >> aw0) & ((uint64_t(1) << aw1) - 1));
+  v.anchor[2] = read_bits(v.bits, aw0 + aw1, v.L.aw[2]);
   return v;
 }
 
@@ -831,17 +834,28 @@ SLIM_INLINE void decode_ids(const ClusterLattice& lat, const uint8_t* data, uint
 // lattice, and where the anchors lie in the stream's first 16 bytes: anchor a's bits first[a] ..
 // first[a] + width[a] (the lattice's anchor_bits, first[a] <= 48), for the AVX2 path as the 4
 // bytes from its first byte (a pshufb control: byte 48 / 8 + 3 at most), a right shift in them
-// and a mask.
+// and a mask; the origin, the step and its bits as vectors (memory operands of the frame's
+// instructions, no broadcasts per visit).
 struct LatticeFrame {
   ClusterLattice lat;
   alignas(16) uint8_t bytes[16] = {};
   alignas(16) uint32_t shift[4] = {};
   alignas(16) uint32_t mask[4] = {};
+  alignas(16) float origin[4] = {};        // lane 3: 0
+  alignas(16) float step[4] = {};          // 4 x lat.step
+  alignas(16) uint32_t step_bits[4] = {};  // 4 x lat.step's bits
   uint32_t first[3] = {}, width[3] = {};
 };
 SLIM_INLINE LatticeFrame lattice_frame(const ClusterLattice& lat) {
   LatticeFrame f;
   f.lat = lat;
+  uint32_t step_bits;
+  std::memcpy(&step_bits, &lat.step, 4);
+  for (int a = 0; a < 4; ++a) {
+    f.origin[a] = a < 3 ? lat.origin[a] : 0.0f;
+    f.step[a] = lat.step;
+    f.step_bits[a] = step_bits;
+  }
   uint32_t o = 0;
   for (int a = 0; a < 3; ++a) {
     const uint32_t w = std::min<uint32_t>(lat.anchor_bits[a], 24);  // check_opened: <= 24
@@ -870,8 +884,8 @@ SLIM_INLINE void box_start(const LatticeFrame& f, const uint8_t* bits, float* st
   const __m128i q =
       _mm_and_si128(_mm_srlv_epi32(x, _mm_load_si128(reinterpret_cast<const __m128i*>(f.shift))),
                     _mm_load_si128(reinterpret_cast<const __m128i*>(f.mask)));
-  const __m128 origin = _mm_loadu_ps(f.lat.origin);  // lane 3: the step (unused)
-  _mm_storeu_ps(start, _mm_fmadd_ps(_mm_cvtepi32_ps(q), _mm_set1_ps(f.lat.step), origin));
+  _mm_storeu_ps(start,
+                _mm_fmadd_ps(_mm_cvtepi32_ps(q), _mm_load_ps(f.step), _mm_load_ps(f.origin)));
 #else
   for (int a = 0; a < 3; ++a)
     start[a] = lattice_coord(f.lat, a, read_bits(bits, f.first[a], f.width[a]));
@@ -890,10 +904,8 @@ SLIM_INLINE void box_frame(const LatticeFrame& f, const uint8_t* p, float* start
 #if defined(SLIM_SIMD_AVX2)
   uint32_t sc;
   std::memcpy(&sc, scale, 4);  // the 3 scale bytes and the cluster header's first
-  uint32_t step_bits;
-  std::memcpy(&step_bits, &f.lat.step, 4);
   const __m128i e = _mm_add_epi32(_mm_slli_epi32(_mm_cvtepu8_epi32(_mm_cvtsi32_si128(int(sc))), 20),
-                                  _mm_set1_epi32(int(step_bits)));
+                                  _mm_load_si128(reinterpret_cast<const __m128i*>(f.step_bits)));
   _mm_storeu_ps(extent, _mm_castsi128_ps(e));
 #else
   for (int a = 0; a < 3; ++a) extent[a] = box_extent(f.lat, scale[a]);
@@ -1228,7 +1240,6 @@ struct ClusterLeaf {
     const uint8_t* data;
     uint32_t children;
     cluster::DecodeCache* cache;
-    const ClusterLattice* lattice;
     mutable bool read = false;
     // The view, written at the first get(): left uninitialized until then, since most visits
     // never read it (a default View would be some 30 stores per visit).
@@ -1237,17 +1248,17 @@ struct ClusterLeaf {
       cluster::View v;
     };
     mutable Lazy lazy;
-    SLIM_INLINE const cluster::View& get() const {
+    SLIM_INLINE const cluster::View& get(const ClusterLattice& lat) const {
       if (!read) {
-        lazy.v = cluster::view<kLossless>(*lattice, data, children);
+        lazy.v = cluster::view<kLossless>(lat, data, children);
         read = true;
       }
       return lazy.v;
     }
   };
-  static SLIM_INLINE MultiLeafView multileaf_view(const Context& ctx, const uint8_t* data,
+  static SLIM_INLINE MultiLeafView multileaf_view(const Context&, const uint8_t* data,
                                                   uint32_t children) {
-    return {data, children, &cluster::decode_cache(), &ctx.lattice};
+    return {data, children, &cluster::decode_cache()};
   }
   template <bool kAny, class Stats>
   static SLIM_INLINE bool intersect_in_view(const Context& ctx, const MultiLeafView& view, int i,
@@ -1255,7 +1266,7 @@ struct ClusterLeaf {
     using namespace simd;
     cluster::DecodeCache::Entry& en = view.cache->slot(view.data, i);
     if (en.bits != view.data || en.child != i || en.tag != ctx.cache_tag) {
-      const cluster::View& v = view.get();
+      const cluster::View& v = view.get(ctx.lattice);
       cluster::decode_child<kLossless>(ctx.lattice, v, i, en.d);
       en.ids = cluster::child_ids(v, uint32_t(en.d.first));
       en.bits = view.data;

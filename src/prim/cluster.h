@@ -146,7 +146,8 @@ struct ClusterHeader {
                      // lossless coordinate mode (0 float keys, 1 + k decimal q x 10^-k, k <= 9)
   uint8_t idw[3];    // 4 x 6 bits from bit 0 (each <= 32): pb, bits per primID run start's low
                      // part (Elias-Fano); gb, per geomID offset; bb and hb, of prim_base and
-                     // geom_base in the stream (run_low_bits(), geom_bits(), base_bits() below)
+                     // geom_base in the stream (run_low_bits(), geom_bits(), prim_base_bits(),
+                     // geom_base_bits() below)
   uint8_t nruns;     // primID runs, 1..the cluster's triangles
   uint8_t ob;        // low 6 bits: bits per primID offset in its run (<= 32); top bit: repeats
   uint8_t sizes[3];  // child c holds 1 + (the 3 bits at 3c) triangles
@@ -1013,12 +1014,12 @@ SLIM_INLINE DecodeCache& decode_cache() {
 // A tag no scene had before (1, 2, ...).
 uint64_t next_cache_tag();
 
-// Checks that `size` bytes at `data` hold a well-formed cluster of `children` children (header
-// fields in range, child sizes covering the triangles, every strip inside the topology stream with
-// every vertex index below nverts, every run index below nruns, the run highs' nruns - 1 one bits
-// within kMaxRunHighBits bits, the stream inside `size`). The decoders read only what this accepts
-// (plus kClusterReadSlack bytes).
-// `lat`: the scene's lattice (lossy: the anchors' widths).
+// Checks that `size` bytes at `data` hold a well-formed cluster of `children` children on the
+// scene's lattice `lat` (lossy: the anchors' widths, at most 24 bits; header fields in range, no
+// child sizes beyond the child count, every strip inside the topology stream with every vertex
+// index below nverts, every run index below nruns, the run highs' nruns - 1 one bits within
+// kMaxRunHighBits bits, the stream inside `size`). The decoders read only what this accepts (plus
+// kClusterReadSlack bytes).
 bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterLattice& lat,
            bool lossless, std::string* why);
 // The lattice fields the decoders take as given (lossy: anchor widths of at most 24 bits), else

@@ -582,6 +582,35 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 0x40));  // bit 6 of ob: no field
 }
 
+// A cluster whose stream takes fewer bits than the multi-leaf frame reads (one triangle on one
+// lattice point, anchors of 0 bits) is padded to kMinStreamBytes, and check() rejects less.
+TEST(ClusterCodec, ShortStreamsArePadded) {
+  PolyMesh m;
+  m.positions = {Vec3f(1, 2, 3), Vec3f(1, 2, 3), Vec3f(1, 2, 3)};
+  m.face_indices = {0, 1, 2};
+  m.face_sizes = {3};
+  const TriangleMesh tm = triangulate_fan({&m});
+  ASSERT_EQ(tm.tri_count(), 1u);
+  const cluster::Quantized z =
+      cluster::quantize(tm.vertices.data(), tm.vertices.size(), tm.tris.data(), 1, 1e-5, false);
+  for (int a = 0; a < 3; ++a) ASSERT_EQ(z.lattice.anchor_bits[a], 0) << a;
+  const ClusterSource src = source_of(tm, z, false);
+  const uint32_t prim = 0, count = 1;
+  const uint32_t* prims = &prim;
+  const std::vector<uint8_t> data = cluster::encode(src, &prims, &count, 1, false);
+  EXPECT_EQ(data.size(), sizeof(ClusterHeader) + kMinStreamBytes);
+  std::string why;
+  EXPECT_TRUE(cluster::check(data.data(), data.size(), 1, z.lattice, false, &why)) << why;
+  EXPECT_FALSE(cluster::check(data.data(), data.size() - 1, 1, z.lattice, false, &why));
+  EXPECT_NE(why.find("stream shorter"), std::string::npos) << why;
+  // The frame as the traversal reads it: the boxes, the cluster, the read slack.
+  std::vector<uint8_t> ml(sizeof(cluster::LatticeBoxes8) + data.size() + kClusterReadSlack, 0);
+  std::memcpy(ml.data() + sizeof(cluster::LatticeBoxes8), data.data(), data.size());
+  float start[4], extent[4];
+  cluster::box_frame(cluster::lattice_frame(z.lattice), ml.data(), start, extent);
+  for (int a = 0; a < 3; ++a) EXPECT_EQ(start[a], z.decoded[0][a]) << a;
+}
+
 struct Built {
   std::vector<PolyMesh> meshes;
   std::vector<const PolyMesh*> ptrs() const {

@@ -483,7 +483,9 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   const Layout L = layout(h, uint32_t(k), s.lattice, s.lossless);
   if (L.ntris != ntris) throw std::logic_error("cluster: child sizes do not give the triangles");
   const uint64_t entries = uint64_t(nentries) * L.idbits;  // bits
-  const uint64_t bytes = data_bytes(h, uint32_t(k), s.lattice, s.lossless, entries + highs);
+  const uint64_t bytes =
+      std::max<uint64_t>(data_bytes(h, uint32_t(k), s.lattice, s.lossless, entries + highs),
+                         sizeof(ClusterHeader) + kMinStreamBytes);
   std::vector<uint8_t> out(bytes + 8, 0);  // 8: 64-bit stores
   std::memcpy(out.data(), &h, sizeof(h));
   BitWriter w{out, sizeof(ClusterHeader)};
@@ -635,6 +637,8 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
   };
   if (size < sizeof(ClusterHeader))
     return fail("shorter than its " + std::to_string(sizeof(ClusterHeader)) + "-byte header");
+  if (size < sizeof(ClusterHeader) + kMinStreamBytes)
+    return fail("stream shorter than " + std::to_string(kMinStreamBytes) + " bytes");
   if (children < 1 || children > 8) return fail("children must be 1..8");
   ClusterHeader h;
   std::memcpy(&h, data, sizeof(h));

@@ -159,6 +159,10 @@ static_assert(sizeof(ClusterHeader) == 15, "cluster header is 15 bytes");
 
 // Bytes a decoder may read past the end of a cluster's data (64-bit bit-stream loads).
 constexpr uint32_t kClusterReadSlack = 8;
+// Bytes of a cluster's stream at least (the encoder pads a shorter one with zeros, check() rejects
+// a shorter one): the multi-leaf frames read 16 bytes from the stream's start (box_start,
+// exact_box_start), inside these and the read slack however narrow the anchors.
+constexpr uint32_t kMinStreamBytes = 16 - kClusterReadSlack;
 // Bits of the primID run starts' high parts at most (the encoder keeps to it, check() enforces it,
 // and the decoder scans no further): nruns - 1 one bits and at most 2 (nruns - 1) zero bits at the
 // Elias-Fano width floor(log2(e_max / (nruns - 1))) fit in it.

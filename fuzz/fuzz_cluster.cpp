@@ -6,7 +6,8 @@
 // Checks:
 //   1. cluster::check() either rejects the block or accepts one that the decoders read only
 //      inside its bytes plus kClusterReadSlack (ASan: the block is copied to an exact-size
-//      buffer), for every child, with ids of every triangle;
+//      buffer), for every child, with ids of every triangle (lossy: with anchors of 24 bits per
+//      axis, and of the input size's widths);
 //   2. round trip: the input bytes as vertex codes (lossless: float keys, or the keys of decimals
 //      q x 10^-k, cluster.h's decimal mode) and a topology of up to 64 triangles in up to 8
 //      children: encode(), check() accepts it, and every child decodes to its triangles (in the
@@ -29,11 +30,8 @@ using namespace slim;
 using fuzz::Reader;
 
 template <bool kLossless>
-void decode_all(const uint8_t* block, uint32_t children) {
-  ClusterLattice lat;
-  lat.origin[0] = 1.0f;
-  lat.step = 0.25f;
-  const cluster::View view = cluster::view<kLossless>(block, children);
+void decode_all(const ClusterLattice& lat, const uint8_t* block, uint32_t children) {
+  const cluster::View view = cluster::view<kLossless>(lat, block, children);
   for (uint32_t c = 0; c < children; ++c) {
     cluster::Decoded8 d;
     cluster::decode_child<kLossless>(lat, block, children, int(c), d);
@@ -41,7 +39,7 @@ void decode_all(const uint8_t* block, uint32_t children) {
     const cluster::ChildIds ids = cluster::child_ids(view, uint32_t(d.first));
     for (int l = 0; l < d.n; ++l) {
       uint32_t g, p, gc, pc;
-      cluster::decode_ids<kLossless>(block, children, uint32_t(d.first + l), g, p);
+      cluster::decode_ids<kLossless>(lat, block, children, uint32_t(d.first + l), g, p);
       // The traversal's path (the child's ids kept in the decode cache) gives the same ids.
       cluster::decode_ids(view.bits, ids, uint32_t(l), gc, pc);
       SLIM_FUZZ_CHECK(g == gc && p == pc, "ids differ between the decode paths");
@@ -67,7 +65,7 @@ void multileaf_boxes(const ClusterLattice& lat, const std::vector<uint8_t>& bloc
   float start[4], extent[4], s2[4], e2[4];
   SLIM_FUZZ_CHECK(cluster::write_box_frame(lat, block.data(), all, lb, start, extent),
                   "no box frame");
-  cluster::box_frame(lat, ml.data(), s2, e2);
+  cluster::box_frame(cluster::lattice_frame(lat), ml.data(), s2, e2);
   SLIM_FUZZ_CHECK(std::memcmp(start, s2, 3 * sizeof(float)) == 0 &&
                       std::memcmp(extent, e2, 3 * sizeof(float)) == 0,
                   "box frame decodes differently from the builder's");
@@ -106,6 +104,12 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
       codes[3 * i + a] = c;
       decoded[i][a] = lossless ? cluster::key_float(c) : cluster::lattice_coord(lat, a, c);
     }
+  // Lossy: the anchors at the codes' widths (the lattice's largest code per axis, as quantize).
+  for (int a = 0; a < 3; ++a) {
+    uint32_t top = 0;
+    for (uint32_t i = 0; i < nv; ++i) top = std::max(top, codes[3 * i + a]);
+    lat.anchor_bits[a] = uint8_t(cluster::bit_width(top));
+  }
   std::vector<uint32_t> tris(3 * ntris), geom(ntris), prim(ntris), order(ntris);
   for (uint32_t t = 0; t < ntris; ++t) {
     for (int k = 0; k < 3; ++k) tris[3 * t + k] = in.byte() % nv;
@@ -120,6 +124,7 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
   src.geom_ids = geom.data();
   src.prim_ids = prim.data();
   src.lossless = lossless;
+  src.lattice = lat;
   const uint32_t* prims[8];
   uint32_t counts[8];
   int k = 0;
@@ -130,9 +135,9 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
   }
   std::vector<uint8_t> block = cluster::encode(src, prims, counts, k, true);
   std::string why;
-  SLIM_FUZZ_CHECK(
-      cluster::check(block.data(), block.size() - kClusterReadSlack, uint32_t(k), lossless, &why),
-      why);
+  SLIM_FUZZ_CHECK(cluster::check(block.data(), block.size() - kClusterReadSlack, uint32_t(k), lat,
+                                 lossless, &why),
+                  why);
   for (int c = 0; c < k; ++c) {
     cluster::Decoded8 d;
     if (lossless)
@@ -146,9 +151,9 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
     for (int l = 0; l < d.n; ++l) {
       uint32_t g, p;
       if (lossless)
-        cluster::decode_ids<true>(block.data(), uint32_t(k), uint32_t(d.first + l), g, p);
+        cluster::decode_ids<true>(lat, block.data(), uint32_t(k), uint32_t(d.first + l), g, p);
       else
-        cluster::decode_ids<false>(block.data(), uint32_t(k), uint32_t(d.first + l), g, p);
+        cluster::decode_ids<false>(lat, block.data(), uint32_t(k), uint32_t(d.first + l), g, p);
       bool found = false;
       for (int m = 0; m < d.n && !found; ++m) {
         const uint32_t t = prims[c][m];
@@ -177,11 +182,19 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const size_t n = block.size();
   block.resize(n + kClusterReadSlack, 0);
   block.shrink_to_fit();
-  if (cluster::check(block.data(), n, children, lossless, nullptr)) {
+  // Lossy, twice: on a lattice of 24-bit anchors (the seeds') and on one of narrower anchors
+  // (0..24 bits per axis, from the input's size).
+  ClusterLattice lat;
+  lat.origin[0] = 1.0f;
+  lat.step = 0.25f;
+  for (int pass = 0; pass < (lossless ? 1 : 2); ++pass) {
+    if (pass == 1)
+      for (int a = 0; a < 3; ++a) lat.anchor_bits[a] = uint8_t((size >> (5 * a)) % 25);
+    if (!cluster::check(block.data(), n, children, lat, lossless, nullptr)) continue;
     if (lossless)
-      decode_all<true>(block.data(), children);
+      decode_all<true>(lat, block.data(), children);
     else
-      decode_all<false>(block.data(), children);
+      decode_all<false>(lat, block.data(), children);
   }
   // 2. Round trip.
   Reader in{data + 1, size - 1};

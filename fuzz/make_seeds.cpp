@@ -68,6 +68,8 @@ std::vector<ClusterSeed> cluster_seeds() {
       src.geom_ids = geom.data();
       src.prim_ids = prim.data();
       src.lossless = lossless;
+      // The default lattice's 24-bit anchors: the target's first check reads lossy blocks so.
+      src.lattice = ClusterLattice{};
       for (const std::vector<uint32_t>& cut : cuts) {
         uint32_t total = 0;
         for (uint32_t n : cut) total += n;
@@ -89,7 +91,8 @@ std::vector<ClusterSeed> cluster_seeds() {
         std::vector<uint8_t> padded = block;
         padded.resize(block.size() + kClusterReadSlack, 0);
         std::string why;
-        if (!cluster::check(padded.data(), block.size(), uint32_t(cut.size()), lossless, &why))
+        if (!cluster::check(padded.data(), block.size(), uint32_t(cut.size()), src.lattice,
+                            lossless, &why))
           throw Error(std::string("make_seeds: cluster::check() refuses the encoder's block of ") +
                       m.name + ": " + why);
         const uint8_t mode = uint8_t((cut.size() - 1) | (lossless ? 8 : 0) |

@@ -59,6 +59,7 @@ ClusterSource source_of(const TriangleMesh& tm, const cluster::Quantized& z, boo
   src.geom_ids = tm.geom_ids.data();
   src.prim_ids = tm.prim_ids.data();
   src.lossless = lossless;
+  src.lattice = z.lattice;  // the anchors' widths
   return src;
 }
 
@@ -120,8 +121,8 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
     }
     std::vector<uint8_t> data = cluster::encode(src, prims, counts, kk, true);
     std::string why;
-    ASSERT_TRUE(
-        cluster::check(data.data(), data.size() - kClusterReadSlack, uint32_t(kk), lossless, &why))
+    ASSERT_TRUE(cluster::check(data.data(), data.size() - kClusterReadSlack, uint32_t(kk),
+                               z.lattice, lossless, &why))
         << why;
     ClusterHeader hdr;
     std::memcpy(&hdr, data.data(), sizeof(hdr));
@@ -147,7 +148,7 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
             return cluster::write_box_frame(z.lattice, data.data(), all, lb, start, extent);
           },
           [&](const uint8_t* p, float* start, float* extent) {
-            cluster::box_frame(z.lattice, p, start, extent);
+            cluster::box_frame(cluster::lattice_frame(z.lattice), p, start, extent);
           },
           [&](int a, float start, float extent) {
             const double need = (double(all.hi[a]) - double(start)) / 255.0;
@@ -173,8 +174,9 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
     }
     ASSERT_FALSE(::testing::Test::HasFatalFailure());
     // One view of the cluster serves all its children (as in the traversal).
-    const cluster::View view = lossless ? cluster::view<true>(data.data(), uint32_t(kk))
-                                        : cluster::view<false>(data.data(), uint32_t(kk));
+    const cluster::View view = lossless
+                                   ? cluster::view<true>(z.lattice, data.data(), uint32_t(kk))
+                                   : cluster::view<false>(z.lattice, data.data(), uint32_t(kk));
     for (int c = 0; c < kk; ++c) {
       cluster::Decoded8 d, dv;
       if (lossless) {
@@ -193,9 +195,11 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
       for (int l = 0; l < d.n; ++l) {
         uint32_t g, p;
         if (lossless)
-          cluster::decode_ids<true>(data.data(), uint32_t(kk), uint32_t(d.first + l), g, p);
+          cluster::decode_ids<true>(z.lattice, data.data(), uint32_t(kk), uint32_t(d.first + l), g,
+                                    p);
         else
-          cluster::decode_ids<false>(data.data(), uint32_t(kk), uint32_t(d.first + l), g, p);
+          cluster::decode_ids<false>(z.lattice, data.data(), uint32_t(kk), uint32_t(d.first + l), g,
+                                     p);
         uint32_t gv, pv;
         cluster::decode_ids(view, uint32_t(d.first + l), gv, pv);
         ASSERT_EQ(gv, g);
@@ -309,7 +313,7 @@ TEST(ClusterCodec, DecodeEqualsEncodeFullClusters) {
         ASSERT_FALSE(::testing::Test::HasFatalFailure());
         size_t full = 0, repeats = 0;
         for (const ClusterHeader& h : headers) {
-          full += h.ntris == 64;
+          full += cluster::tri_count(h, 8) == 64;
           repeats += cluster::has_repeats(h);
         }
         EXPECT_GE(full, headers.size() - 1);
@@ -375,7 +379,9 @@ TEST(ClusterCodec, DecimalModeDigits) {
     const uint32_t* prims = &prim;
     const std::vector<uint8_t> data = cluster::encode(src, &prims, &count, 1, true);
     std::string why;
-    EXPECT_TRUE(cluster::check(data.data(), data.size() - kClusterReadSlack, 1, true, &why)) << why;
+    EXPECT_TRUE(
+        cluster::check(data.data(), data.size() - kClusterReadSlack, 1, z.lattice, true, &why))
+        << why;
     cluster::Decoded8 d;
     cluster::decode_child<true>(z.lattice, data.data(), 1, 0, d);
     for (int k = 0; k < 3; ++k)
@@ -446,27 +452,60 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   const uint32_t counts[2] = {8, 8};
   const std::vector<uint8_t> good = cluster::encode(src, prims, counts, 2, false);
   std::string why;
-  ASSERT_TRUE(cluster::check(good.data(), good.size(), 2, false, &why)) << why;
-  EXPECT_FALSE(cluster::check(good.data(), good.size() - 1, 2, false, &why));  // truncated
-  EXPECT_FALSE(cluster::check(good.data(), good.size(), 3, false, &why));      // a third child
+  ASSERT_TRUE(cluster::check(good.data(), good.size(), 2, z.lattice, false, &why)) << why;
+  EXPECT_FALSE(
+      cluster::check(good.data(), good.size() - 1, 2, z.lattice, false, &why));  // truncated
+  EXPECT_FALSE(
+      cluster::check(good.data(), good.size(), 3, z.lattice, false, &why));  // a third child
   auto corrupt = [&](size_t off, uint8_t value) {
     std::vector<uint8_t> b = good;
     b[off] = value;
-    return cluster::check(b.data(), b.size(), 2, false, &why);
+    return cluster::check(b.data(), b.size(), 2, z.lattice, false, &why);
   };
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nverts), 1));     // indices beyond the vertices
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ntris), 65));     // too many triangles
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, bits), 25));      // lossy axis wider than 24 bits
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ib), 9));         // index wider than 8 bits
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 33));        // run offset wider than 32 bits
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nruns), 0));      // no primID run
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nruns), 17));     // more runs than triangles
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, bb), 33));        // prim base wider than 32 bits
   ASSERT_EQ(good[offsetof(ClusterHeader, sizes)], 0x3f);         // children of 8 + 8
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, sizes), 0x3e));   // children of 7 + 8 (< 16)
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, sizes), 0x07));   // children of 8 + 1 (< 16)
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, sizes) + 2, 1));  // a size for a sixth child
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, tbits), 0));      // the strips past the stream
+  // The packed id widths (pb, gb, bb, hb: 6 bits each in idw): each at most 32.
+  ClusterHeader gh;
+  std::memcpy(&gh, good.data(), sizeof(gh));
+  for (int f = 0; f < 4; ++f)
+    for (uint32_t width : {33u, 63u}) {
+      uint32_t w[4] = {cluster::run_low_bits(gh), cluster::geom_bits(gh),
+                       cluster::prim_base_bits(gh), cluster::geom_base_bits(gh)};
+      w[f] = width;
+      ClusterHeader h = gh;
+      cluster::set_id_widths(h, w[0], w[1], w[2], w[3]);
+      std::vector<uint8_t> b = good;
+      std::memcpy(b.data(), &h, sizeof(h));
+      EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, z.lattice, false, &why)) << f;
+      EXPECT_NE(why.find("id width"), std::string::npos) << why;
+    }
+  // The lattice's anchor widths (the scene's, not the block's): at most 24 bits (lossy).
+  ClusterLattice wide = z.lattice;
+  wide.anchor_bits[1] = 25;
+  EXPECT_FALSE(cluster::check(good.data(), good.size(), 2, wide, false, &why));
+  EXPECT_NE(why.find("anchor width"), std::string::npos) << why;
+  // The triangle count is the children's sizes: a block with other sizes is another cluster,
+  // which check() takes or refuses as any other (no stored count to disagree with); one it takes
+  // decodes children of those sizes.
+  for (uint8_t sizes : {uint8_t(0x3e), uint8_t(0x07)}) {
+    std::vector<uint8_t> b = good;
+    b[offsetof(ClusterHeader, sizes)] = sizes;  // children of 7 + 8, of 8 + 1
+    if (cluster::check(b.data(), b.size(), 2, z.lattice, false, &why)) {
+      b.resize(b.size() + kClusterReadSlack, 0);
+      for (int c = 0; c < 2; ++c) {
+        cluster::Decoded8 d;
+        cluster::decode_child<false>(z.lattice, b.data(), 2, c, d);
+        EXPECT_EQ(uint32_t(d.first + d.n), cluster::child_first(sizes, uint32_t(c + 1)));
+      }
+    }
+  }
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, tbits), 0));  // the strips past the stream
   // The coordinate mode (the top 4 bits of ib): none in a lossy cluster.
   const uint8_t ib = good[offsetof(ClusterHeader, ib)];
   ASSERT_LE(ib, 8);
@@ -482,11 +521,11 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   ClusterHeader lh;
   std::memcpy(&lh, lgood.data(), sizeof(lh));
   ASSERT_EQ(cluster::coord_mode(lh), 1u + 4);  // 4 digits
-  ASSERT_TRUE(cluster::check(lgood.data(), lgood.size(), 2, true, &why)) << why;
+  ASSERT_TRUE(cluster::check(lgood.data(), lgood.size(), 2, dz.lattice, true, &why)) << why;
   for (uint32_t mode = 0; mode < 16; ++mode) {
     std::vector<uint8_t> b = lgood;
     b[offsetof(ClusterHeader, ib)] = uint8_t(cluster::index_bits(lh) | mode << 4);
-    EXPECT_EQ(cluster::check(b.data(), b.size(), 2, true, &why), mode <= 10) << mode;
+    EXPECT_EQ(cluster::check(b.data(), b.size(), 2, dz.lattice, true, &why), mode <= 10) << mode;
     if (mode > 10) {
       EXPECT_NE(why.find("decimal mode with"), std::string::npos) << why;
       continue;
@@ -501,7 +540,7 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
     std::vector<uint8_t> b = lgood;
     b[offsetof(ClusterHeader, ib)] = uint8_t(cluster::index_bits(lh) | mode << 4);
     b[offsetof(ClusterHeader, bits) + 1] = uint8_t(lh.bits[1] | 3 << 6);
-    EXPECT_EQ(cluster::check(b.data(), b.size(), 2, true, &why), mode >= 4) << mode;
+    EXPECT_EQ(cluster::check(b.data(), b.size(), 2, dz.lattice, true, &why), mode >= 4) << mode;
     if (mode < 4) {
       EXPECT_NE(why.find("axis 1"), std::string::npos) << why;
     }
@@ -515,14 +554,14 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   ClusterHeader rh;
   std::memcpy(&rh, rgood.data(), sizeof(rh));
   ASSERT_EQ(rh.nruns, 8);
-  ASSERT_TRUE(cluster::check(rgood.data(), rgood.size(), 2, false, &why)) << why;
+  ASSERT_TRUE(cluster::check(rgood.data(), rgood.size(), 2, z.lattice, false, &why)) << why;
   std::vector<uint8_t> b = rgood;
   b.back() = 0;  // the last run's one bit gone
-  EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, false, &why));
+  EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, z.lattice, false, &why));
   EXPECT_NE(why.find("run highs"), std::string::npos) << why;
   b.resize(b.size() + kMaxRunHighBits / 8 + 1, 0);  // its one bit beyond kMaxRunHighBits bits
   b.back() = 0x80;
-  EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, false, &why));
+  EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, z.lattice, false, &why));
   EXPECT_NE(why.find("run highs beyond"), std::string::npos) << why;
   // The repeat bits (each child's triangles with one primID and one geomID): never on triangle 0.
   for (size_t i = 0; i < rtm.tri_count(); ++i) {
@@ -534,13 +573,42 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   ClusterHeader qh;
   std::memcpy(&qh, qgood.data(), sizeof(qh));
   ASSERT_TRUE(cluster::has_repeats(qh));
-  ASSERT_TRUE(cluster::check(qgood.data(), qgood.size(), 2, false, &why)) << why;
-  const cluster::Layout ql = cluster::layout(qh, 2, false);
+  ASSERT_TRUE(cluster::check(qgood.data(), qgood.size(), 2, z.lattice, false, &why)) << why;
+  const cluster::Layout ql = cluster::layout(qh, 2, z.lattice, false);
   b = qgood;
   b[sizeof(ClusterHeader) + (ql.ids >> 3)] |= uint8_t(1u << (ql.ids & 7));
-  EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, false, &why));
+  EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, z.lattice, false, &why));
   EXPECT_NE(why.find("repeat bit on triangle 0"), std::string::npos) << why;
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 0x40));  // bit 6 of ob: no field
+}
+
+// A cluster whose stream takes fewer bits than the multi-leaf frame reads (one triangle on one
+// lattice point, anchors of 0 bits) is padded to kMinStreamBytes, and check() rejects less.
+TEST(ClusterCodec, ShortStreamsArePadded) {
+  PolyMesh m;
+  m.positions = {Vec3f(1, 2, 3), Vec3f(1, 2, 3), Vec3f(1, 2, 3)};
+  m.face_indices = {0, 1, 2};
+  m.face_sizes = {3};
+  const TriangleMesh tm = triangulate_fan({&m});
+  ASSERT_EQ(tm.tri_count(), 1u);
+  const cluster::Quantized z =
+      cluster::quantize(tm.vertices.data(), tm.vertices.size(), tm.tris.data(), 1, 1e-5, false);
+  for (int a = 0; a < 3; ++a) ASSERT_EQ(z.lattice.anchor_bits[a], 0) << a;
+  const ClusterSource src = source_of(tm, z, false);
+  const uint32_t prim = 0, count = 1;
+  const uint32_t* prims = &prim;
+  const std::vector<uint8_t> data = cluster::encode(src, &prims, &count, 1, false);
+  EXPECT_EQ(data.size(), sizeof(ClusterHeader) + kMinStreamBytes);
+  std::string why;
+  EXPECT_TRUE(cluster::check(data.data(), data.size(), 1, z.lattice, false, &why)) << why;
+  EXPECT_FALSE(cluster::check(data.data(), data.size() - 1, 1, z.lattice, false, &why));
+  EXPECT_NE(why.find("stream shorter"), std::string::npos) << why;
+  // The frame as the traversal reads it: the boxes, the cluster, the read slack.
+  std::vector<uint8_t> ml(sizeof(cluster::LatticeBoxes8) + data.size() + kClusterReadSlack, 0);
+  std::memcpy(ml.data() + sizeof(cluster::LatticeBoxes8), data.data(), data.size());
+  float start[4], extent[4];
+  cluster::box_frame(cluster::lattice_frame(z.lattice), ml.data(), start, extent);
+  for (int a = 0; a < 3; ++a) EXPECT_EQ(start[a], z.decoded[0][a]) << a;
 }
 
 struct Built {
@@ -862,6 +930,58 @@ TEST(ClusterScene, MultiLeafBoxesContainTheirTrianglesRealMesh) {
   }
 }
 
+// The lossy anchors take the bits of the largest lattice code per axis (ClusterLattice::
+// anchor_bits, from the lattice's box): few for a mesh whose extent spans few steps, more for the
+// same mesh on the lattice of a 64 times larger box (BuildOptions::lattice_box, as a chunk of a
+// larger scene) with the same origin and step, whose clusters decode to the same triangles: the
+// same hits bit for bit, at more header bits.
+TEST(ClusterScene, AnchorWidthsFollowTheLattice) {
+  PolyMesh sphere = icosphere(3);
+  const TriangleMesh tm = triangulate_fan({&sphere});
+  Box3f box;
+  for (const Vec3f& v : tm.vertices) box.extend(v);
+  const double err = 1e-3;
+  const Box3f big(box.lo, box.lo + (box.hi - box.lo) * 64.0f);
+  const cluster::Quantized z = cluster::quantize(tm.vertices.data(), tm.vertices.size(),
+                                                 tm.tris.data(), tm.tri_count(), err, false);
+  const cluster::Quantized zb = cluster::quantize(
+      tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(), err / 64, false, big);
+  ASSERT_EQ(zb.lattice.step, z.lattice.step);
+  ASSERT_EQ(z.codes, zb.codes);
+  for (int a = 0; a < 3; ++a) {
+    auto top = [&](const Box3f& b) {
+      return cluster::bit_width(
+          uint32_t(std::nearbyint((double(b.hi[a]) - double(b.lo[a])) / z.lattice.step)));
+    };
+    EXPECT_EQ(z.lattice.anchor_bits[a], top(box)) << a;
+    EXPECT_EQ(zb.lattice.anchor_bits[a], top(big)) << a;
+    EXPECT_LE(z.lattice.anchor_bits[a], 12) << a;  // about 1 / (2 x 1e-3 / sqrt(3)) steps
+    EXPECT_GE(zb.lattice.anchor_bits[a], z.lattice.anchor_bits[a] + 5) << a;
+  }
+  BuildOptions opt = BuildOptions::from_config("cluster"), wide = opt;
+  opt.cluster_error = err;
+  wide.cluster_error = err / 64;
+  wide.lattice_box = big;
+  const Scene s = Scene::build(sphere, opt), sw = Scene::build(sphere, wide);
+  std::string why;
+  ASSERT_TRUE(s.validate(&why)) << why;
+  ASSERT_TRUE(sw.validate(&why)) << why;
+  EXPECT_GT(detail(sw, "header_bits_per_triangle"), detail(s, "header_bits_per_triangle"));
+  Rng rng(11);
+  int hits = 0;
+  for (int i = 0; i < 2000; ++i) {
+    const Ray r = random_ray(rng, s.bounds());
+    const Hit h = s.intersect(r), hw = sw.intersect(r);
+    hits += h.valid();
+    ASSERT_EQ(h.valid(), hw.valid()) << i;
+    ASSERT_EQ(bits_of(h.t), bits_of(hw.t)) << i;
+    ASSERT_EQ(bits_of(h.u), bits_of(hw.u)) << i;
+    ASSERT_EQ(bits_of(h.v), bits_of(hw.v)) << i;
+    ASSERT_EQ(h.primID, hw.primID) << i;
+  }
+  EXPECT_GT(hits, 500);
+}
+
 // An error bound finer than 24 lattice bits resolve gets a coarser step (reported), not a failure.
 TEST(ClusterScene, CoarserStepWhenTheLatticeNeedsMoreBits) {
   PolyMesh sphere = icosphere(3);
@@ -975,6 +1095,7 @@ TEST(ClusterScene, DecodeCacheNeverAnswersForAnotherScene) {
       } else {
         ClusterLeaf<false>::Context ctx;
         ctx.lattice = z.lattice;
+        ctx.frame = cluster::lattice_frame(z.lattice);
         hit = ClusterLeaf<false>::intersect_in_multileaf<false>(ctx, at.data(), 1, 0, tr, h, st);
       }
       ASSERT_TRUE(hit);

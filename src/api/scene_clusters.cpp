@@ -347,6 +347,15 @@ template <bool kLossless>
 class ClusterScene : public BvhScene<ClusterLeaf<kLossless>> {
  public:
   using Leaf = ClusterLeaf<kLossless>;
+  // Every open: the lattice fields the decoders take as given (the anchors' widths), then the BVH.
+  void check_opened(bool deep) const override {
+    if (!kLossless) {
+      const std::string bad = cluster::check_lattice(this->ctx.lattice);
+      if (!bad.empty())
+        throw SectionFault{"cluster.lattice", offsetof(ClusterLattice, anchor_bits), bad};
+    }
+    this->check_bvh("", deep);
+  }
   // Every cluster's triangles, decoded as the traversal decodes them, in leaf order.
   std::optional<DecodedTriangles> decoded_triangles() const override {
     const typename Leaf::Context& c = this->ctx;
@@ -356,7 +365,7 @@ class ClusterScene : public BvhScene<ClusterLeaf<kLossless>> {
       cluster::decode_child<kLossless>(c.lattice, data, k, int(i), d);
       for (int l = 0; l < d.n; ++l) {
         uint32_t geom, prim;
-        cluster::decode_ids<kLossless>(data, k, uint32_t(d.first + l), geom, prim);
+        cluster::decode_ids<kLossless>(c.lattice, data, k, uint32_t(d.first + l), geom, prim);
         for (int q = 0; q < 3; ++q)
           out.vertices.emplace_back(d.v[q][0][l], d.v[q][1][l], d.v[q][2][l]);
         out.geom.push_back(geom);
@@ -433,6 +442,7 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   side->resize(side->size() + kClusterReadSlack, 0);
   side->shrink_to_fit();
   s->ctx.lattice = lat;
+  s->ctx.frame = cluster::lattice_frame(lat);
   s->ctx.side = side->data();
   s->ctx.side_bytes = side->size();
   s->ctx.cache_tag = cluster::next_cache_tag();  // the arenas no longer move
@@ -459,6 +469,10 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
                    est.clusters ? double(est.decimal_clusters) / double(est.clusters) : 0.0);
   d.emplace_back("lattice_step", kLossless ? 0.0 : double(lat.step));
   d.emplace_back("lattice_coarsened", z->coarsened ? 1.0 : 0.0);
+  // Bits of a cluster's anchors (cluster.h: lossy, the lattice's per-axis widths).
+  d.emplace_back(
+      "anchor_bits",
+      kLossless ? 96.0 : double(lat.anchor_bits[0] + lat.anchor_bits[1] + lat.anchor_bits[2]));
   d.emplace_back("max_error", z->max_error);
   d.emplace_back("max_error_diag_pct", z->diag > 0 ? 100.0 * z->max_error / z->diag : 0.0);
   d.emplace_back("rms_error", z->rms_error);

@@ -118,7 +118,6 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     sizes |= (counts[c] - 1) << (3 * c);
     ntris += counts[c];
   }
-  h.ntris = uint8_t(ntris);
   for (int i = 0; i < 3; ++i) h.sizes[i] = uint8_t(sizes >> (8 * i));
   // Distinct vertex codes in order of first sight (duplicated input vertices with the same code
   // are one vertex), found through a small open-addressing table: the triangles' corners as
@@ -350,7 +349,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   }
   if (!s.lossless)
     for (int a = 0; a < 3; ++a)
-      if (anchor[a] >> 24) throw std::logic_error("cluster: lattice code beyond 24 bits");
+      if (anchor[a] >> s.lattice.anchor_bits[a])
+        throw std::logic_error("cluster: lattice code beyond the lattice's anchor bits");
   // Lossless: the decimal mode when its codes take fewer vertex bits than the float keys.
   uint32_t digits = 0, ka[3];
   if (s.lossless && decimal_axes(codes.data(), nv, digits, ka)) {
@@ -394,9 +394,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   }
   std::sort(ids.begin(), ids.end());
   const uint32_t prim_base = ids[0];
-  h.gb = uint8_t(bit_width(ghi - glo));
-  h.bb = uint8_t(bit_width(prim_base));
-  h.hb = uint8_t(bit_width(glo));
+  const uint32_t gb = bit_width(ghi - glo), bb = bit_width(prim_base), hb = bit_width(glo);
   // PrimID runs: a run starts at the first sorted id that is 2^ob or more past the current start;
   // run i >= 1 stores e_i = start_i - prim_base - i x 2^ob (Elias-Fano: pb low bits, the high
   // part in unary). ob and pb are the widths with the fewest bits (run lows and highs + per
@@ -460,7 +458,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     }
     const uint64_t ef = ef_bits(m, e_max, pb);
     bool with_repeats;
-    const uint64_t bits = ef + entry_bits(bit_width(uint32_t(m)) + ob + h.gb, with_repeats);
+    const uint64_t bits = ef + entry_bits(bit_width(uint32_t(m)) + ob + gb, with_repeats);
     if (bits < best_bits) {
       best_bits = bits;
       best_ob = ob;
@@ -474,7 +472,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   runs_of(best_ob, starts);
   h.nruns = uint8_t(starts.size());
   h.ob = uint8_t(best_ob | (repeats ? 0x80 : 0));
-  h.pb = uint8_t(best_pb);
+  set_id_widths(h, best_pb, gb, bb, hb);
   // e_i of run i (i >= 1) and the run highs' length.
   const uint32_t* st = starts.data();
   const size_t nst = starts.size();
@@ -482,15 +480,18 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   const uint64_t highs = nst > 1 ? (nst - 1) + (run_e(nst - 1) >> best_pb) : 0;
   const uint32_t nentries = repeats ? ntris - nrep : ntris;
 
-  const Layout L = layout(h, uint32_t(k), s.lossless);
+  const Layout L = layout(h, uint32_t(k), s.lattice, s.lossless);
+  if (L.ntris != ntris) throw std::logic_error("cluster: child sizes do not give the triangles");
   const uint64_t entries = uint64_t(nentries) * L.idbits;  // bits
-  const uint64_t bytes = data_bytes(h, uint32_t(k), s.lossless, entries + highs);
+  const uint64_t bytes =
+      std::max<uint64_t>(data_bytes(h, uint32_t(k), s.lattice, s.lossless, entries + highs),
+                         sizeof(ClusterHeader) + kMinStreamBytes);
   std::vector<uint8_t> out(bytes + 8, 0);  // 8: 64-bit stores
   std::memcpy(out.data(), &h, sizeof(h));
   BitWriter w{out, sizeof(ClusterHeader)};
-  for (int a = 0; a < 3; ++a) w.put(anchor[a], L.aw);
-  w.put(prim_base, h.bb);
-  w.put(glo, h.hb);
+  for (int a = 0; a < 3; ++a) w.put(anchor[a], L.aw[a]);
+  w.put(prim_base, bb);
+  w.put(glo, hb);
   for (int c = 1; c < k; ++c) {
     const uint32_t first = child_first(sizes, uint32_t(c));
     w.put(child_off[c] - predicted_offset(L, first), L.tb);
@@ -498,7 +499,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   }
   for (uint32_t i = 0; i < nv; ++i)
     for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], axis_bits(h, a));
-  for (size_t i = 1; i < nst; ++i) w.put(uint32_t(run_e(i)), h.pb);
+  for (size_t i = 1; i < nst; ++i) w.put(uint32_t(run_e(i)), best_pb);
   auto repeated = [&](uint32_t i) { return repeats && ((rep_mask >> i) & 1); };
   if (repeats)
     for (uint32_t i = 0; i < ntris; ++i) w.put(repeated(i), 1);
@@ -527,12 +528,12 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     const uint32_t run = uint32_t(std::upper_bound(st, st + nst, id) - st) - 1;
     w.put(run, L.rb);
     w.put(id - st[run], best_ob);
-    w.put(s.geom_ids[ord[i]] - glo, h.gb);
+    w.put(s.geom_ids[ord[i]] - glo, gb);
   }
   if (w.pos != L.end + entries) throw std::logic_error("cluster: id entries size mismatch");
   // Run highs: run i's one bit at (e_i >> pb) + i - 1.
   for (size_t i = 1; i < nst; ++i) {
-    const uint64_t pos = 8 * sizeof(ClusterHeader) + w.pos + (run_e(i) >> h.pb) + i - 1;
+    const uint64_t pos = 8 * sizeof(ClusterHeader) + w.pos + (run_e(i) >> best_pb) + i - 1;
     out[pos >> 3] |= uint8_t(1u << (pos & 7));
   }
   out.resize(bytes + (slack ? kClusterReadSlack : 0));
@@ -545,9 +546,11 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     st.position_bits += uint64_t(nv) * L.vbits;
     st.topology_bits +=
         topology_bits(h) + (L.verts - L.table) + 8 * (sizeof(h.sizes) + sizeof(h.tbits));
-    // Run lows, repeat bits, entries, run highs, the bases, and pb, gb, nruns, ob, bb, hb.
-    st.id_bits += (L.topo - L.runs) + entries + highs + h.bb + h.hb + 6 * 8;
-    st.header_bits += 6 * 8 + 3 * L.aw;  // nverts, ntris, bits, ib; anchors
+    // Run lows, repeat bits, entries, run highs, the bases, and idw (pb, gb, bb, hb), nruns, ob.
+    st.id_bits += (L.topo - L.runs) + entries + highs + bb + hb +
+                  8 * (sizeof(h.idw) + sizeof(h.nruns) + sizeof(h.ob));
+    // nverts, bits, ib; the anchors.
+    st.header_bits += 8 * (sizeof(h.nverts) + sizeof(h.bits) + sizeof(h.ib)) + L.bases;
     st.decimal_clusters += coord_mode(h) != 0;
   }
   return out;
@@ -574,9 +577,10 @@ bool reaching_extents(const float* start, const Box3f& box, uint32_t (&first)[3]
 bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f& box,
                      LatticeBoxes8& boxes, float* start, float* extent) {
   // The anchors in a padded copy: box_start reads 16 bytes (the traversal has the read slack).
+  const LatticeFrame f = lattice_frame(lat);
   uint8_t anchors[16] = {};
-  std::memcpy(anchors, data + sizeof(ClusterHeader), 9);
-  box_start(lat, anchors, start);
+  std::memcpy(anchors, data + sizeof(ClusterHeader), (f.first[2] + f.width[2] + 7) / 8);
+  box_start(f, anchors, start);
   // Scale bytes e << 3 | m, e <= kMaxBoxScaleExp.
   uint32_t first[3] = {0, 0, 0}, sc[3];
   if (!reaching_extents(
@@ -617,24 +621,38 @@ bool write_exact_box_frame(const uint8_t* data, const Box3f& box, ExactBoxes8& b
   return true;
 }
 
-bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless, std::string* why) {
+std::string check_lattice(const ClusterLattice& lat) {
+  for (int a = 0; a < 3; ++a)
+    if (lat.anchor_bits[a] > 24)
+      return "lattice anchor width " + std::to_string(lat.anchor_bits[a]) + " of axis " +
+             std::to_string(a) + " beyond 24 bits";
+  return {};
+}
+
+bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterLattice& lat,
+           bool lossless, std::string* why) {
   auto fail = [&](const std::string& m) {
     if (why) *why = "cluster: " + m;
     return false;
   };
   if (size < sizeof(ClusterHeader))
     return fail("shorter than its " + std::to_string(sizeof(ClusterHeader)) + "-byte header");
+  if (size < sizeof(ClusterHeader) + kMinStreamBytes)
+    return fail("stream shorter than " + std::to_string(kMinStreamBytes) + " bytes");
   if (children < 1 || children > 8) return fail("children must be 1..8");
   ClusterHeader h;
   std::memcpy(&h, data, sizeof(h));
   if (h.nverts < 1) return fail("no vertex");
-  if (h.ntris < 1 || h.ntris > 64) return fail("triangle count must be 1..64");
+  if (!lossless) {
+    const std::string bad = check_lattice(lat);
+    if (!bad.empty()) return fail(bad);
+  }
   const uint32_t max_bits = lossless ? 32 : 24;
   for (int a = 0; a < 3; ++a)
     if (axis_bits(h, a) > max_bits || (!lossless && h.bits[a] > max_bits))
       return fail("axis width beyond " + std::to_string(max_bits) + " bits");
-  if (index_bits(h) > 8 || h.pb > 32 || h.gb > 32 || offset_bits(h) > 32 || (h.ob & 0x40) ||
-      h.bb > 32 || h.hb > 32)
+  if (index_bits(h) > 8 || run_low_bits(h) > 32 || geom_bits(h) > 32 || offset_bits(h) > 32 ||
+      (h.ob & 0x40) || prim_base_bits(h) > 32 || geom_base_bits(h) > 32)
     return fail("index or id width beyond its limit");
   if (const uint32_t mode = coord_mode(h)) {
     if (!lossless) return fail("coordinate mode " + std::to_string(mode) + " in a lossy cluster");
@@ -650,14 +668,14 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
       return fail("axis " + std::to_string(a) + " has " + std::to_string(below) +
                   " digits fewer than the cluster's " + std::to_string(coord_mode(h) - 1));
   }
-  if (h.nruns < 1 || h.nruns > h.ntris) return fail("run count must be 1..ntris");
-  const uint32_t sizes = child_sizes(h);
-  if (child_first(sizes, children) != h.ntris) return fail("children do not cover the triangles");
+  // The triangles are the children's sizes (1..64 for 1..8 children): no count to disagree with.
+  const uint32_t sizes = child_sizes(h), ntris = tri_count(h, children);
+  if (h.nruns < 1 || h.nruns > ntris) return fail("run count must be 1..the triangle count");
   if (children < 8 && (sizes >> (3 * children)) != 0)
     return fail("sizes given for children beyond the child count");
-  if (data_bytes(h, children, lossless, 0) > size) return fail("stream runs past the data");
+  if (data_bytes(h, children, lat, lossless, 0) > size) return fail("stream runs past the data");
   const uint8_t* bits = data + sizeof(ClusterHeader);
-  const Layout L = layout(h, children, lossless);
+  const Layout L = layout(h, children, lat, lossless);
   // Readers of w <= 32 bits at pos to which bits at or beyond `limit` read as 0: the strips' and
   // repeat bits' (limit L.end, inside `size` or not: the decoders may read beyond it, with the
   // slack, but use none of those bits on a block this accepts) and the id entries' and run highs'
@@ -683,12 +701,12 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless,
           return fail("vertex index " + std::to_string(idx[q][j]) + " >= vertex count");
   }
   // The repeat bits (none on triangle 0), the ids' entries inside the data, their run indices.
-  uint32_t entries = h.ntris;
+  uint32_t entries = ntris;
   if (has_repeats(h)) {
     if (get(L.ids, 1)) return fail("repeat bit on triangle 0");
-    for (uint32_t t = 1; t < h.ntris; ++t) entries -= get(L.ids + t, 1);
+    for (uint32_t t = 1; t < ntris; ++t) entries -= get(L.ids + t, 1);
   }
-  if (data_bytes(h, children, lossless, uint64_t(entries) * L.idbits) > size)
+  if (data_bytes(h, children, lat, lossless, uint64_t(entries) * L.idbits) > size)
     return fail("stream runs past the data (id entries)");
   const uint64_t avail = 8 * (size - sizeof(ClusterHeader));
   const auto get_data = reader(avail);
@@ -777,15 +795,27 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
           err[2 * i + 1] = e2;
         }
       });
+  // The anchors' widths: the largest code the lattice's box takes per axis (its top corner's; a
+  // chunk of a larger mesh gets the whole box's widths, as the other chunks), or a used vertex
+  // takes (one a given box holds up to rounding).
+  uint32_t top[3] = {0, 0, 0};
+  if (!lossless && (ntris || given))
+    for (int a = 0; a < 3; ++a)
+      top[a] = uint32_t(
+          std::clamp(std::nearbyint((double(box.hi[a]) - double(z.lattice.origin[a])) / step), 0.0,
+                     double(kLatticeMax)));
   double sum_sq = 0, sum = 0;
   uint64_t n = 0;
   for (size_t i = 0; i < nv; ++i) {
     if (!used[i]) continue;
+    for (int a = 0; a < 3; ++a) top[a] = std::max(top[a], z.codes[3 * i + a]);
     z.max_error = std::max(z.max_error, err[2 * i]);
     sum += err[2 * i];
     sum_sq += err[2 * i + 1];
     n++;
   }
+  if (!lossless)
+    for (int a = 0; a < 3; ++a) z.lattice.anchor_bits[a] = uint8_t(bit_width(top[a]));
   z.rms_error = n ? std::sqrt(sum_sq / double(n)) : 0.0;
   z.mean_error = n ? sum / double(n) : 0.0;
   return z;

@@ -9,9 +9,11 @@
 // children of up to 8 triangles each (one 8-wide watertight test per child): 51 bytes lossy (a
 // LatticeBoxes8, below: the boxes' frame comes from the cluster's anchors), a 72-byte MultiLeaf8
 // lossless. The cluster data follows it:
-//   ClusterHeader (17 B, packed)
+//   ClusterHeader (15 B, packed)
 //   bit stream, LSB first from the byte after the header:
-//     anchors:  3 x aw bits (aw = 24 lossy, 32 lossless)
+//     anchors:  aw0 + aw1 + aw2 bits, the per-axis minimum codes (lossless aw = 32; lossy the
+//               scene's ClusterLattice::anchor_bits, the bits of the largest lattice code on the
+//               axis: 16 on canyon:1024, at most 24)
 //     bases:    prim_base (bb bits), geom_base (hb bits)
 //     children: for children 1..k-1, the child's topology offset (tb bits) and its first new
 //               vertex (vbw bits), each a residual of a linear prediction (below)
@@ -26,7 +28,9 @@
 //               (primID = prim_base + start + offset), gb bits geomID - geom_base
 //     run highs: for runs 1..nruns-1 in order, e >> pb in unary (that many 0 bits, then a 1);
 //               the stream ends after their nruns-1 one bits (at most kMaxRunHighBits bits)
-// Child c holds 1 + sizes[c] triangles (3 bits each); k, the child count, is the multi-leaf's.
+// Child c holds 1 + sizes[c] triangles (3 bits each); k, the child count, is the multi-leaf's, and
+// the cluster's triangle count ntris = tri_count(h, k) is the k children's sizes (the header
+// stores no count: every reader has k).
 // Children with fewer than 8 triangles repeat their last triangle in the padding lanes (the
 // duplicate gives the same hit).
 //
@@ -92,8 +96,8 @@
 //     with decimal_coord itself; k_a at least k - 3), and this mode only when it takes fewer
 //     vertex bits than the keys; the decoders (scalar and AVX2) compute decimal_coord's
 //     operations (an exact int-to-double conversion, one correctly rounded product, one rounding
-//     to float), so both give the encoder's bits. The mode lives in spare header bits: the header
-//     stays 17 bytes and a float-key cluster is the same bytes as before the mode existed.
+//     to float), so both give the encoder's bits. The mode lives in spare header bits (the top 4
+//     of ib, the top 2 of each bits[a]).
 //
 // An isolated BVH leaf (a one-triangle cluster, or a whole scene of at most 8 triangles) is an
 // 8-byte block holding the offset of a one-child cluster record in the scene's side arena
@@ -124,29 +128,41 @@ namespace slim {
 struct ClusterLattice {
   float origin[3] = {0, 0, 0};
   float step = 1.0f;  // a power of two
+  // Bits of a lossy cluster's anchor per axis (<= 24): bit_width of the largest lattice code a
+  // vertex of the scene can take on the axis (quantize: from the lattice's box, which a chunked
+  // build shares with the other chunks). The anchors of canyon:1024 take 16 bits, not 24.
+  uint8_t anchor_bits[3] = {24, 24, 24};
+  uint8_t pad = 0;
 };
+static_assert(sizeof(ClusterLattice) == 20 && offsetof(ClusterLattice, step) == 12,
+              "origin[3], step, the anchor widths");
 
 #pragma pack(push, 1)
 struct ClusterHeader {
   uint8_t nverts;    // distinct vertices (codes) in the cluster, 1..255
-  uint8_t ntris;     // triangles, 1..64
   uint8_t bits[3];   // per-axis offset widths (low 6 bits: lossy <= 24, lossless <= 32); decimal
                      // mode: the top 2 bits are the axis's digits below the cluster's k
   uint8_t ib;        // low 4 bits: bits of a reused vertex's distance back (<= 8); high 4 bits:
                      // lossless coordinate mode (0 float keys, 1 + k decimal q x 10^-k, k <= 9)
-  uint8_t pb, gb;    // bits per primID run start's low part (Elias-Fano) / geomID offset (<= 32)
-  uint8_t nruns;     // primID runs, 1..ntris
+  uint8_t idw[3];    // 4 x 6 bits from bit 0 (each <= 32): pb, bits per primID run start's low
+                     // part (Elias-Fano); gb, per geomID offset; bb and hb, of prim_base and
+                     // geom_base in the stream (run_low_bits(), geom_bits(), prim_base_bits(),
+                     // geom_base_bits() below)
+  uint8_t nruns;     // primID runs, 1..the cluster's triangles
   uint8_t ob;        // low 6 bits: bits per primID offset in its run (<= 32); top bit: repeats
-  uint8_t bb, hb;    // bits of prim_base / geom_base in the stream (<= 32)
   uint8_t sizes[3];  // child c holds 1 + (the 3 bits at 3c) triangles
   uint16_t tbits;    // low 11 bits: bits of the topology stream (<= 1854: 27 + 63 x 29); top 5
                      // bits: the child table's widths (3 bits to, 2 bits vo; see above)
 };
 #pragma pack(pop)
-static_assert(sizeof(ClusterHeader) == 17, "cluster header is 17 bytes");
+static_assert(sizeof(ClusterHeader) == 15, "cluster header is 15 bytes");
 
 // Bytes a decoder may read past the end of a cluster's data (64-bit bit-stream loads).
 constexpr uint32_t kClusterReadSlack = 8;
+// Bytes of a cluster's stream at least (the encoder pads a shorter one with zeros, check() rejects
+// a shorter one): the multi-leaf frames read 16 bytes from the stream's start (box_start,
+// exact_box_start), inside these and the read slack however narrow the anchors.
+constexpr uint32_t kMinStreamBytes = 16 - kClusterReadSlack;
 // Bits of the primID run starts' high parts at most (the encoder keeps to it, check() enforces it,
 // and the decoder scans no further): nruns - 1 one bits and at most 2 (nruns - 1) zero bits at the
 // Elias-Fano width floor(log2(e_max / (nruns - 1))) fit in it.
@@ -181,8 +197,8 @@ SLIM_INLINE uint32_t topology_bits(const ClusterHeader& h) { return h.tbits & 0x
 SLIM_INLINE uint32_t table_offset_code(const ClusterHeader& h) { return (h.tbits >> 11) & 7u; }
 SLIM_INLINE uint32_t table_vertex_code(const ClusterHeader& h) { return uint32_t(h.tbits) >> 14; }
 constexpr uint32_t kPlainVertexCode = 3;
-// 2^16 / n for n = 1..64 (entries 0 and 65..127 0: any 7 bits of a header's ntris index inside,
-// the checker rejects ntris > 64): the child table's slopes without a division.
+// 2^16 / n for n = 1..64 (entries 0 and 65..127 0): the child table's slopes without a division,
+// indexed by the cluster's triangle count (tri_count: 1..64 for 1..8 children, 0 for none).
 struct InvTris {
   uint32_t v[128];
   constexpr InvTris() : v{} {
@@ -191,6 +207,20 @@ struct InvTris {
 };
 inline constexpr InvTris kInvTris{};
 SLIM_INLINE uint32_t coord_mode(const ClusterHeader& h) { return uint32_t(h.ib) >> 4; }
+// The header's id widths (idw, 4 x 6 bits): bits of a run start's low part (pb), of a geomID
+// offset (gb), of prim_base (bb) and of geom_base (hb).
+SLIM_INLINE uint32_t id_widths(const ClusterHeader& h) {
+  return uint32_t(h.idw[0]) | uint32_t(h.idw[1]) << 8 | uint32_t(h.idw[2]) << 16;
+}
+SLIM_INLINE uint32_t run_low_bits(const ClusterHeader& h) { return id_widths(h) & 63u; }
+SLIM_INLINE uint32_t geom_bits(const ClusterHeader& h) { return (id_widths(h) >> 6) & 63u; }
+SLIM_INLINE uint32_t prim_base_bits(const ClusterHeader& h) { return (id_widths(h) >> 12) & 63u; }
+SLIM_INLINE uint32_t geom_base_bits(const ClusterHeader& h) { return id_widths(h) >> 18; }
+SLIM_INLINE void set_id_widths(ClusterHeader& h, uint32_t pb, uint32_t gb, uint32_t bb,
+                               uint32_t hb) {
+  const uint32_t w = (pb & 63u) | (gb & 63u) << 6 | (bb & 63u) << 12 | (hb & 63u) << 18;
+  for (int i = 0; i < 3; ++i) h.idw[i] = uint8_t(w >> (8 * i));
+}
 // Bits of a primID's offset in its run; whether the cluster has repeat bits.
 SLIM_INLINE uint32_t offset_bits(const ClusterHeader& h) { return h.ob & 63u; }
 SLIM_INLINE bool has_repeats(const ClusterHeader& h) { return h.ob >> 7; }
@@ -312,6 +342,17 @@ SLIM_INLINE uint32_t child_first(uint32_t sizes, uint32_t c) {
          4 * uint32_t(__builtin_popcount(m & 0x924924u));
 }
 
+// Triangles of a cluster of k children (the header stores no count: the sizes of its k children
+// add up to it).
+SLIM_INLINE uint32_t tri_count(const ClusterHeader& h, uint32_t k) {
+  return child_first(child_sizes(h), k);
+}
+// Bits of a cluster's anchor on axis a: 32 lossless (a float key or a decimal's q), the lattice's
+// anchor_bits lossy.
+SLIM_INLINE uint32_t anchor_bits(const ClusterLattice& lat, bool lossless, int a) {
+  return lossless ? 32u : lat.anchor_bits[a];
+}
+
 // Bit positions of the streams of a cluster of k children.
 // ids: the repeat bits; end: the topology's end, where the ids' entries begin (as many as
 // triangles without their repeat bit: one popcount), then the run highs (they end after their
@@ -319,19 +360,24 @@ SLIM_INLINE uint32_t child_first(uint32_t sizes, uint32_t c) {
 // not the layout.
 struct Layout {
   uint64_t table = 0, verts = 0, runs = 0, ids = 0, topo = 0, end = 0;  // from the stream start
-  uint32_t aw = 0;                                                      // bits per anchor
-  uint32_t vbits = 0;                                                   // bits per vertex
+  uint32_t aw[3] = {};                                                  // bits per anchor, per axis
+  uint32_t bases = 0;           // bit of prim_base (the anchors' end)
+  uint32_t ntris = 0;           // triangles (tri_count)
+  uint32_t vbits = 0;           // bits per vertex
   uint32_t tb = 0, vbw = 0;     // bits per child topology offset / first new vertex
   uint32_t ts = 0, tbias = 0;   // the offset's slope (x 2^-12 per triangle) and bias
   uint32_t vs = 0, vbias = 0;   // the first new vertex's slope and bias
   uint32_t rb = 0, idbits = 0;  // bits per run index; per triangle's ids (rb + ob + gb)
 };
-SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, bool lossless) {
+SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, const ClusterLattice& lat,
+                          bool lossless) {
   Layout l;
-  l.aw = lossless ? 32 : 24;
+  for (int a = 0; a < 3; ++a) l.aw[a] = anchor_bits(lat, lossless, a);
+  l.bases = l.aw[0] + l.aw[1] + l.aw[2];
+  l.ntris = tri_count(h, k);
   l.vbits = axis_bits(h, 0) + axis_bits(h, 1) + axis_bits(h, 2);
   const uint32_t tbits = topology_bits(h), to = table_offset_code(h), vo = table_vertex_code(h);
-  const uint32_t inv = kInvTris.v[h.ntris & 127u];
+  const uint32_t inv = kInvTris.v[l.ntris & 127u];
   const bool vplain = vo == kPlainVertexCode;
   l.tb = to + 5;
   l.ts = (tbits * inv) >> 4;
@@ -340,12 +386,12 @@ SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, bool lossless) {
   l.vs = vplain ? 0 : (uint32_t(h.nverts) * inv) >> 4;
   l.vbias = vplain ? 0 : 1u << (l.vbw - 1);
   l.rb = h.nruns ? bit_width(uint32_t(h.nruns) - 1) : 0;
-  l.idbits = l.rb + offset_bits(h) + h.gb;
-  l.table = 3 * l.aw + uint32_t(h.bb) + h.hb;
+  l.idbits = l.rb + offset_bits(h) + geom_bits(h);
+  l.table = l.bases + prim_base_bits(h) + geom_base_bits(h);
   l.verts = l.table + uint64_t(k ? k - 1 : 0) * (l.tb + l.vbw);
   l.runs = l.verts + uint64_t(h.nverts) * l.vbits;
-  l.ids = l.runs + uint64_t(h.nruns ? h.nruns - 1 : 0) * h.pb;
-  l.topo = l.ids + (has_repeats(h) ? h.ntris : 0);
+  l.ids = l.runs + uint64_t(h.nruns ? h.nruns - 1 : 0) * run_low_bits(h);
+  l.topo = l.ids + (has_repeats(h) ? l.ntris : 0);
   l.end = l.topo + tbits;
   return l;
 }
@@ -361,8 +407,9 @@ SLIM_INLINE uint32_t predicted_vertex(const Layout& L, uint32_t first) {
 }
 // Bytes of a cluster's data (header + stream) with `tail` bits of ids' entries and run highs,
 // without the read slack.
-SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, bool lossless, uint64_t tail) {
-  return sizeof(ClusterHeader) + (layout(h, k, lossless).end + tail + 7) / 8;
+SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, const ClusterLattice& lat,
+                                bool lossless, uint64_t tail) {
+  return sizeof(ClusterHeader) + (layout(h, k, lat, lossless).end + tail + 7) / 8;
 }
 
 // Decodes the strip of child c (n triangles) into idx[corner][lane], lanes < n. get(pos, w) reads
@@ -651,13 +698,18 @@ struct View {
   uint32_t anchor[3] = {};  // per-axis anchor codes
 };
 template <bool kLossless>
-SLIM_INLINE View view(const uint8_t* data, uint32_t children) {
+SLIM_INLINE View view(const ClusterLattice& lat, const uint8_t* data, uint32_t children) {
   View v;
   std::memcpy(&v.h, data, sizeof(v.h));
   v.bits = data + sizeof(ClusterHeader);
-  v.L = layout(v.h, children, kLossless);
+  v.L = layout(v.h, children, lat, kLossless);
   v.sizes = child_sizes(v.h);
-  for (int a = 0; a < 3; ++a) v.anchor[a] = read_bits(v.bits, uint64_t(a) * v.L.aw, v.L.aw);
+  uint64_t x;  // anchors 0 and 1 (at most 64 bits together)
+  std::memcpy(&x, v.bits, 8);
+  const uint32_t aw0 = v.L.aw[0], aw1 = v.L.aw[1];
+  v.anchor[0] = uint32_t(x & ((uint64_t(1) << aw0) - 1));
+  v.anchor[1] = uint32_t((x >> aw0) & ((uint64_t(1) << aw1) - 1));
+  v.anchor[2] = read_bits(v.bits, aw0 + aw1, v.L.aw[2]);
   return v;
 }
 
@@ -689,7 +741,7 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const View& v, int chil
 template <bool kLossless>
 SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, uint32_t children,
                               int child, Decoded8& d) {
-  decode_child<kLossless>(lat, view<kLossless>(data, children), child, d);
+  decode_child<kLossless>(lat, view<kLossless>(lat, data, children), child, d);
 }
 
 // What the ids of a child's triangles take from the cluster's view (kept with a decoded child in
@@ -712,15 +764,16 @@ SLIM_INLINE ChildIds child_ids(const View& v, uint32_t first) {
   c.entries = L.end;
   c.runs = L.runs;
   c.first = uint8_t(first);
-  c.ntris = h.ntris;
+  c.ntris = uint8_t(L.ntris);
   c.has_repeats = has_repeats(h);
-  c.prim_base = read_bits(v.bits, 3 * L.aw, h.bb);
-  c.geom_base = read_bits(v.bits, 3 * L.aw + h.bb, h.hb);
+  const uint32_t bb = prim_base_bits(h);
+  c.prim_base = read_bits(v.bits, L.bases, bb);
+  c.geom_base = read_bits(v.bits, L.bases + bb, geom_base_bits(h));
   c.idbits = uint8_t(L.idbits);
   c.rb = uint8_t(L.rb);
   c.ob = uint8_t(offset_bits(h));
-  c.gb = h.gb;
-  c.pb = h.pb;
+  c.gb = uint8_t(geom_bits(h));
+  c.pb = uint8_t(run_low_bits(h));
   return c;
 }
 // The start of run `run` (from prim_base; bits: the cluster's stream): 0 for run 0, else
@@ -777,50 +830,90 @@ SLIM_INLINE void decode_ids(const View& v, uint32_t t, uint32_t& geom, uint32_t&
 }
 // primID and geomID of triangle t of a cluster of `children` children.
 template <bool kLossless>
-SLIM_INLINE void decode_ids(const uint8_t* data, uint32_t children, uint32_t t, uint32_t& geom,
-                            uint32_t& prim) {
-  decode_ids(view<kLossless>(data, children), t, geom, prim);
+SLIM_INLINE void decode_ids(const ClusterLattice& lat, const uint8_t* data, uint32_t children,
+                            uint32_t t, uint32_t& geom, uint32_t& prim) {
+  decode_ids(view<kLossless>(lat, data, children), t, geom, prim);
+}
+
+// What box_frame takes from the lattice, made once per scene (lattice_frame: Context::frame): the
+// lattice, and where the anchors lie in the stream's first 16 bytes: anchor a's bits first[a] ..
+// first[a] + width[a] (the lattice's anchor_bits, first[a] <= 48), for the AVX2 path as the 4
+// bytes from its first byte (a pshufb control: byte 48 / 8 + 3 at most), a right shift in them
+// and a mask; the origin, the step and its bits as vectors (memory operands of the frame's
+// instructions, no broadcasts per visit).
+struct LatticeFrame {
+  ClusterLattice lat;
+  alignas(16) uint8_t bytes[16] = {};
+  alignas(16) uint32_t shift[4] = {};
+  alignas(16) uint32_t mask[4] = {};
+  alignas(16) float origin[4] = {};        // lane 3: 0
+  alignas(16) float step[4] = {};          // 4 x lat.step
+  alignas(16) uint32_t step_bits[4] = {};  // 4 x lat.step's bits
+  uint32_t first[3] = {}, width[3] = {};
+};
+SLIM_INLINE LatticeFrame lattice_frame(const ClusterLattice& lat) {
+  LatticeFrame f;
+  f.lat = lat;
+  uint32_t step_bits;
+  std::memcpy(&step_bits, &lat.step, 4);
+  for (int a = 0; a < 4; ++a) {
+    f.origin[a] = a < 3 ? lat.origin[a] : 0.0f;
+    f.step[a] = lat.step;
+    f.step_bits[a] = step_bits;
+  }
+  uint32_t o = 0;
+  for (int a = 0; a < 3; ++a) {
+    const uint32_t w = std::min<uint32_t>(lat.anchor_bits[a], 24);  // check_opened: <= 24
+    f.first[a] = o;
+    f.width[a] = w;
+    for (int j = 0; j < 4; ++j) f.bytes[4 * a + j] = uint8_t((o >> 3) + uint32_t(j));
+    f.shift[a] = o & 7;
+    f.mask[a] = (1u << w) - 1;
+    o += w;
+  }
+  for (int j = 12; j < 16; ++j) f.bytes[j] = 0x80;  // lane 3: 0
+  return f;
 }
 
 // The boxes' start per axis (4 floats, the 4th unused): the anchor's lattice coordinate, from the
-// 3 x 24-bit anchors in the first 9 of the 16 bytes at `bits` (the stream's start; the builder
-// passes a padded copy). The one computation of it, for the builder and the traversal alike; the
-// AVX2 path takes the three axes at once with one fma (the product is exact: q < 2^24 and a
-// power-of-two step, so it rounds as lattice_coord's sum).
-SLIM_INLINE void box_start(const ClusterLattice& lat, const uint8_t* bits, float* start) {
+// anchors (f.width[a] <= 24 bits each) in the first 16 bytes at `bits` (the stream's start; the
+// builder passes a padded copy). The one computation of it, for the builder and the traversal
+// alike; the AVX2 path takes the three axes at once (one load, a byte shuffle, a shift and a mask
+// per lane: read_bits' bits) with one fma (the product is exact: q < 2^24 and a power-of-two
+// step, so it rounds as lattice_coord's sum).
+SLIM_INLINE void box_start(const LatticeFrame& f, const uint8_t* bits, float* start) {
 #if defined(SLIM_SIMD_AVX2)
   const __m128i raw = _mm_lddqu_si128(reinterpret_cast<const __m128i*>(bits));
+  const __m128i x =
+      _mm_shuffle_epi8(raw, _mm_load_si128(reinterpret_cast<const __m128i*>(f.bytes)));
   const __m128i q =
-      _mm_shuffle_epi8(raw, _mm_setr_epi8(0, 1, 2, -1, 3, 4, 5, -1, 6, 7, 8, -1, -1, -1, -1, -1));
-  static_assert(sizeof(ClusterLattice) == 16, "origin[3] then step: one 16-byte load");
-  const __m128 origin = _mm_loadu_ps(lat.origin);  // lane 3: the step (unused)
-  _mm_storeu_ps(start, _mm_fmadd_ps(_mm_cvtepi32_ps(q), _mm_set1_ps(lat.step), origin));
+      _mm_and_si128(_mm_srlv_epi32(x, _mm_load_si128(reinterpret_cast<const __m128i*>(f.shift))),
+                    _mm_load_si128(reinterpret_cast<const __m128i*>(f.mask)));
+  _mm_storeu_ps(start,
+                _mm_fmadd_ps(_mm_cvtepi32_ps(q), _mm_load_ps(f.step), _mm_load_ps(f.origin)));
 #else
   for (int a = 0; a < 3; ++a)
-    start[a] = lattice_coord(lat, a, read_bits(bits, uint64_t(a) * 24, 24));
+    start[a] = lattice_coord(f.lat, a, read_bits(bits, f.first[a], f.width[a]));
   start[3] = 0.0f;
 #endif
 }
 
 // The frame (start, extent per axis; 4 floats each, the 4th unused) of the LatticeBoxes8 at p,
-// the cluster's data right behind them (its stream holds the 9 anchor bytes and more, plus
+// the cluster's data right behind them (its stream holds the anchors and more, plus
 // kClusterReadSlack: 16 bytes to read). Read on every multi-leaf visit: the AVX2 path takes the
 // three axes at once (a dozen instructions instead of some 45), the extents with box_extent's
 // integer operations lane by lane.
-SLIM_INLINE void box_frame(const ClusterLattice& lat, const uint8_t* p, float* start,
-                           float* extent) {
+SLIM_INLINE void box_frame(const LatticeFrame& f, const uint8_t* p, float* start, float* extent) {
   const uint8_t* scale = p + offsetof(LatticeBoxes8, scale);
-  box_start(lat, p + sizeof(LatticeBoxes8) + sizeof(ClusterHeader), start);
+  box_start(f, p + sizeof(LatticeBoxes8) + sizeof(ClusterHeader), start);
 #if defined(SLIM_SIMD_AVX2)
   uint32_t sc;
   std::memcpy(&sc, scale, 4);  // the 3 scale bytes and the cluster header's first
-  uint32_t step_bits;
-  std::memcpy(&step_bits, &lat.step, 4);
   const __m128i e = _mm_add_epi32(_mm_slli_epi32(_mm_cvtepu8_epi32(_mm_cvtsi32_si128(int(sc))), 20),
-                                  _mm_set1_epi32(int(step_bits)));
+                                  _mm_load_si128(reinterpret_cast<const __m128i*>(f.step_bits)));
   _mm_storeu_ps(extent, _mm_castsi128_ps(e));
 #else
-  for (int a = 0; a < 3; ++a) extent[a] = box_extent(lat, scale[a]);
+  for (int a = 0; a < 3; ++a) extent[a] = box_extent(f.lat, scale[a]);
   extent[3] = 0.0f;
 #endif
 }
@@ -925,12 +1018,17 @@ SLIM_INLINE DecodeCache& decode_cache() {
 // A tag no scene had before (1, 2, ...).
 uint64_t next_cache_tag();
 
-// Checks that `size` bytes at `data` hold a well-formed cluster of `children` children (header
-// fields in range, child sizes covering the triangles, every strip inside the topology stream with
-// every vertex index below nverts, every run index below nruns, the run highs' nruns - 1 one bits
-// within kMaxRunHighBits bits, the stream inside `size`). The decoders read only what this accepts
-// (plus kClusterReadSlack bytes).
-bool check(const uint8_t* data, uint64_t size, uint32_t children, bool lossless, std::string* why);
+// Checks that `size` bytes at `data` hold a well-formed cluster of `children` children on the
+// scene's lattice `lat` (lossy: the anchors' widths, at most 24 bits; header fields in range, no
+// child sizes beyond the child count, every strip inside the topology stream with every vertex
+// index below nverts, every run index below nruns, the run highs' nruns - 1 one bits within
+// kMaxRunHighBits bits, the stream inside `size`). The decoders read only what this accepts (plus
+// kClusterReadSlack bytes).
+bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterLattice& lat,
+           bool lossless, std::string* why);
+// The lattice fields the decoders take as given (lossy: anchor widths of at most 24 bits), else
+// what is wrong.
+std::string check_lattice(const ClusterLattice& lat);
 
 // Per-scene encoding figures (info --clusters). The four parts add up to the clusters' bytes
 // (but for the padding to whole bytes).
@@ -980,7 +1078,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
 // exact). The box is `lattice_box` when it is not empty (BuildOptions::lattice_box, which must
 // contain the vertices: meshes quantized with the same box share one lattice, so a vertex they
 // share gets the same code and decodes to the same bits in each), else the used vertices' box.
-// Lossless: the order keys of the exact floats.
+// The lattice's anchor_bits: per axis the bit width of the largest code of the box (or of a used
+// vertex, if larger). Lossless: the order keys of the exact floats.
 struct Quantized {
   ClusterLattice lattice;
   bool coarsened = false;
@@ -998,6 +1097,7 @@ template <bool kLossless>
 struct ClusterLeaf {
   struct Context {
     ClusterLattice lattice;
+    cluster::LatticeFrame frame = cluster::lattice_frame(lattice);  // from `lattice`
     const uint8_t* side = nullptr;
     uint64_t side_bytes = 0;                         // scene files: the section's size
     uint64_t cache_tag = cluster::next_cache_tag();  // this scene's key in cluster::DecodeCache
@@ -1006,6 +1106,7 @@ struct ClusterLeaf {
   template <class V>
   static void context_sections(V& v, const std::string& p, Context& c) {
     v.pod(p + "cluster.lattice", c.lattice);
+    c.frame = cluster::lattice_frame(c.lattice);  // opening: of the lattice read
     v.array(p + "cluster.side", c.side, c.side_bytes);
   }
   static constexpr uint32_t kBlockPrims = 8;
@@ -1018,7 +1119,7 @@ struct ClusterLeaf {
   // Scene files' structure check (OpenOptions::check_structure): the cluster a multi-leaf holds
   // (`avail` bytes from `data` to the end of the leaf arena, whose last kClusterReadSlack bytes
   // are the decoders' read slack), and the side arena's record an isolated leaf names.
-  static std::string check_multileaf(const Context&, const uint8_t* data, uint32_t k,
+  static std::string check_multileaf(const Context& ctx, const uint8_t* data, uint32_t k,
                                      uint64_t avail) {
     if constexpr (!kLossless) {  // the box scales right before the data (the walk checked them in)
       for (const uint8_t* sc = data - 3; sc < data; ++sc)
@@ -1035,7 +1136,8 @@ struct ClusterLeaf {
     }
     std::string why;
     if (avail < kClusterReadSlack) return "cluster beyond the leaf arena";
-    if (!cluster::check(data, avail - kClusterReadSlack, k, kLossless, &why)) return why;
+    if (!cluster::check(data, avail - kClusterReadSlack, k, ctx.lattice, kLossless, &why))
+      return why;
     return {};
   }
   static std::string check_block(const Context& ctx, const uint8_t* block) {
@@ -1044,8 +1146,8 @@ struct ClusterLeaf {
     if (ctx.side_bytes < kClusterReadSlack || off > ctx.side_bytes - kClusterReadSlack)
       return "cluster record offset beyond the side arena (cluster.side)";
     std::string why;
-    if (!cluster::check(ctx.side + off, ctx.side_bytes - kClusterReadSlack - off, 1, kLossless,
-                        &why))
+    if (!cluster::check(ctx.side + off, ctx.side_bytes - kClusterReadSlack - off, 1, ctx.lattice,
+                        kLossless, &why))
       return why + " (cluster.side)";
     return {};
   }
@@ -1141,7 +1243,7 @@ struct ClusterLeaf {
     if constexpr (kLossless)
       cluster::exact_box_frame(p, start, extent);
     else
-      cluster::box_frame(ctx.lattice, p, start, extent);
+      cluster::box_frame(ctx.frame, p, start, extent);
   }
 
   // ---- traversal side ----
@@ -1161,9 +1263,9 @@ struct ClusterLeaf {
       cluster::View v;
     };
     mutable Lazy lazy;
-    SLIM_INLINE const cluster::View& get() const {
+    SLIM_INLINE const cluster::View& get(const ClusterLattice& lat) const {
       if (!read) {
-        lazy.v = cluster::view<kLossless>(data, children);
+        lazy.v = cluster::view<kLossless>(lat, data, children);
         read = true;
       }
       return lazy.v;
@@ -1179,7 +1281,7 @@ struct ClusterLeaf {
     using namespace simd;
     cluster::DecodeCache::Entry& en = view.cache->slot(view.data, i);
     if (en.bits != view.data || en.child != i || en.tag != ctx.cache_tag) {
-      const cluster::View& v = view.get();
+      const cluster::View& v = view.get(ctx.lattice);
       cluster::decode_child<kLossless>(ctx.lattice, v, i, en.d);
       en.ids = cluster::child_ids(v, uint32_t(en.d.first));
       en.bits = view.data;
@@ -1240,7 +1342,8 @@ struct ClusterLeaf {
         box.extend(c[k]);
       }
       uint32_t geom, prim;
-      cluster::decode_ids<kLossless>(data, children, uint32_t(d.first + l), geom, prim);
+      cluster::decode_ids<kLossless>(ctx.lattice, data, children, uint32_t(d.first + l), geom,
+                                     prim);
       fn(box, triangle_key(c[0], c[1], c[2], geom, prim));
     }
   }

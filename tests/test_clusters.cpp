@@ -837,9 +837,9 @@ TEST(ClusterScene, StatisticsAndSizes) {
   EXPECT_GT(detail(l, "multileaf_count"), 0);
   EXPECT_EQ(detail(l, "multileaf_bytes"),
             double(sizeof(cluster::ExactBoxes8)) * detail(l, "multileaf_count"));
-  // The clusters lie in the leaf arena without padding (ClusterLeaf::kBytePacked), and the memory
-  // counts the arenas as kept: the clusters' data, then the read slack of the leaf arena and of
-  // the (here empty) side arena.
+  // The clusters lie in the leaf arena without padding (ClusterLeaf::kLeafAlign = 1), and the
+  // memory counts the arenas as kept: the clusters' data, then the read slack of the leaf arena and
+  // of the (here empty) side arena.
   for (const Scene* c : {&s, &l}) {
     ASSERT_EQ(detail(*c, "leaf_count"), detail(*c, "leaves_in_multileaf"));
     EXPECT_EQ(double(c->memory().geometry_bytes),

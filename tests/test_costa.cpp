@@ -676,11 +676,16 @@ TEST(CostaScene, KindsValidateAndMemory) {
     }
     MemoryStats mem = s.memory();
     EXPECT_EQ(mem.total(), mem.geometry_bytes + mem.bvh_bytes + mem.other_bytes);
-    double store = 0;
-    for (auto& [k, v] : stat_details(s))
+    double store = 0, leaf_data = -1;
+    for (auto& [k, v] : stat_details(s)) {
       if (k == "store_bytes") store = v;
+      if (k == "leaf_data_bytes") leaf_data = v;
+    }
     EXPECT_GT(store, 0);
     EXPECT_LT(store, double(mem.geometry_bytes));
+    // The geometry is the store and the leaf arena as kept, whose leaves lie at 8-byte multiples
+    // without padding (CostaBlockLeaf::kLeafAlign: 8-byte blocks, 72-byte multi-leaf boxes).
+    EXPECT_EQ(double(mem.geometry_bytes), store + leaf_data) << cfg;
   }
 }
 

@@ -193,7 +193,7 @@ class BvhScene : public Scene::Impl {
   // index side tables check those tables' own fields first (their check_opened).
   void check_bvh(const std::string& p, bool deep) const {
     constexpr uint32_t hb = multileaf_header_bytes<Leaf>();
-    constexpr uint32_t align = leaf_packed<Leaf>() ? 1 : 4;
+    constexpr uint32_t align = std::min(leaf_align<Leaf>(), 4u);  // what the walk asks for
     check_bvh_root(bvh, p, Leaf::kBlockBytes, hb, align);
     if (!deep) return;
     BvhWalkHooks h;
@@ -283,7 +283,7 @@ class BvhScene : public Scene::Impl {
     LeafEncoder enc;
     enc.block_prims = Leaf::kBlockPrims;
     enc.block_bytes = Leaf::kBlockBytes;
-    enc.byte_packed = leaf_packed<Leaf>();
+    enc.leaf_align = leaf_align<Leaf>();
     enc.encode = [&](const uint32_t* prims, uint32_t n, uint8_t* out) {
       Leaf::encode(src, prims, n, out);
     };

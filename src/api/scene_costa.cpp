@@ -483,6 +483,7 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const MeshList& meshes, const Bui
   LeafEncoder enc;
   enc.block_prims = CostaBlockLeaf::kBlockPrims;
   enc.block_bytes = CostaBlockLeaf::kBlockBytes;
+  enc.leaf_align = leaf_align<CostaBlockLeaf>();
   enc.encode = [&](const uint32_t* prims, uint32_t n, uint8_t* out) {
     CostaBlock b{pos[prims[0]], n};
     for (uint32_t k = 1; k < n; ++k)

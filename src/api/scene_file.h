@@ -89,8 +89,8 @@ struct BvhWalkHooks {
   std::function<std::string(uint64_t off)> block;
   std::function<std::string(uint64_t off, uint32_t children)> multi;  // layouts with own data
   uint32_t multileaf_header_bytes = sizeof(MultiLeaf8);  // MultiLeafBoxDecoder::header_bytes
-  uint32_t leaf_align =
-      4;  // leaves and multi-leaves start at multiples of it (traverse.h leaf_packed)
+  // Leaves and multi-leaves start at multiples of it (traverse.h leaf_align, at most 4).
+  uint32_t leaf_align = 4;
 };
 // A leaf format's check answer as the walk takes it: leaves answer nullptr / an empty string for
 // a good block, else what is wrong.

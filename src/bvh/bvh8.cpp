@@ -212,11 +212,12 @@ class Collapser {
   }
 
  private:
-  static uint64_t round16(uint64_t x) { return (x + 15) & ~uint64_t(15); }
-  // Leaf and multi-leaf sizes: 16-byte multiples, or no padding for layouts that read at any byte
-  // address (LeafEncoder::byte_packed: the clusters, where the padding to 4 bytes cost 1.5 bytes a
-  // cluster).
-  uint64_t round_leaf(uint64_t x) const { return enc_.byte_packed ? x : round16(x); }
+  // Leaf and multi-leaf sizes: multiples of LeafEncoder::leaf_align (16 unless the layout reads
+  // its leaves at any multiple of less: the padding cost the clusters 1.5 bytes a cluster at 4,
+  // the Costa leaves 8 bytes a leaf at 16).
+  uint64_t round_leaf(uint64_t x) const {
+    return (x + enc_.leaf_align - 1) & ~uint64_t(enc_.leaf_align - 1);
+  }
 
   // fn(c) for c = 0..k-1: as parallel tasks if the subtree of node i is large (and `parallel`).
   template <class F>

@@ -167,9 +167,10 @@ struct LeafEncoder {
   uint32_t multileaf_header_bytes = sizeof(MultiLeaf8);
   std::function<void(const uint8_t* data, int k, const Box3f* boxes, uint8_t* header)>
       multileaf_boxes;
-  // The layout reads its leaves and multi-leaves at any byte address (the clusters: unaligned
-  // loads only): the collapse packs them without padding (leaf_packed in traverse.h).
-  bool byte_packed = false;
+  // Leaves and multi-leaves start at multiples of this (a power of two): the collapse pads each to
+  // it. 16 unless the layout reads them at any multiple of less (traverse.h leaf_align: the
+  // clusters 1, the Costa leaves 8).
+  uint32_t leaf_align = 16;
 };
 
 struct Bvh8Stats {

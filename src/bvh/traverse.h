@@ -144,14 +144,14 @@ constexpr uint32_t multileaf_header_bytes() {
   else
     return sizeof(MultiLeaf8);
 }
-// Its leaves and multi-leaves may start at any byte (L::kBytePacked: the layout reads them with
-// unaligned loads only); others start at 4-byte multiples (the collapse pads them to 16).
+// The alignment its leaves and multi-leaves need (LeafEncoder::leaf_align): L::kLeafAlign (the
+// clusters 1: unaligned loads and memcpy only; the Costa leaves 8), else 16.
 template <class L>
-constexpr bool leaf_packed() {
-  if constexpr (requires { L::kBytePacked; })
-    return L::kBytePacked;
+constexpr uint32_t leaf_align() {
+  if constexpr (requires { L::kLeafAlign; })
+    return L::kLeafAlign;
   else
-    return false;
+    return 16;
 }
 // Its multi-leaf data is written by L::encode_multileaf (clbvh-compact's vertex dictionary).
 template <class L>

@@ -1113,8 +1113,8 @@ struct ClusterLeaf {
   static constexpr uint32_t kBlockBytes = 8;
   static constexpr bool kMultiLeafLayout = true;
   // Every read of a cluster, its boxes and its isolated leaves' blocks is an unaligned load or a
-  // memcpy: the collapse packs them without padding (traverse.h leaf_packed).
-  static constexpr bool kBytePacked = true;
+  // memcpy: the collapse packs them without padding (traverse.h leaf_align).
+  static constexpr uint32_t kLeafAlign = 1;
 
   // Scene files' structure check (OpenOptions::check_structure): the cluster a multi-leaf holds
   // (`avail` bytes from `data` to the end of the leaf arena, whose last kClusterReadSlack bytes
@@ -1217,7 +1217,7 @@ struct ClusterLeaf {
   static constexpr bool kMultiLeafBoxes = true;
   static constexpr uint32_t kMultiLeafHeaderBytes =
       kLossless ? sizeof(cluster::ExactBoxes8) : sizeof(cluster::LatticeBoxes8);
-  // Multi-leaves lie at any byte (kBytePacked): the boxes are written through a copy (an
+  // Multi-leaves lie at any byte (kLeafAlign): the boxes are written through a copy (an
   // ExactBoxes8's extents are 2-byte fields).
   static void write_multileaf_frame(const ClusterSource& s, const uint8_t* data, const Box3f& box,
                                     uint8_t* header, float* start, float* extent) {

@@ -86,6 +86,10 @@ struct CostaLeaf {
   };
   static constexpr uint32_t kBlockPrims = 4;
   static constexpr uint32_t kBlockBytes = sizeof(CostaBlock);
+  // Blocks are read with memcpy, multi-leaf boxes (MultiLeaf8: floats) at 4-byte multiples: the
+  // collapse packs leaves and multi-leaves at 8-byte multiples (traverse.h leaf_align), which
+  // their sizes are.
+  static constexpr uint32_t kLeafAlign = 8;
 
   // Scene files' structure check (OpenOptions::check_structure) of the store's parameters: bit
   // widths the readers take, a linear predictor whose sums fit int64 (predict_offset), a face

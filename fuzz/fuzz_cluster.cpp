@@ -105,11 +105,12 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
       decoded[i][a] = lossless ? cluster::key_float(c) : cluster::lattice_coord(lat, a, c);
     }
   // Lossy: the anchors at the codes' widths (the lattice's largest code per axis, as quantize).
-  for (int a = 0; a < 3; ++a) {
-    uint32_t top = 0;
-    for (uint32_t i = 0; i < nv; ++i) top = std::max(top, codes[3 * i + a]);
-    lat.anchor_bits[a] = uint8_t(cluster::bit_width(top));
-  }
+  if (!lossless)
+    for (int a = 0; a < 3; ++a) {
+      uint32_t top = 0;
+      for (uint32_t i = 0; i < nv; ++i) top = std::max(top, codes[3 * i + a]);
+      lat.anchor_bits[a] = uint8_t(cluster::bit_width(top));
+    }
   std::vector<uint32_t> tris(3 * ntris), geom(ntris), prim(ntris), order(ntris);
   for (uint32_t t = 0; t < ntris; ++t) {
     for (int k = 0; k < 3; ++k) tris[3 * t + k] = in.byte() % nv;

@@ -90,8 +90,9 @@ struct PairingOptions {
 
 // How the binary BVH is collapsed into 8-wide nodes.
 enum class Collapse : uint8_t {
-  Auto,     // Optimal for Bvh8 and QBvh8, Slots for CompressedLeaf
-  Optimal,  // SAH-optimal choice of the up to 8 descendants each node takes
+  Auto,     // Optimal, but Slots for the compressed-leaf BVH other than the clusters'
+  Optimal,  // SAH-optimal choice of the up to 8 descendants each node takes (for the clusters
+            // with a node's memory in the cost)
   Slots,    // open the largest child until 8 slots are taken (spends fewer inner nodes around
             // multi-leaves)
 };

@@ -193,7 +193,9 @@ class BvhScene : public Scene::Impl {
   // index side tables check those tables' own fields first (their check_opened).
   void check_bvh(const std::string& p, bool deep) const {
     constexpr uint32_t hb = multileaf_header_bytes<Leaf>();
-    constexpr uint32_t align = std::min(leaf_align<Leaf>(), 4u);  // what the walk asks for
+    // The walk asks for at most 4: the widest typed field a layout reads from its leaves (the
+    // floats of a MultiLeaf8, the uint32 of a block); stricter padding is the collapse's choice.
+    constexpr uint32_t align = std::min(leaf_align<Leaf>(), 4u);
     check_bvh_root(bvh, p, Leaf::kBlockBytes, hb, align);
     if (!deep) return;
     BvhWalkHooks h;
@@ -315,10 +317,8 @@ class BvhScene : public Scene::Impl {
     if (progress) progress->finish();
     double collapse_s = secs(t0);
     bounds = bvh.bounds;
-    // The arenas as kept: the leaf data with the padding between leaves (the multi-leaf headers
-    // are BVH memory).
-    mem.bvh_bytes = bvh.nodes.size() + bvh.multileaf_bytes;
-    mem.geometry_bytes += bvh.leaves.size() - bvh.multileaf_bytes;
+    mem.bvh_bytes = bvh.kept_bvh_bytes();
+    mem.geometry_bytes += bvh.kept_leaf_bytes();
     stats.primitives = prim_count;
     const Bvh8Stats& s = bvh.stats;
     auto& d = stats.details;

@@ -495,10 +495,9 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const MeshList& meshes, const Bui
   Bvh8 bvh = collapse_bvh8(b2, kind, enc, collapse_rule(opt, kind), progress.get());
   if (progress) progress->finish();
 
-  // The arenas as kept: the leaf data with the padding between leaves (the multi-leaf headers are
-  // BVH memory).
-  const uint64_t node_bytes = bvh.nodes.size(), multileaf_bytes = bvh.multileaf_bytes;
-  const uint64_t leaf_data_bytes = bvh.leaves.size() - bvh.multileaf_bytes;
+  const uint64_t node_bytes = bvh.node_bytes, multileaf_bytes = bvh.multileaf_bytes;
+  const uint64_t leaf_data_bytes = bvh.leaf_data_bytes;
+  const uint64_t kept_bvh = bvh.kept_bvh_bytes(), kept_leaves = bvh.kept_leaf_bytes();
   const Bvh8Stats b8 = bvh.stats;
   const Box3f bounds = bvh.bounds;
   std::unique_ptr<Scene::Impl> s = make_scene(flags, data, std::move(bvh), expected);
@@ -506,8 +505,8 @@ std::unique_ptr<Scene::Impl> build_costa_scene(const MeshList& meshes, const Bui
   s->error_bound = max_error;
   const QuantizedMesh& q = data->store;
   MemoryStats& mem = s->mem;  // everything the scene keeps
-  mem.bvh_bytes = node_bytes + multileaf_bytes;
-  mem.geometry_bytes = q.bytes() + leaf_data_bytes;
+  mem.bvh_bytes = kept_bvh;
+  mem.geometry_bytes = q.bytes() + kept_leaves;
   mem.other_bytes = data->face_map.bytes() + data->face_base.size() * sizeof(uint32_t);
   mem.triangles = stats_src.input_triangles;
   SceneStatsAndDetails& st = s->stats;

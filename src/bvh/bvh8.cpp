@@ -213,8 +213,8 @@ class Collapser {
 
  private:
   // Leaf and multi-leaf sizes: multiples of LeafEncoder::leaf_align (16 unless the layout reads
-  // its leaves at any multiple of less: the padding cost the clusters 1.5 bytes a cluster at 4,
-  // the Costa leaves 8 bytes a leaf at 16).
+  // its leaves at any multiple of less: padding to 4 would cost the clusters 1.5 bytes a cluster,
+  // to 16 the Costa leaves 8 bytes a leaf).
   uint64_t round_leaf(uint64_t x) const {
     return (x + enc_.leaf_align - 1) & ~uint64_t(enc_.leaf_align - 1);
   }

@@ -148,10 +148,13 @@ constexpr uint32_t multileaf_header_bytes() {
 // clusters 1: unaligned loads and memcpy only; the Costa leaves 8), else 16.
 template <class L>
 constexpr uint32_t leaf_align() {
-  if constexpr (requires { L::kLeafAlign; })
+  if constexpr (requires { L::kLeafAlign; }) {
+    static_assert(L::kLeafAlign && (L::kLeafAlign & (L::kLeafAlign - 1)) == 0,
+                  "the collapse rounds leaf sizes to a power of two");
     return L::kLeafAlign;
-  else
+  } else {
     return 16;
+  }
 }
 // Its multi-leaf data is written by L::encode_multileaf (clbvh-compact's vertex dictionary).
 template <class L>

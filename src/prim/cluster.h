@@ -7,8 +7,9 @@
 // A cluster is one multi-leaf of the compressed-leaf BVH (bvh8.h; QBVH8 inner nodes above the
 // multi-leaves, NodeKind::QCompressedLeaf): its header holds the quantized boxes of up to 8
 // children of up to 8 triangles each (one 8-wide watertight test per child): 51 bytes lossy (a
-// LatticeBoxes8, below: the boxes' frame comes from the cluster's anchors), a 72-byte MultiLeaf8
-// lossless. The cluster data follows it:
+// LatticeBoxes8, below: the boxes' frame comes from the cluster's anchors), 54 bytes lossless (an
+// ExactBoxes8: the frame from the anchors and three bfloat16 extents). The cluster data follows
+// it:
 //   ClusterHeader (15 B, packed)
 //   bit stream, LSB first from the byte after the header:
 //     anchors:  aw0 + aw1 + aw2 bits, the per-axis minimum codes (lossless aw = 32; lossy the
@@ -130,7 +131,7 @@ struct ClusterLattice {
   float step = 1.0f;  // a power of two
   // Bits of a lossy cluster's anchor per axis (<= 24): bit_width of the largest lattice code a
   // vertex of the scene can take on the axis (quantize: from the lattice's box, which a chunked
-  // build shares with the other chunks). The anchors of canyon:1024 take 16 bits, not 24.
+  // build shares with the other chunks). The anchors of canyon:1024 take 16 bits.
   uint8_t anchor_bits[3] = {24, 24, 24};
   uint8_t pad = 0;
 };
@@ -1031,7 +1032,7 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
 std::string check_lattice(const ClusterLattice& lat);
 
 // Per-scene encoding figures (info --clusters). The four parts add up to the clusters' bytes
-// (but for the padding to whole bytes).
+// (but for the padding to whole bytes and of short streams to kMinStreamBytes).
 struct EncodeStats {
   std::mutex m;
   uint64_t clusters = 0, triangles = 0, vertices = 0;
@@ -1106,7 +1107,7 @@ struct ClusterLeaf {
   template <class V>
   static void context_sections(V& v, const std::string& p, Context& c) {
     v.pod(p + "cluster.lattice", c.lattice);
-    c.frame = cluster::lattice_frame(c.lattice);  // opening: of the lattice read
+    if (!v.saving()) c.frame = cluster::lattice_frame(c.lattice);  // of the lattice read
     v.array(p + "cluster.side", c.side, c.side_bytes);
   }
   static constexpr uint32_t kBlockPrims = 8;

@@ -213,9 +213,9 @@ enum class CollapseRule : uint8_t {
 
 // The clusters' optimal collapse: a QNode8 costs, beyond its SAH visit, this many times the mean
 // area of the collapse's terminals (the clusters and the rare isolated leaves, relative to the
-// root's), which trades a little SAH for
-// fuller nodes (136 B each) where the two are close. On canyon:1024 6861 QNode8 (Slots, SAH cost
-// 20.5) become 6052 (18.7); without the memory term 6752 (18.5).
+// root's), which trades a little SAH for fuller nodes (136 B each) where the two are close. On
+// canyon:1024 6861 QNode8 (Slots, SAH cost 20.5) become 6052 (18.7); without the memory term 6752
+// (18.5).
 constexpr float kClusterNodeCost = 16;
 
 // The rule each node kind is best served by (the figures above).

@@ -511,7 +511,9 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   ASSERT_LE(ib, 8);
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ib), uint8_t(ib | 1 << 4)));
   EXPECT_NE(why.find("lossy"), std::string::npos) << why;
-  // Lossless: float keys or decimals of 0..9 digits (modes 0..10), not more.
+  // Lossless: float keys or decimals of 0..9 digits (modes 0..10), not more; a decimal mode's box
+  // start (the stream's first 3 floats) decimals of the axes' digits: these 4-digit coordinates
+  // are decimals of 4 to 9 digits, not of fewer.
   PolyMesh dec = printed(icosphere(2), 4);
   TriangleMesh dtm = triangulate_fan({&dec});
   const cluster::Quantized dz = cluster::quantize(dtm.vertices.data(), dtm.vertices.size(),
@@ -525,25 +527,37 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   for (uint32_t mode = 0; mode < 16; ++mode) {
     std::vector<uint8_t> b = lgood;
     b[offsetof(ClusterHeader, ib)] = uint8_t(cluster::index_bits(lh) | mode << 4);
-    EXPECT_EQ(cluster::check(b.data(), b.size(), 2, dz.lattice, true, &why), mode <= 10) << mode;
+    EXPECT_EQ(cluster::check(b.data(), b.size(), 2, dz.lattice, true, &why),
+              mode == 0 || (mode >= 5 && mode <= 10))
+        << mode;
     if (mode > 10) {
       EXPECT_NE(why.find("decimal mode with"), std::string::npos) << why;
       continue;
     }
+    if (mode >= 1 && mode <= 4) EXPECT_NE(why.find("box start"), std::string::npos) << why;
     cluster::Decoded8 d;                        // another mode: other positions, but no failure
     b.resize(b.size() + kClusterReadSlack, 0);  // the decoders' read slack (check() has its size)
     for (int c = 0; c < 2; ++c) cluster::decode_child<true>(dz.lattice, b.data(), 2, c, d);
   }
-  // An axis's digits below the cluster's (the top 2 bits of bits[a]): at most k, decimal mode only.
+  // An axis's digits below the cluster's (the top 2 bits of bits[a]): at most k, decimal mode only
+  // (and each axis's start a decimal of its digits: axis 1's of 1 digit or more, the others'
+  // of 4 or more).
   ASSERT_EQ(lh.bits[1] >> 6, 0);
-  for (uint32_t mode : {0u, 1u, 3u, 4u, 5u}) {
+  for (uint32_t mode : {0u, 1u, 3u, 4u, 5u, 8u}) {
     std::vector<uint8_t> b = lgood;
     b[offsetof(ClusterHeader, ib)] = uint8_t(cluster::index_bits(lh) | mode << 4);
     b[offsetof(ClusterHeader, bits) + 1] = uint8_t(lh.bits[1] | 3 << 6);
-    EXPECT_EQ(cluster::check(b.data(), b.size(), 2, dz.lattice, true, &why), mode >= 4) << mode;
-    if (mode < 4) {
-      EXPECT_NE(why.find("axis 1"), std::string::npos) << why;
-    }
+    EXPECT_EQ(cluster::check(b.data(), b.size(), 2, dz.lattice, true, &why), mode >= 5) << mode;
+    if (mode < 4) EXPECT_NE(why.find("axis 1"), std::string::npos) << why;
+    if (mode == 4) EXPECT_NE(why.find("box start"), std::string::npos) << why;
+  }
+  // A decimal cluster's start beyond the 32-bit codes, or not a number.
+  for (float bad :
+       {3e9f, std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN()}) {
+    std::vector<uint8_t> b = lgood;
+    std::memcpy(b.data() + sizeof(ClusterHeader) + 4, &bad, 4);
+    EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, dz.lattice, true, &why)) << bad;
+    EXPECT_NE(why.find("axis 1 box start"), std::string::npos) << why;
   }
   // The run highs (the stream's last bits): nruns - 1 one bits inside the data. Ids in pairs far
   // apart: 8 runs.

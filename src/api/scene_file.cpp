@@ -45,7 +45,7 @@ constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
 // per-axis widths (ClusterLattice::anchor_bits, in cluster.lattice). Any change of a section's
 // layout (a node, block or context struct), of what its bytes decode to, or of the header needs a
 // new version: the sections are the in-memory structs byte for byte.
-constexpr uint32_t kVersion = 7;
+constexpr uint32_t kVersion = 8;
 constexpr uint32_t kByteOrder = 0x01020304;
 constexpr uint64_t kAlign = 64;
 // Bounds the table before it is read (the header size check then bounds it by the file size): a

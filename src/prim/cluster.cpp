@@ -369,7 +369,16 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       dec_bits += bit_width(uint32_t(hi[a]) - uint32_t(lo[a]));
       key_bits += h.bits[a];
     }
-    if (dec_bits < key_bits) {
+    // The decoder recovers each anchor from the smallest coordinate (lossless_anchor): that holds
+    // for codes from decimal_code, checked here all the same.
+    bool recovered = true;
+    for (int a = 0; a < 3; ++a) {
+      const float f = decimal_coord(uint32_t(lo[a]), ka[a]);
+      uint32_t fb;
+      std::memcpy(&fb, &f, 4);
+      recovered = recovered && lossless_anchor(fb, 1, ka[a]) == uint32_t(lo[a]);
+    }
+    if (recovered && dec_bits < key_bits) {
       codes.swap(qs);
       for (int a = 0; a < 3; ++a) {
         anchor[a] = uint32_t(lo[a]);
@@ -489,7 +498,18 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   std::vector<uint8_t> out(bytes + 8, 0);  // 8: 64-bit stores
   std::memcpy(out.data(), &h, sizeof(h));
   BitWriter w{out, sizeof(ClusterHeader)};
-  for (int a = 0; a < 3; ++a) w.put(anchor[a], L.aw[a]);
+  for (int a = 0; a < 3; ++a) {
+    if (s.lossless) {  // the smallest coordinate's float, from which the decoder derives the anchor
+      const float f = decode_coord<true>(s.lattice, a, anchor[a], axis_mode(h, a));
+      uint32_t fb;
+      std::memcpy(&fb, &f, 4);
+      if (lossless_anchor(fb, coord_mode(h), axis_digits(h, a)) != anchor[a])
+        throw std::logic_error("cluster: lossless anchor not recovered from its coordinate");
+      w.put(fb, 32);
+    } else {
+      w.put(anchor[a], L.aw[a]);
+    }
+  }
   w.put(prim_base, bb);
   w.put(glo, hb);
   for (int c = 1; c < k; ++c) {
@@ -676,6 +696,21 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
   if (data_bytes(h, children, lat, lossless, 0) > size) return fail("stream runs past the data");
   const uint8_t* bits = data + sizeof(ClusterHeader);
   const Layout L = layout(h, children, lat, lossless);
+  // A decimal cluster's box start: per axis a float that is a decimal of the axis's digits (so
+  // that the boxes start at the coordinate the anchor decodes to).
+  if (lossless && coord_mode(h))
+    for (int a = 0; a < 3; ++a) {
+      uint32_t fb;
+      std::memcpy(&fb, bits + 4 * a, 4);
+      const uint32_t k = axis_digits(h, a), q = lossless_anchor(fb, coord_mode(h), k);
+      const float g = decimal_coord(q, k);
+      if (q == kNoDecimal || std::memcmp(&g, &fb, 4) != 0) {
+        float f;
+        std::memcpy(&f, &fb, 4);
+        return fail("axis " + std::to_string(a) + " box start " + std::to_string(f) +
+                    " is no decimal of " + std::to_string(k) + " digits");
+      }
+    }
   // Readers of w <= 32 bits at pos to which bits at or beyond `limit` read as 0: the strips' and
   // repeat bits' (limit L.end, inside `size` or not: the decoders may read beyond it, with the
   // slack, but use none of those bits on a block this accepts) and the id entries' and run highs'

@@ -12,9 +12,10 @@
 // it:
 //   ClusterHeader (15 B, packed)
 //   bit stream, LSB first from the byte after the header:
-//     anchors:  aw0 + aw1 + aw2 bits, the per-axis minimum codes (lossless aw = 32; lossy the
-//               scene's ClusterLattice::anchor_bits, the bits of the largest lattice code on the
-//               axis: 16 on canyon:1024, at most 24)
+//     anchors:  aw0 + aw1 + aw2 bits, the per-axis minimum codes (lossy: aw the scene's
+//               ClusterLattice::anchor_bits, the bits of the largest lattice code on the axis:
+//               16 on canyon:1024, at most 24); lossless: aw = 32, the per-axis minimum
+//               coordinates as floats, whose codes are the anchors (lossless_anchor)
 //     bases:    prim_base (bb bits), geom_base (hb bits)
 //     children: for children 1..k-1, the child's topology offset (tb bits) and its first new
 //               vertex (vbw bits), each a residual of a linear prediction (below)
@@ -106,6 +107,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -257,6 +259,24 @@ SLIM_INLINE float decimal_coord(uint32_t q, uint32_t k) {
   return float(double(int32_t(q)) * kInvPow10[k]);
 }
 
+// The decimal code of f with k digits before the range check: round(f x 10^k), the encoder's code
+// for each coordinate (non-decreasing in f, so the smallest coordinate of an axis has the
+// smallest code).
+SLIM_INLINE double decimal_q(float f, uint32_t k) { return std::nearbyint(double(f) * kPow10[k]); }
+
+// A lossless cluster's stream starts with its box start, the smallest coordinate per axis as its
+// float (the multi-leaf visit reads it with one load, no decode ahead of the box test); the anchor
+// the vertex offsets count from is that coordinate's code in the cluster's mode, derived on
+// decoding (a cache miss): its float key, or its decimal code decimal_q (clamped to -2^31 out of
+// range, which check() rejects).
+SLIM_INLINE uint32_t lossless_anchor(uint32_t start_bits, uint32_t mode, uint32_t digits) {
+  float f;
+  std::memcpy(&f, &start_bits, 4);
+  if (!mode) return float_key(f);
+  const double q = decimal_q(f, digits);
+  return std::fabs(q) < 2147483648.0 ? uint32_t(int32_t(q)) : 0x80000000u;
+}
+
 // The one decoding of a lossy coordinate (build and traversal use this function only).
 SLIM_INLINE float lattice_coord(const ClusterLattice& lat, int axis, uint32_t q) {
   return lat.origin[axis] + float(q) * lat.step;  // the product is exact (power-of-two step)
@@ -280,9 +300,9 @@ static_assert(sizeof(LatticeBoxes8) == 51, "lossy cluster multi-leaf boxes are 5
 constexpr uint32_t kMaxBoxScaleExp = 24;  // 255 x 2^24 steps span any cluster (< 2^24 steps)
 
 // ---- the lossless clusters' multi-leaf boxes (ClusterLeaf<true>) ----
-// The start is the cluster's lowest vertex per axis: its anchor (the per-axis minimum code, the
-// stream's first field) decoded in the cluster's mode (float key or decimal), exactly a vertex
-// coordinate. The extent per axis is a bfloat16 (a float's top 16 bits, decoded by a shift), the
+// The start is the cluster's lowest coordinate per axis, exactly a vertex coordinate: the
+// stream's first field holds it as a float (the anchors are its codes, lossless_anchor). The
+// extent per axis is a bfloat16 (a float's top 16 bits, decoded by a shift), the
 // smallest normal one whose q = 255 plane, start + 255 x extent with the traversal's fma, reaches
 // the cluster's top: at most 1/128 above the exact 1/255 of the span. 54 bytes instead of 72.
 struct ExactBoxes8 {
@@ -705,6 +725,13 @@ SLIM_INLINE View view(const ClusterLattice& lat, const uint8_t* data, uint32_t c
   v.bits = data + sizeof(ClusterHeader);
   v.L = layout(v.h, children, lat, kLossless);
   v.sizes = child_sizes(v.h);
+  if constexpr (kLossless) {
+    uint32_t w[3];  // the box start's floats
+    std::memcpy(w, v.bits, 12);
+    for (int a = 0; a < 3; ++a)
+      v.anchor[a] = lossless_anchor(w[a], coord_mode(v.h), axis_digits(v.h, a));
+    return v;
+  }
   uint64_t x;  // anchors 0 and 1 (at most 64 bits together)
   std::memcpy(&x, v.bits, 8);
   const uint32_t aw0 = v.L.aw[0], aw1 = v.L.aw[1];
@@ -925,40 +952,15 @@ bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f
                      LatticeBoxes8& boxes, float* start, float* extent);
 
 // The frame of the ExactBoxes8 at p (4 floats each, the 4th unused), the lossless cluster's data
-// right behind it: the start its anchors decoded in the cluster's mode, the extents the bfloat16s.
-// The one computation of it, for the builder (exact_box_start on the encoded cluster) and the
-// traversal, which reads it on every multi-leaf visit.
+// right behind it: the start the stream's first 3 floats (lossless_anchor), the extents the
+// bfloat16s. The one computation of it, for the builder (exact_box_start on the encoded cluster)
+// and the traversal, which reads it on every multi-leaf visit.
 SLIM_INLINE void exact_box_start(const uint8_t* data, float* start) {
-  const uint8_t* bits = data + sizeof(ClusterHeader);  // 3 x 32-bit anchors, then more stream
+  const uint8_t* bits = data + sizeof(ClusterHeader);  // the start's 3 floats, then more stream
 #if defined(SLIM_SIMD_AVX2)
-  // decode_coord's operations on the three axes at once (the same bits: exact bit operations for
-  // the keys; exact conversion, one correctly rounded product, one rounding for decimals).
-  uint32_t hb;  // the header's bits[0..2] (their top 2 bits: the axes' digits below k) and ib
-  std::memcpy(&hb, data + offsetof(ClusterHeader, bits), 4);
-  static_assert(offsetof(ClusterHeader, ib) == offsetof(ClusterHeader, bits) + 3, "bits[3], ib");
-  const __m128i code = _mm_loadu_si128(reinterpret_cast<const __m128i*>(bits));
-  const uint32_t mode = hb >> 28;  // coord_mode
-  if (mode == 0) {
-    _mm_storeu_ps(start, _mm256_castps256_ps128(key_floats8(_mm256_castsi128_si256(code))));
-  } else {
-    // axis_digits of the 3 axes, one per byte (SWAR: each byte of 16 + k - 1 - top2 is at least
-    // 13, so no borrow crosses bytes; & 15 keeps any block in kInvPow10), then 3 scalar loads
-    // (no gather: a short latency ahead of the box test).
-    const uint32_t top = (hb >> 6) & 0x030303u;
-    const uint32_t k = ((mode - 1) * 0x010101u + 0x101010u - top) & 0x0f0f0fu;
-    const __m128d xy = _mm_loadh_pd(_mm_load_sd(&kInvPow10[k & 0xff]), &kInvPow10[(k >> 8) & 0xff]);
-    const __m128d z1 = _mm_loadh_pd(_mm_load_sd(&kInvPow10[k >> 16]), &kInvPow10[0]);  // lane 3
-    const __m256d inv_pow10 = _mm256_insertf128_pd(_mm256_castpd128_pd256(xy), z1, 1);
-    _mm_storeu_ps(start, decimal_coords4(code, inv_pow10));
-  }
+  _mm_storeu_ps(start, _mm_loadu_ps(reinterpret_cast<const float*>(bits)));  // lane 3 unused
 #else
-  ClusterHeader h;
-  std::memcpy(&h, data, sizeof(h));
-  for (int a = 0; a < 3; ++a) {
-    uint32_t code;
-    std::memcpy(&code, bits + 4 * a, 4);  // 32-bit anchors, LSB first: little-endian words
-    start[a] = decode_coord<true>(ClusterLattice{}, a, code, axis_mode(h, a));
-  }
+  std::memcpy(start, bits, 12);
   start[3] = 0.0f;
 #endif
 }

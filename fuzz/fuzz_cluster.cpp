@@ -32,6 +32,17 @@ using fuzz::Reader;
 template <bool kLossless>
 void decode_all(const ClusterLattice& lat, const uint8_t* block, uint32_t children) {
   const cluster::View view = cluster::view<kLossless>(lat, block, children);
+  if constexpr (kLossless) {
+    // The box start the traversal loads is the coordinate its derived anchor decodes to.
+    alignas(16) float start[4];
+    cluster::exact_box_start(block, start);
+    for (int a = 0; a < 3; ++a) {
+      const float x =
+          cluster::decode_coord<true>(lat, a, view.anchor[a], cluster::axis_mode(view.h, a));
+      SLIM_FUZZ_CHECK(std::memcmp(&x, &start[a], 4) == 0,
+                      "box start is not the anchor's coordinate");
+    }
+  }
   for (uint32_t c = 0; c < children; ++c) {
     cluster::Decoded8 d;
     cluster::decode_child<kLossless>(lat, block, children, int(c), d);

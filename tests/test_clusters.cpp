@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cfenv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -155,8 +156,8 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
             EXPECT_LE(double(extent), std::max(1.125 * need, double(z.lattice.step)) * 1.0001);
           });
     } else {
-      // From the anchors: the start the cluster's lowest coordinate exactly (a vertex's, in the
-      // cluster's coordinate mode), the extent at most 1/128 above the exact 1/255 of the span
+      // From the stream's start floats: the cluster's lowest coordinate exactly (a vertex's), the
+      // extent at most 1/128 above the exact 1/255 of the span
       // (one bfloat16), or the least normal float.
       check_multileaf_boxes<cluster::ExactBoxes8, true>(
           data, z.lattice, boxes, kk,
@@ -426,6 +427,29 @@ TEST(ClusterCodec, DecimalModeDigits) {
   EXPECT_EQ(mode_of({0.1f, 0.2f, -0.0f, 1.5f, -2.2f, 0.7f, 1.0f, 0.0f, 3.0f}), (A{0, 0, 0, 0}));
 }
 
+// A lossless cluster's anchors from its start floats: the float keys, or the decimal codes
+// round(f x 10^k) under any rounding mode (the encoder's codes), -2^31 (kNoDecimal, which check()
+// rejects) beyond 32 bits.
+TEST(ClusterCodec, LosslessAnchorFromTheStartFloat) {
+  auto bits = [](float f) { return bits_of(f); };
+  const float inf = std::numeric_limits<float>::infinity();
+  for (float f : {0.0f, -0.0f, 1.5f, -2.25f, 1e-40f, inf, -inf})
+    EXPECT_EQ(cluster::lossless_anchor(bits(f), 0, 0), cluster::float_key(f)) << f;
+  for (int mode : {FE_TONEAREST, FE_DOWNWARD, FE_UPWARD, FE_TOWARDZERO}) {
+    ASSERT_EQ(std::fesetround(mode), 0);
+    volatile float seven = 0.7f, minus = -0.7f, hundred = 100.0f, big = 3e9f, digits = 1.0001f;
+    EXPECT_EQ(cluster::lossless_anchor(bits(seven), 2, 1), 7u) << mode;  // 0.69999998807907
+    EXPECT_EQ(cluster::lossless_anchor(bits(minus), 2, 1), uint32_t(-7)) << mode;
+    EXPECT_EQ(cluster::lossless_anchor(bits(hundred), 1, 0), 100u) << mode;
+    EXPECT_EQ(cluster::lossless_anchor(bits(digits), 5, 4), 10001u) << mode;
+    EXPECT_EQ(cluster::lossless_anchor(bits(big), 1, 0), 0x80000000u) << mode;
+    EXPECT_EQ(cluster::lossless_anchor(bits(std::numeric_limits<float>::quiet_NaN()), 1, 0),
+              0x80000000u);
+    EXPECT_EQ(cluster::lossless_anchor(bits(inf), 1, 0), 0x80000000u);
+  }
+  std::fesetround(FE_TONEAREST);
+}
+
 TEST(ClusterCodec, DecodeEqualsEncodeRealMesh) {
   SLIM_REQUIRE_SHARED_DATA();
   PolyMesh m = load(shared_data_dir() + "/stanford_bunny.obj.xz");  // %f decimals
@@ -552,8 +576,8 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
     if (mode == 4) EXPECT_NE(why.find("box start"), std::string::npos) << why;
   }
   // A decimal cluster's start beyond the 32-bit codes, or not a number.
-  for (float bad :
-       {3e9f, std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN()}) {
+  for (float bad : {3e9f, -0.0f, std::numeric_limits<float>::infinity(),
+                    std::numeric_limits<float>::quiet_NaN()}) {
     std::vector<uint8_t> b = lgood;
     std::memcpy(b.data() + sizeof(ClusterHeader) + 4, &bad, 4);
     EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, dz.lattice, true, &why)) << bad;
@@ -844,7 +868,8 @@ TEST(ClusterScene, StatisticsAndSizes) {
   EXPECT_EQ(detail(l, "max_error"), 0);
   EXPECT_GT(l.memory().total(), s.memory().total());
   // Multi-leaf headers: the lossy clusters' boxes on the lattice (51 B), the lossless clusters'
-  // boxes from their anchors (54 B), a MultiLeaf8 (72 B) for the other compressed-leaf formats.
+  // boxes from their start floats (54 B), a MultiLeaf8 (72 B) for the other compressed-leaf
+  // formats.
   EXPECT_GT(detail(s, "multileaf_count"), 0);
   EXPECT_EQ(detail(s, "multileaf_bytes"),
             double(sizeof(cluster::LatticeBoxes8)) * detail(s, "multileaf_count"));

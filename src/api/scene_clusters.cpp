@@ -469,7 +469,8 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
                    est.clusters ? double(est.decimal_clusters) / double(est.clusters) : 0.0);
   d.emplace_back("lattice_step", kLossless ? 0.0 : double(lat.step));
   d.emplace_back("lattice_coarsened", z->coarsened ? 1.0 : 0.0);
-  // Bits of a cluster's anchors (cluster.h: lossy, the lattice's per-axis widths).
+  // Bits of a cluster's anchors (cluster.h: lossy, the lattice's per-axis widths; lossless, the
+  // start floats the anchors are derived from).
   d.emplace_back(
       "anchor_bits",
       kLossless ? 96.0 : double(lat.anchor_bits[0] + lat.anchor_bits[1] + lat.anchor_bits[2]));

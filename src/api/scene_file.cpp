@@ -42,9 +42,10 @@ constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
 // steps with a 1-bit edge after a step, their child table as residuals of linear predictions
 // (prim/cluster.h), clusters of up to 64 triangles. Version 7: the cluster header of 15 bytes (no
 // triangle count, pb, gb, bb and hb packed in 3 bytes), the lossy anchors at the lattice's
-// per-axis widths (ClusterLattice::anchor_bits, in cluster.lattice). Any change of a section's
-// layout (a node, block or context struct), of what its bytes decode to, or of the header needs a
-// new version: the sections are the in-memory structs byte for byte.
+// per-axis widths (ClusterLattice::anchor_bits, in cluster.lattice). Version 8: a lossless
+// cluster's stream starts with its box start (3 floats), the anchors derived from them. Any change
+// of a section's layout (a node, block or context struct), of what its bytes decode to, or of the
+// header needs a new version: the sections are the in-memory structs byte for byte.
 constexpr uint32_t kVersion = 8;
 constexpr uint32_t kByteOrder = 0x01020304;
 constexpr uint64_t kAlign = 64;

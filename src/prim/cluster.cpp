@@ -40,7 +40,7 @@ struct BitWriter {
 // digits than k).
 constexpr uint32_t kNoDecimal = 0x80000000u;  // -2^31: never a valid code (|q| < 2^31 below)
 uint32_t decimal_code(float f, uint32_t k) {
-  const double q = std::nearbyint(double(f) * kPow10[k]);
+  const double q = decimal_q(f, k);
   if (!(std::fabs(q) < 2147483648.0)) return kNoDecimal;
   const uint32_t code = uint32_t(int32_t(q));
   const float g = decimal_coord(code, k);
@@ -369,8 +369,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       dec_bits += bit_width(uint32_t(hi[a]) - uint32_t(lo[a]));
       key_bits += h.bits[a];
     }
-    // The decoder recovers each anchor from the smallest coordinate (lossless_anchor): that holds
-    // for codes from decimal_code, checked here all the same.
+    // The decoder derives each anchor from the smallest coordinate (lossless_anchor): that holds
+    // for codes from decimal_code (the same decimal_q), checked here all the same.
     bool recovered = true;
     for (int a = 0; a < 3; ++a) {
       const float f = decimal_coord(uint32_t(lo[a]), ka[a]);
@@ -569,7 +569,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     // Run lows, repeat bits, entries, run highs, the bases, and idw (pb, gb, bb, hb), nruns, ob.
     st.id_bits += (L.topo - L.runs) + entries + highs + bb + hb +
                   8 * (sizeof(h.idw) + sizeof(h.nruns) + sizeof(h.ob));
-    // nverts, bits, ib; the anchors.
+    // nverts, bits, ib; the anchors (lossless: the start floats).
     st.header_bits += 8 * (sizeof(h.nverts) + sizeof(h.bits) + sizeof(h.ib)) + L.bases;
     st.decimal_clusters += coord_mode(h) != 0;
   }
@@ -617,8 +617,8 @@ bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f
 
 bool write_exact_box_frame(const uint8_t* data, const Box3f& box, ExactBoxes8& boxes, float* start,
                            float* extent) {
-  // The header and anchors in a padded copy: exact_box_start reads 16 bytes of the stream (the
-  // traversal has the anchors, more stream and the read slack behind them).
+  // The header and start floats in a padded copy: exact_box_start reads 16 bytes of the stream
+  // (the traversal has the start floats, more stream and the read slack behind them).
   uint8_t head[sizeof(ClusterHeader) + 16] = {};
   std::memcpy(head, data, sizeof(ClusterHeader) + 12);
   exact_box_start(head, start);

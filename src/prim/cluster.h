@@ -8,8 +8,8 @@
 // multi-leaves, NodeKind::QCompressedLeaf): its header holds the quantized boxes of up to 8
 // children of up to 8 triangles each (one 8-wide watertight test per child): 51 bytes lossy (a
 // LatticeBoxes8, below: the boxes' frame comes from the cluster's anchors), 54 bytes lossless (an
-// ExactBoxes8: the frame from the anchors and three bfloat16 extents). The cluster data follows
-// it:
+// ExactBoxes8: the frame from the stream's start floats and three bfloat16 extents). The cluster
+// data follows it:
 //   ClusterHeader (15 B, packed)
 //   bit stream, LSB first from the byte after the header:
 //     anchors:  aw0 + aw1 + aw2 bits, the per-axis minimum codes (lossy: aw the scene's
@@ -261,8 +261,9 @@ SLIM_INLINE float decimal_coord(uint32_t q, uint32_t k) {
 
 // The decimal code of f with k digits before the range check: round(f x 10^k), the encoder's code
 // for each coordinate (non-decreasing in f, so the smallest coordinate of an axis has the
-// smallest code).
-SLIM_INLINE double decimal_q(float f, uint32_t k) { return std::nearbyint(double(f) * kPow10[k]); }
+// smallest code). The product is exact (24 + 21 bits for k <= 9) and std::round ignores the
+// rounding mode, so the decoder derives the encoder's anchor under any mode.
+SLIM_INLINE double decimal_q(float f, uint32_t k) { return std::round(double(f) * kPow10[k]); }
 
 // A lossless cluster's stream starts with its box start, the smallest coordinate per axis as its
 // float (the multi-leaf visit reads it with one load, no decode ahead of the box test); the anchor
@@ -368,8 +369,8 @@ SLIM_INLINE uint32_t child_first(uint32_t sizes, uint32_t c) {
 SLIM_INLINE uint32_t tri_count(const ClusterHeader& h, uint32_t k) {
   return child_first(child_sizes(h), k);
 }
-// Bits of a cluster's anchor on axis a: 32 lossless (a float key or a decimal's q), the lattice's
-// anchor_bits lossy.
+// Bits of a cluster's anchor on axis a: 32 lossless (the smallest coordinate's float, from which
+// lossless_anchor derives the anchor), the lattice's anchor_bits lossy.
 SLIM_INLINE uint32_t anchor_bits(const ClusterLattice& lat, bool lossless, int a) {
   return lossless ? 32u : lat.anchor_bits[a];
 }
@@ -382,7 +383,7 @@ SLIM_INLINE uint32_t anchor_bits(const ClusterLattice& lat, bool lossless, int a
 struct Layout {
   uint64_t table = 0, verts = 0, runs = 0, ids = 0, topo = 0, end = 0;  // from the stream start
   uint32_t aw[3] = {};                                                  // bits per anchor, per axis
-  uint32_t bases = 0;           // bit of prim_base (the anchors' end)
+  uint32_t bases = 0;           // bit of prim_base (the end of the anchors or start floats)
   uint32_t ntris = 0;           // triangles (tri_count)
   uint32_t vbits = 0;           // bits per vertex
   uint32_t tb = 0, vbw = 0;     // bits per child topology offset / first new vertex
@@ -1022,7 +1023,8 @@ SLIM_INLINE DecodeCache& decode_cache() {
 uint64_t next_cache_tag();
 
 // Checks that `size` bytes at `data` hold a well-formed cluster of `children` children on the
-// scene's lattice `lat` (lossy: the anchors' widths, at most 24 bits; header fields in range, no
+// scene's lattice `lat` (lossy: the anchors' widths, at most 24 bits; lossless decimal: the start
+// floats decimals of their axes' digits (lossless_anchor); header fields in range, no
 // child sizes beyond the child count, every strip inside the topology stream with every vertex
 // index below nverts, every run index below nruns, the run highs' nruns - 1 one bits within
 // kMaxRunHighBits bits, the stream inside `size`). The decoders read only what this accepts (plus
@@ -1041,7 +1043,7 @@ struct EncodeStats {
   uint64_t position_bits = 0;     // sum over clusters of nverts * (bx + by + bz)
   uint64_t topology_bits = 0;     // strips, the child table, the child sizes and tbits
   uint64_t id_bits = 0;           // run starts, run indices, offsets, geomIDs, the bases and widths
-  uint64_t header_bits = 0;       // the rest of the header, the anchors
+  uint64_t header_bits = 0;       // the rest of the header, the anchors (lossless: start floats)
   uint64_t decimal_clusters = 0;  // lossless clusters in decimal mode
 };
 

@@ -118,7 +118,11 @@ concept HasMultiLeafLayout = requires {
 //   static MultiLeafView multileaf_view(const Context&, const uint8_t* data, uint32_t children);
 //   template <bool kAny, class Stats> static bool intersect_in_view(const Context&,
 //       const MultiLeafView&, int i, TravRay&, HitRecord&, Stats&);
-// and intersect_multileaf makes the view once, when the ray enters at least one child.
+// and intersect_multileaf makes the view once, when the ray enters at least one child. It may also
+// provide
+//   static void prefetch_in_view(const MultiLeafView&, uint32_t mask);
+// which starts loading what the children in `mask` (those the ray enters) will read, called before
+// the first of them is tested.
 template <class L>
 concept HasMultiLeafView = HasMultiLeafLayout<L> && requires {
   typename L::MultiLeafView;
@@ -203,6 +207,8 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
     else
       return NoView{};
   }();
+  if constexpr (requires { Leaf::prefetch_in_view(view, mask); })
+    Leaf::prefetch_in_view(view, mask);
   while (mask) {
     int i;
     if constexpr (kAny) {

@@ -508,46 +508,53 @@ SLIM_INLINE bool decode_strip(const ClusterHeader& h, const Layout& L, Get&& get
   return ok;
 }
 
-// The decoders' strip step as a byte shuffle: the triangle is packed in a word (corner k's vertex
-// in byte k) with the step's new vertex in byte 3; entry q << 4 | c, q the previous triangle's p
-// and c the step's next 4 bits (p | e << 2 after a first triangle or a restart, q = 3; p | b << 2
-// and one bit of the reference after a step, q < 3, e = q + 2b), picks the new corners: corner p
-// the new vertex, corner p + 1 the previous corner e + 1, corner p + 2 the previous corner e (edge
-// 3 reads as edge 0, as in decode_strip). Byte 3 is 0x80 (zero): an entry is a pshufb control's
-// low 4 bytes (AVX2 path; the control's other bytes pick byte 0, outside the result's low word)
-// and the scalar shifts' byte numbers alike. Entries with p = 3 (a restart) are unused.
-struct StepShuffle {
-  uint32_t b[64];
-  constexpr StepShuffle() : b{} {
+// The decoders' strip step as a table, entry q << 4 | c: q the previous triangle's p (3 after a
+// first triangle or a restart) and c the step's next 4 bits (p | e << 2 after a first triangle or
+// a restart; p | b << 2 after a step, e = q + 2b, bit 3 then the reference's). An entry's shuffle
+// picks the new corners from the previous triangle packed in a word (corner k's vertex in byte k)
+// with the step's vertex in byte 3: corner p takes the step's vertex, corner p + 1 the previous
+// corner e + 1, corner p + 2 the previous corner e (edge 3 reads as edge 0, as in decode_strip);
+// byte 3 is 0x80 (zero). The AVX2 path loads 16 bytes from the entry as a pshufb control (the
+// bytes after the shuffle, the entry's and the next one's, only move bytes 4..15 of the result,
+// which nothing reads; the table ends with 8 bytes of padding for the last entry's load); the
+// scalar path applies the shuffle with shifts. next: the next step's row (p << 4). Entries with
+// p = 3 (a restart) are unused.
+struct StepTable {
+  struct Entry {
+    uint8_t shuffle[4];
+    uint8_t next;
+    uint8_t pad[3];
+  };
+  Entry e[64];
+  uint8_t tail[8];
+  constexpr StepTable() : e{}, tail{} {
     for (int i = 0; i < 64; ++i) {
-      const int q = i >> 4, p = i & 3, x = (i >> 2) & 3;
-      const int e = q == 3 ? (x == 3 ? 0 : x) : (q + 2 * (x & 1)) % 3;
+      const int q = i >> 4, c = i & 15, p = c & 3;
       if (p == 3) continue;
-      uint8_t t[4] = {0, 0, 0, 0x80};
-      t[p] = 3;
-      t[(p + 1) % 3] = uint8_t((e + 1) % 3);
-      t[(p + 2) % 3] = uint8_t(e);
-      b[i] = uint32_t(t[0]) | uint32_t(t[1]) << 8 | uint32_t(t[2]) << 16 | uint32_t(t[3]) << 24;
+      int edge;
+      if (q == 3) {
+        const int x = (c >> 2) & 3;
+        edge = x == 3 ? 0 : x;
+      } else {
+        edge = (q + 2 * ((c >> 2) & 1)) % 3;
+      }
+      Entry& t = e[i];
+      t.shuffle[p] = 3;
+      t.shuffle[(p + 1) % 3] = uint8_t((edge + 1) % 3);
+      t.shuffle[(p + 2) % 3] = uint8_t(edge);
+      t.shuffle[3] = 0x80;
+      t.next = uint8_t(p << 4);
     }
   }
 };
-inline constexpr StepShuffle kStepShuffle{};
-
-SLIM_INLINE uint32_t step_triangle(uint32_t t4, uint32_t c) {
-  const uint32_t s = kStepShuffle.b[c];
-#if defined(SLIM_SIMD_AVX2)
-  const __m128i sh = _mm_cvtsi32_si128(int(s));
-  return uint32_t(_mm_cvtsi128_si32(_mm_shuffle_epi8(_mm_cvtsi32_si128(int(t4)), sh)));
-#else
-  return ((t4 >> (8 * (s & 0xff))) & 0xff) | ((t4 >> (8 * ((s >> 8) & 0xff))) & 0xff) << 8 |
-         ((t4 >> (8 * ((s >> 16) & 0xff))) & 0xff) << 16;
-#endif
-}
+static_assert(sizeof(StepTable) == 64 * 8 + 8, "8-byte entries, 8 bytes of padding");
+inline constexpr StepTable kStepTable{};
 
 // decode_strip for the decoders (blocks that check() accepted, read with the slack): the same
 // triangles, corner k's vertex in byte k of tri[j]. One 64-bit load per triangle (a restart takes
-// at most 2 + 3 x 9 bits of the 57 it holds); a strip step is the table's byte shuffle of the
-// previous triangle plus one reference.
+// at most 2 + 3 x 9 bits of the 57 it holds); a strip step is one kStepTable entry (its byte
+// shuffle of the previous triangle and the next row) plus one reference. AVX2 keeps the packed
+// triangle in a vector register (the step's vertex inserted in byte 3, one pshufb).
 SLIM_INLINE void decode_strip_packed(const ClusterHeader& h, const Layout& L, const uint8_t* bits,
                                      uint32_t c, uint32_t first, uint32_t n, uint32_t (&tri)[8]) {
   uint64_t pos = L.topo;
@@ -584,30 +591,54 @@ SLIM_INLINE void decode_strip_packed(const ClusterHeader& h, const Layout& L, co
     std::memcpy(&x, bits + (pos >> 3), 8);
     return x >> (pos & 7);
   };
+#if defined(SLIM_SIMD_AVX2)
+  using Packed = __m128i;
+  auto pack = [](uint32_t t) { return _mm_cvtsi32_si128(int(t)); };
+  auto unpack = [](Packed t) { return uint32_t(_mm_cvtsi128_si32(t)); };
+  auto step = [](Packed t, uint32_t r, const StepTable::Entry& e) {
+    return _mm_shuffle_epi8(_mm_insert_epi8(t, int(r), 3),
+                            _mm_loadu_si128(reinterpret_cast<const __m128i*>(&e)));
+  };
+#else
+  using Packed = uint32_t;
+  auto pack = [](uint32_t t) { return t; };
+  auto unpack = [](Packed t) { return t; };
+  auto step = [](Packed t, uint32_t r, const StepTable::Entry& e) {
+    const uint8_t* s = e.shuffle;
+    const uint32_t t4 = (t & 0xffffffu) | r << 24;
+    return (t4 >> (8 * s[0]) & 0xff) | (t4 >> (8 * s[1]) & 0xff) << 8 |
+           (t4 >> (8 * s[2]) & 0xff) << 16;
+  };
+#endif
   uint32_t s = 0;
-  uint32_t t = restart(load(), s);
+  Packed t = pack(restart(load(), s));
   pos += s;
-  tri[0] = t;
+  tri[0] = unpack(t);
   // The previous triangle's p as the table's row (q << 4), and the bits of a step's p and edge
-  // after it (4 after a first triangle or a restart, 3 after a step).
+  // after it (4 after a first triangle or a restart, 3 after a step). The step's width comes from
+  // the bits and w, not from the table, so that the next load's position waits on one load only.
   uint32_t row = 3 << 4, w = 4;
   for (uint32_t j = 1; j < n; ++j) {
     const uint64_t x = load();
-    if ((x & 3) == 3) {
+    if (((x + 1) & 3) == 0) [[unlikely]] {  // p = 3: a restart (1 in 8 of canyon's later triangles)
       s = 2;
-      t = restart(x, s);
+      t = pack(restart(x, s));
       row = 3 << 4;
       w = 4;
     } else {
-      s = w;
-      uint32_t y = uint32_t(x >> w);
-      const uint32_t r = ref(y, s);
-      t = step_triangle(t | r << 24, row | (uint32_t(x) & 15));
-      row = (uint32_t(x) & 3) << 4;
+      const StepTable::Entry& e = kStepTable.e[row | (uint32_t(x) & 15)];
+      const uint32_t isnew = uint32_t(x >> w) & 1;
+      const uint32_t reused = isnew - 1;  // all ones for a reused vertex, 0 for a new one
+      // A reused vertex is cnt - 1 - d = cnt + ~d.
+      const uint32_t r = cnt + (~(uint32_t(x >> (w + 1)) & dmask) & reused);
+      cnt += isnew;
+      s = w + 1 + (ib & reused);
+      t = step(t, r, e);
+      row = e.next;
       w = 3;
     }
     pos += s;
-    tri[j] = t;
+    tri[j] = unpack(t);
   }
 }
 

@@ -369,16 +369,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       dec_bits += bit_width(uint32_t(hi[a]) - uint32_t(lo[a]));
       key_bits += h.bits[a];
     }
-    // The decoder derives each anchor from the smallest coordinate (lossless_anchor): that holds
-    // for codes from decimal_code (the same decimal_q), checked here all the same.
-    bool recovered = true;
-    for (int a = 0; a < 3; ++a) {
-      const float f = decimal_coord(uint32_t(lo[a]), ka[a]);
-      uint32_t fb;
-      std::memcpy(&fb, &f, 4);
-      recovered = recovered && lossless_anchor(fb, 1, ka[a]) == uint32_t(lo[a]);
-    }
-    if (recovered && dec_bits < key_bits) {
+    if (dec_bits < key_bits) {
       codes.swap(qs);
       for (int a = 0; a < 3; ++a) {
         anchor[a] = uint32_t(lo[a]);
@@ -499,7 +490,10 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   std::memcpy(out.data(), &h, sizeof(h));
   BitWriter w{out, sizeof(ClusterHeader)};
   for (int a = 0; a < 3; ++a) {
-    if (s.lossless) {  // the smallest coordinate's float, from which the decoder derives the anchor
+    if (s.lossless) {
+      // The smallest coordinate's float, from which the decoder derives the anchor: decimal codes
+      // are decimal_q of their floats and strictly increase with them, so the smallest
+      // coordinate's code is the anchor (checked).
       const float f = decode_coord<true>(s.lattice, a, anchor[a], axis_mode(h, a));
       uint32_t fb;
       std::memcpy(&fb, &f, 4);
@@ -700,16 +694,12 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
   // that the boxes start at the coordinate the anchor decodes to).
   if (lossless && coord_mode(h))
     for (int a = 0; a < 3; ++a) {
-      uint32_t fb;
-      std::memcpy(&fb, bits + 4 * a, 4);
-      const uint32_t k = axis_digits(h, a), q = lossless_anchor(fb, coord_mode(h), k);
-      const float g = decimal_coord(q, k);
-      if (q == kNoDecimal || std::memcmp(&g, &fb, 4) != 0) {
-        float f;
-        std::memcpy(&f, &fb, 4);
+      float f;
+      std::memcpy(&f, bits + 4 * a, 4);
+      const uint32_t k = axis_digits(h, a);
+      if (decimal_code(f, k) == kNoDecimal)  // lossless_anchor's code, and it decodes to f
         return fail("axis " + std::to_string(a) + " box start " + std::to_string(f) +
                     " is no decimal of " + std::to_string(k) + " digits");
-      }
     }
   // Readers of w <= 32 bits at pos to which bits at or beyond `limit` read as 0: the strips' and
   // repeat bits' (limit L.end, inside `size` or not: the decoders may read beyond it, with the

@@ -70,10 +70,13 @@ ClusterSource source_of(const TriangleMesh& tm, const cluster::Quantized& z, boo
 // traversal's. The two frames are equal, bound(axis, start, extent) checks each axis, and every
 // child's box decoded as the traversal decodes it contains the child's decoded triangles (all 8
 // lanes, the padding included).
+// `ml` receives the boxes and the cluster behind them (a multi-leaf: the lossy clusters' per-child
+// vertex ranges come from these boxes).
 template <class Boxes, bool kLossless, class Write, class Frame, class Bound>
 void check_multileaf_boxes(const std::vector<uint8_t>& data, const ClusterLattice& lat,
-                           const Box3f* boxes, int k, Write&& write, Frame&& frame, Bound&& bound) {
-  std::vector<uint8_t> ml(sizeof(Boxes) + data.size());
+                           const Box3f* boxes, int k, Write&& write, Frame&& frame, Bound&& bound,
+                           std::vector<uint8_t>& ml) {
+  ml.assign(sizeof(Boxes) + data.size(), 0);
   std::memcpy(ml.data() + sizeof(Boxes), data.data(), data.size());
   auto& hb = *reinterpret_cast<Boxes*>(ml.data());
   float start[4], extent[4], s2[4], e2[4];
@@ -86,7 +89,7 @@ void check_multileaf_boxes(const std::vector<uint8_t>& data, const ClusterLattic
   for (int c = 0; c < k; ++c) {
     const Box3f b = dequantize_planes(hb.q, s2, e2, c);
     cluster::Decoded8 d;
-    cluster::decode_child<kLossless>(lat, data.data(), uint32_t(k), c, d);
+    cluster::decode_child<kLossless>(lat, ml.data() + sizeof(Boxes), uint32_t(k), c, d);
     for (int l = 0; l < 8; ++l)
       for (int q = 0; q < 3; ++q)
         ASSERT_TRUE(b.contains(Vec3f(d.v[q][0][l], d.v[q][1][l], d.v[q][2][l])))
@@ -120,11 +123,9 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
       prims[kk] = &order[pos];
       pos += counts[kk];
     }
-    std::vector<uint8_t> data = cluster::encode(src, prims, counts, kk, true);
-    std::string why;
-    ASSERT_TRUE(cluster::check(data.data(), data.size() - kClusterReadSlack, uint32_t(kk),
-                               z.lattice, lossless, &why))
-        << why;
+    // As the builder encodes a multi-leaf's cluster (lossy: with per-child vertex ranges when
+    // they are smaller).
+    std::vector<uint8_t> data = cluster::encode(src, prims, counts, kk, true, true);
     ClusterHeader hdr;
     std::memcpy(&hdr, data.data(), sizeof(hdr));
     if (!lossless) {
@@ -140,6 +141,7 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
           boxes[c].extend(z.decoded[tm.tris[3 * size_t(prims[c][j]) + q]]);
       all.extend(boxes[c]);
     }
+    std::vector<uint8_t> ml;  // the boxes, then the cluster
     if (!lossless) {
       // On the lattice: the extent at most 1/8 above the smallest that reaches the cluster's top
       // (one scale byte).
@@ -154,7 +156,8 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
           [&](int a, float start, float extent) {
             const double need = (double(all.hi[a]) - double(start)) / 255.0;
             EXPECT_LE(double(extent), std::max(1.125 * need, double(z.lattice.step)) * 1.0001);
-          });
+          },
+          ml);
     } else {
       // From the stream's start floats: the cluster's lowest coordinate exactly (a vertex's), the
       // extent at most 1/128 above the exact 1/255 of the span
@@ -171,20 +174,33 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
             EXPECT_EQ(bits_of(start), bits_of(all.lo[a])) << "axis " << a;
             const double need = (double(all.hi[a]) - double(start)) / 255.0;
             EXPECT_LE(double(extent), std::max(need * (1.0 + 1.0 / 64), 1.2e-38)) << "axis " << a;
-          });
+          },
+          ml);
     }
     ASSERT_FALSE(::testing::Test::HasFatalFailure());
+    // From here on the cluster is the one behind its boxes.
+    const size_t head = lossless ? sizeof(cluster::ExactBoxes8) : sizeof(cluster::LatticeBoxes8);
+    data.assign(ml.begin() + ptrdiff_t(head), ml.end());
+    std::string why;
+    ASSERT_TRUE(cluster::check(ml.data() + head, data.size() - kClusterReadSlack, uint32_t(kk),
+                               z.lattice, lossless, &why, lossless ? nullptr : ml.data()))
+        << why;
+    if (cluster::has_ranges(hdr) && !lossless) {
+      // Without its boxes the ranges have no source: check() refuses the cluster.
+      EXPECT_FALSE(cluster::check(ml.data() + head, data.size() - kClusterReadSlack, uint32_t(kk),
+                                  z.lattice, lossless, &why));
+    }
+    const uint8_t* cd = ml.data() + head;
     // One view of the cluster serves all its children (as in the traversal).
-    const cluster::View view = lossless
-                                   ? cluster::view<true>(z.lattice, data.data(), uint32_t(kk))
-                                   : cluster::view<false>(z.lattice, data.data(), uint32_t(kk));
+    const cluster::View view = lossless ? cluster::view<true>(z.lattice, cd, uint32_t(kk))
+                                        : cluster::view<false>(z.lattice, cd, uint32_t(kk));
     for (int c = 0; c < kk; ++c) {
       cluster::Decoded8 d, dv;
       if (lossless) {
-        cluster::decode_child<true>(z.lattice, data.data(), uint32_t(kk), c, d);
+        cluster::decode_child<true>(z.lattice, cd, uint32_t(kk), c, d);
         cluster::decode_child<true>(z.lattice, view, c, dv);
       } else {
-        cluster::decode_child<false>(z.lattice, data.data(), uint32_t(kk), c, d);
+        cluster::decode_child<false>(z.lattice, cd, uint32_t(kk), c, d);
         cluster::decode_child<false>(z.lattice, view, c, dv);
       }
       ASSERT_EQ(d.n, int(counts[c]));
@@ -196,11 +212,9 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
       for (int l = 0; l < d.n; ++l) {
         uint32_t g, p;
         if (lossless)
-          cluster::decode_ids<true>(z.lattice, data.data(), uint32_t(kk), uint32_t(d.first + l), g,
-                                    p);
+          cluster::decode_ids<true>(z.lattice, cd, uint32_t(kk), uint32_t(d.first + l), g, p);
         else
-          cluster::decode_ids<false>(z.lattice, data.data(), uint32_t(kk), uint32_t(d.first + l), g,
-                                     p);
+          cluster::decode_ids<false>(z.lattice, cd, uint32_t(kk), uint32_t(d.first + l), g, p);
         uint32_t gv, pv;
         cluster::decode_ids(view, uint32_t(d.first + l), gv, pv);
         ASSERT_EQ(gv, g);
@@ -312,12 +326,17 @@ TEST(ClusterCodec, DecodeEqualsEncodeFullClusters) {
         std::vector<ClusterHeader> headers;
         check_codec(tm, lossless, 1e-5, 7 + share, shuffle, nullptr, nullptr, &headers, true);
         ASSERT_FALSE(::testing::Test::HasFatalFailure());
-        size_t full = 0, repeats = 0;
+        size_t full = 0, repeats = 0, ranged = 0;
         for (const ClusterHeader& h : headers) {
           full += cluster::tri_count(h, 8) == 64;
           repeats += cluster::has_repeats(h);
+          ranged += !lossless && cluster::has_ranges(h);
         }
         EXPECT_GE(full, headers.size() - 1);
+        if (!lossless && !shuffle) {
+          // Children of nearby triangles: their ranges are smaller than the cluster's.
+          EXPECT_GT(ranged, headers.size() / 2);
+        }
         if (share == 2 && !shuffle) {
           EXPECT_GT(repeats, 0u);  // the soup's clusters: its strips follow the input order
         }

@@ -86,7 +86,7 @@ class ClusterReshaper {
               first += n.count;
               break;
             }
-        l.block = cluster::encode(src_, prims, counts, k, false);
+        l.block = cluster::encode(src_, prims, counts, k, false, true);
       } else if (l.prims.size() == 1 && src_.side_offsets) {  // an isolated triangle
         const uint32_t* prims = l.prims.data();
         const uint32_t one = 1;

@@ -13,6 +13,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "bvh/bvh8.h"
 #include "core/large_array.h"
 
 namespace slim::cluster {
@@ -108,8 +109,26 @@ uint64_t next_cache_tag() {
   return next.fetch_add(1, std::memory_order_relaxed);
 }
 
+bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const uint32_t* counts,
+                     int k, const uint32_t* anchor, LatticeBoxes8& out) {
+  Box3f boxes[8], all;
+  for (int c = 0; c < k; ++c) {
+    for (uint32_t j = 0; j < counts[c]; ++j)
+      for (int q = 0; q < 3; ++q) boxes[c].extend(s.vertices[s.tris[3 * size_t(prims[c][j]) + q]]);
+    all.extend(boxes[c]);
+  }
+  // The anchors as the stream's start holds them (write_box_frame reads them there).
+  std::vector<uint8_t> head(sizeof(ClusterHeader) + 24, 0);
+  BitWriter aw{head, sizeof(ClusterHeader)};
+  for (int a = 0; a < 3; ++a) aw.put(anchor[a], s.lattice.anchor_bits[a]);
+  float start[4], extent[4];
+  if (!write_box_frame(s.lattice, head.data(), all, out, start, extent)) return false;
+  quantize_planes(start, extent, boxes, k, out.q);
+  return true;
+}
+
 std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims,
-                            const uint32_t* counts, int k, bool slack) {
+                            const uint32_t* counts, int k, bool slack, bool ranges) {
   if (k < 1 || k > 8) throw std::logic_error("cluster: 1..8 children");
   ClusterHeader h{};
   uint32_t sizes = 0, ntris = 0;
@@ -351,6 +370,37 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     for (int a = 0; a < 3; ++a)
       if (anchor[a] >> s.lattice.anchor_bits[a])
         throw std::logic_error("cluster: lattice code beyond the lattice's anchor bits");
+  // Lossy, 2..8 children: per-child vertex ranges (cluster.h) when every vertex lies in its
+  // child's range and they take fewer bits. The multi-leaf boxes are those the build writes
+  // (write_box_frame and quantize_planes of the children's boxes, which are the BVH2 leaves':
+  // the union of their triangles' decoded boxes), so the decoder derives the same ranges.
+  uint32_t range_lo[8][3] = {}, range_w[8][3] = {};
+  uint64_t vertex_bits = kPlainVertexBits;
+  if (!s.lossless && k >= 2 && ranges) {
+    LatticeBoxes8 lb{};
+    bool ok = multileaf_boxes(s, prims, counts, k, anchor, lb);
+    for (int a = 0; a < 3 && ok; ++a) ok = uint32_t(lb.scale[a] >> 3) <= kMaxRangeScaleExp;
+    if (ok) {
+      uint64_t bits = 0;
+      for (int c = 0; c < k && ok; ++c) {
+        for (int a = 0; a < 3; ++a)
+          plane_range(lb.q[2 * a][c], lb.q[2 * a + 1][c], lb.scale[a], range_lo[c][a],
+                      range_w[c][a]);
+        const uint32_t end = c + 1 < k ? child_cnt[c + 1] : nv;
+        for (uint32_t i = child_cnt[c]; i < end && ok; ++i)
+          for (int a = 0; a < 3; ++a) {
+            const uint32_t off = codes[3 * i + a] - anchor[a] - range_lo[c][a];
+            ok &= range_w[c][a] <= 24 && codes[3 * i + a] >= anchor[a] + range_lo[c][a] &&
+                  (off >> range_w[c][a]) == 0;
+          }
+        bits += uint64_t(end - child_cnt[c]) * (range_w[c][0] + range_w[c][1] + range_w[c][2]);
+      }
+      if (ok && bits < uint64_t(nv) * (h.bits[0] + h.bits[1] + h.bits[2])) {
+        vertex_bits = bits;
+        h.bits[0] |= 0x80;
+      }
+    }
+  }
   // Lossless: the decimal mode when its codes take fewer vertex bits than the float keys.
   uint32_t digits = 0, ka[3];
   if (s.lossless && decimal_axes(codes.data(), nv, digits, ka)) {
@@ -480,12 +530,12 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   const uint64_t highs = nst > 1 ? (nst - 1) + (run_e(nst - 1) >> best_pb) : 0;
   const uint32_t nentries = repeats ? ntris - nrep : ntris;
 
-  const Layout L = layout(h, uint32_t(k), s.lattice, s.lossless);
+  const Layout L = layout(h, uint32_t(k), s.lattice, s.lossless, vertex_bits);
   if (L.ntris != ntris) throw std::logic_error("cluster: child sizes do not give the triangles");
   const uint64_t entries = uint64_t(nentries) * L.idbits;  // bits
-  const uint64_t bytes =
-      std::max<uint64_t>(data_bytes(h, uint32_t(k), s.lattice, s.lossless, entries + highs),
-                         sizeof(ClusterHeader) + kMinStreamBytes);
+  const uint64_t bytes = std::max<uint64_t>(
+      data_bytes(h, uint32_t(k), s.lattice, s.lossless, entries + highs, vertex_bits),
+      sizeof(ClusterHeader) + kMinStreamBytes);
   std::vector<uint8_t> out(bytes + 8, 0);  // 8: 64-bit stores
   std::memcpy(out.data(), &h, sizeof(h));
   BitWriter w{out, sizeof(ClusterHeader)};
@@ -511,8 +561,15 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     w.put(child_off[c] - predicted_offset(L, first), L.tb);
     w.put(child_cnt[c] - predicted_vertex(L, first), L.vbw);
   }
-  for (uint32_t i = 0; i < nv; ++i)
-    for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], axis_bits(h, a));
+  if (vertex_bits != kPlainVertexBits)
+    for (int c = 0; c < k; ++c)
+      for (uint32_t i = child_cnt[c], end = c + 1 < k ? child_cnt[c + 1] : nv; i < end; ++i)
+        for (int a = 0; a < 3; ++a)
+          w.put(codes[3 * i + a] - anchor[a] - range_lo[c][a], range_w[c][a]);
+  else
+    for (uint32_t i = 0; i < nv; ++i)
+      for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], axis_bits(h, a));
+  if (w.pos != L.runs) throw std::logic_error("cluster: vertex section size mismatch");
   for (size_t i = 1; i < nst; ++i) w.put(uint32_t(run_e(i)), best_pb);
   auto repeated = [&](uint32_t i) { return repeats && ((rep_mask >> i) & 1); };
   if (repeats)
@@ -557,7 +614,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     st.clusters++;
     st.triangles += ntris;
     st.vertices += nv;
-    st.position_bits += uint64_t(nv) * L.vbits;
+    st.position_bits += L.runs - L.verts;
     st.topology_bits +=
         topology_bits(h) + (L.verts - L.table) + 8 * (sizeof(h.sizes) + sizeof(h.tbits));
     // Run lows, repeat bits, entries, run highs, the bases, and idw (pb, gb, bb, hb), nruns, ob.
@@ -644,7 +701,7 @@ std::string check_lattice(const ClusterLattice& lat) {
 }
 
 bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterLattice& lat,
-           bool lossless, std::string* why) {
+           bool lossless, std::string* why, const uint8_t* boxes) {
   auto fail = [&](const std::string& m) {
     if (why) *why = "cluster: " + m;
     return false;
@@ -662,8 +719,9 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
     if (!bad.empty()) return fail(bad);
   }
   const uint32_t max_bits = lossless ? 32 : 24;
+  const bool ranges = !lossless && has_ranges(h);
   for (int a = 0; a < 3; ++a)
-    if (axis_bits(h, a) > max_bits || (!lossless && h.bits[a] > max_bits))
+    if (axis_bits(h, a) > max_bits || (!lossless && (h.bits[a] & (a ? 0xff : 0x7f)) > max_bits))
       return fail("axis width beyond " + std::to_string(max_bits) + " bits");
   if (index_bits(h) > 8 || run_low_bits(h) > 32 || geom_bits(h) > 32 || offset_bits(h) > 32 ||
       (h.ob & 0x40) || prim_base_bits(h) > 32 || geom_base_bits(h) > 32)
@@ -674,7 +732,7 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
       return fail("decimal mode with " + std::to_string(mode - 1) + " digits (at most " +
                   std::to_string(kMaxDecimalDigits) + ")");
   }
-  for (int a = 0; a < 3; ++a) {
+  for (int a = 0; a < 3 && lossless; ++a) {
     const uint32_t below = uint32_t(h.bits[a]) >> 6;
     if (below && !coord_mode(h))
       return fail("axis " + std::to_string(a) + " digit offset outside the decimal mode");
@@ -687,9 +745,44 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
   if (h.nruns < 1 || h.nruns > ntris) return fail("run count must be 1..the triangle count");
   if (children < 8 && (sizes >> (3 * children)) != 0)
     return fail("sizes given for children beyond the child count");
-  if (data_bytes(h, children, lat, lossless, 0) > size) return fail("stream runs past the data");
+  if (sizeof(ClusterHeader) + (layout(h, children, lat, lossless).verts + 7) / 8 > size)
+    return fail("stream runs past the data (child table)");
+  if (!ranges && data_bytes(h, children, lat, lossless, 0) > size)
+    return fail("stream runs past the data");
   const uint8_t* bits = data + sizeof(ClusterHeader);
-  const Layout L = layout(h, children, lat, lossless);
+  // Per-child vertex ranges: a multi-leaf's cluster of 2..8 children (its boxes right before it),
+  // scales that keep the ranges' products in 32 bits, ascending firsts up to nverts, fields of at
+  // most 24 bits.
+  uint64_t vertex_bits = kPlainVertexBits;
+  if (ranges) {
+    if (children < 2 || !boxes)
+      return fail("per-child vertex ranges outside a multi-leaf of 2..8 children");
+    LatticeBoxes8 b;
+    std::memcpy(&b, boxes, sizeof(b));
+    for (int a = 0; a < 3; ++a)
+      if (uint32_t(b.scale[a] >> 3) > kMaxRangeScaleExp)
+        return fail("box scale exponent " + std::to_string(b.scale[a] >> 3) +
+                    " beyond the vertex ranges' " + std::to_string(kMaxRangeScaleExp));
+    const Layout L0 = layout(h, children, lat, lossless);
+    uint32_t anchor[3];
+    for (int a = 0, at = 0; a < 3; at += int(L0.aw[a]), ++a)
+      anchor[a] = read_bits(bits, uint64_t(at), L0.aw[a]);
+    ChildRanges r;
+    child_ranges(h, L0, bits, anchor, b.q, b.scale, children, r);
+    for (uint32_t c = 0; c < children; ++c) {
+      const uint32_t next = c + 1 < children ? r.first[c + 1] : h.nverts;
+      if (r.first[c] > next || next > h.nverts)
+        return fail("child " + std::to_string(c) + "'s first new vertex out of order");
+      for (int a = 0; a < 3; ++a)
+        if (r.width[a][c] > max_bits)
+          return fail("child " + std::to_string(c) + "'s vertex range on axis " +
+                      std::to_string(a) + " beyond " + std::to_string(max_bits) + " bits");
+    }
+    vertex_bits = r.total;
+    if (data_bytes(h, children, lat, lossless, 0, vertex_bits) > size)
+      return fail("stream runs past the data (vertex ranges)");
+  }
+  const Layout L = layout(h, children, lat, lossless, vertex_bits);
   // A decimal cluster's box start: per axis a float that is a decimal of the axis's digits (so
   // that the boxes start at the coordinate the anchor decodes to).
   if (lossless && coord_mode(h))
@@ -731,7 +824,7 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
     if (get(L.ids, 1)) return fail("repeat bit on triangle 0");
     for (uint32_t t = 1; t < ntris; ++t) entries -= get(L.ids + t, 1);
   }
-  if (data_bytes(h, children, lat, lossless, uint64_t(entries) * L.idbits) > size)
+  if (data_bytes(h, children, lat, lossless, uint64_t(entries) * L.idbits, vertex_bits) > size)
     return fail("stream runs past the data (id entries)");
   const uint64_t avail = 8 * (size - sizeof(ClusterHeader));
   const auto get_data = reader(avail);

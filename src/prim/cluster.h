@@ -391,8 +391,11 @@ struct Layout {
   uint32_t vs = 0, vbias = 0;   // the first new vertex's slope and bias
   uint32_t rb = 0, idbits = 0;  // bits per run index; per triangle's ids (rb + ob + gb)
 };
+// vertex_bits: the vertex section's bits when the cluster has per-child vertex ranges (their
+// ChildRanges::total, below), else kPlainVertexBits: nverts x (bx + by + bz).
+constexpr uint64_t kPlainVertexBits = ~uint64_t(0);
 SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, const ClusterLattice& lat,
-                          bool lossless) {
+                          bool lossless, uint64_t vertex_bits = kPlainVertexBits) {
   Layout l;
   for (int a = 0; a < 3; ++a) l.aw[a] = anchor_bits(lat, lossless, a);
   l.bases = l.aw[0] + l.aw[1] + l.aw[2];
@@ -411,7 +414,7 @@ SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, const ClusterLatti
   l.idbits = l.rb + offset_bits(h) + geom_bits(h);
   l.table = l.bases + prim_base_bits(h) + geom_base_bits(h);
   l.verts = l.table + uint64_t(k ? k - 1 : 0) * (l.tb + l.vbw);
-  l.runs = l.verts + uint64_t(h.nverts) * l.vbits;
+  l.runs = l.verts + (vertex_bits == kPlainVertexBits ? uint64_t(h.nverts) * l.vbits : vertex_bits);
   l.ids = l.runs + uint64_t(h.nruns ? h.nruns - 1 : 0) * run_low_bits(h);
   l.topo = l.ids + (has_repeats(h) ? l.ntris : 0);
   l.end = l.topo + tbits;
@@ -430,8 +433,95 @@ SLIM_INLINE uint32_t predicted_vertex(const Layout& L, uint32_t first) {
 // Bytes of a cluster's data (header + stream) with `tail` bits of ids' entries and run highs,
 // without the read slack.
 SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, const ClusterLattice& lat,
-                                bool lossless, uint64_t tail) {
-  return sizeof(ClusterHeader) + (layout(h, k, lat, lossless).end + tail + 7) / 8;
+                                bool lossless, uint64_t tail,
+                                uint64_t vertex_bits = kPlainVertexBits) {
+  return sizeof(ClusterHeader) + (layout(h, k, lat, lossless, vertex_bits).end + tail + 7) / 8;
+}
+
+// ---- per-child vertex ranges (lossy clusters of 2..8 children) ----
+// With the ranges bit (the top bit of the header's bits[0]: lossless clusters use the top 2 bits
+// of bits[a] for their decimal digits, lossy ones nothing else) a vertex is an offset in the range
+// of the child that uses it first, not in the cluster's: vertices are numbered in order of first
+// use, so child c's new vertices are first_c .. first_{c+1} - 1 (first_0 = 0, first_c the child
+// table's, first_k = nverts), and the child's box planes in the multi-leaf's LatticeBoxes8 (right
+// before the cluster's data) bound them. In lattice steps from the anchor, with the axis's scale
+// byte e << 3 | m, the planes' real values give the range
+//   lo = floor(q_lo x (8 + m) 2^e / 8),  hi = ceil(q_hi x (8 + m) 2^e / 8),
+// and the child's field on the axis is bit_width(hi - lo) bits, the vertex's code lo + the field
+// (+ the anchor). The vertex section holds child 0's new vertices, then child 1's, and so on,
+// child c's at w_c (its three fields) bits each. A child of a scan's cluster spans about a third
+// of the cluster per axis: 3.0-3.8 bits a triangle fewer. The encoder sets the bit when every
+// vertex lies in its child's range (unless a float plane rounds past a vertex's lattice point, it
+// does) and the ranges take fewer bits; the free box planes cost nothing to store.
+SLIM_INLINE bool has_ranges(const ClusterHeader& h) { return h.bits[0] >> 7; }
+// Scale exponents of a cluster with ranges at most: 255 x 15 x 2^20 < 2^32, so the ranges'
+// 32-bit products do not wrap (a cluster spans fewer than 2^24 steps: e <= 17 reaches it).
+constexpr uint32_t kMaxRangeScaleExp = 20;
+// The range of planes q_lo, q_hi under scale byte `scale` (e <= kMaxRangeScaleExp): its low end
+// and its field's bits (32 when q_hi < q_lo, which check() rejects).
+SLIM_INLINE void plane_range(uint32_t qlo, uint32_t qhi, uint32_t scale, uint32_t& lo,
+                             uint32_t& width) {
+  const uint32_t m = 8 + (scale & 7), e = (scale >> 3) & 31;
+  lo = ((qlo * m) << e) >> 3;
+  width = bit_width(((((qhi * m) << e) + 7) >> 3) - lo);
+}
+// What a decoder takes from the ranges, per child (lanes c >= k: first kNoChildVertex, pos and w
+// 0).
+constexpr uint32_t kNoChildVertex = 0x100;  // above every vertex number (signed compares work)
+struct ChildRanges {
+  alignas(32) uint32_t first[8];     // the child's first new vertex
+  alignas(32) uint32_t pos[8];       // vertex v of the child lies at bit pos + v x w (mod 2^32)
+  alignas(32) uint32_t w[8];         // bits a vertex
+  alignas(32) uint32_t shift[3][8];  // axis a's field in the vertex: from its bit shift[a]
+  alignas(32) uint32_t width[3][8];  // ... width[a] bits
+  alignas(32) uint32_t base[3][8];   // the code of field 0: anchor + lo
+  uint64_t total;                    // bits of the vertex section
+  uint32_t wmax;                     // the widest child's w
+};
+// The ranges of the k children of the cluster with header h (L: its layout, from vertex_bits
+// anything: the child table lies before the vertices), its stream `bits`, its anchors and the
+// multi-leaf boxes' planes q (LatticeBoxes8::q) and scale bytes.
+SLIM_INLINE void child_ranges(const ClusterHeader& h, const Layout& L, const uint8_t* bits,
+                              const uint32_t* anchor, const uint8_t (*q)[8], const uint8_t* scale,
+                              uint32_t k, ChildRanges& r) {
+  const uint32_t sizes = child_sizes(h);
+  r.first[0] = 0;
+  for (uint32_t c = 1; c < 8; ++c)
+    r.first[c] =
+        c < k
+            ? (read_bits(bits, L.table + uint64_t(c - 1) * (L.tb + L.vbw), L.tb + L.vbw) >> L.tb) +
+                  predicted_vertex(L, child_first(sizes, c))
+            : kNoChildVertex;
+  uint32_t p = uint32_t(L.verts);
+  uint64_t total = 0;
+  r.wmax = 0;
+  for (uint32_t c = 0; c < 8; ++c) {
+    uint32_t wsum = 0;
+    for (int a = 0; a < 3; ++a) {
+      uint32_t lo = 0, wa = 0;
+      if (c < k) plane_range(q[2 * a][c], q[2 * a + 1][c], scale[a], lo, wa);
+      r.shift[a][c] = wsum;
+      r.width[a][c] = wa;
+      r.base[a][c] = anchor[a] + lo;
+      wsum += wa;
+    }
+    r.w[c] = wsum;
+    r.pos[c] = 0;
+    r.wmax = std::max(r.wmax, wsum);
+    if (c < k) {
+      const uint32_t n = (c + 1 < k ? r.first[c + 1] : uint32_t(h.nverts)) - r.first[c];
+      r.pos[c] = p - r.first[c] * wsum;
+      p += n * wsum;
+      total += uint64_t(n) * wsum;  // check(): the firsts ascend, so n <= nverts
+    }
+  }
+  r.total = total;
+}
+// The child whose new vertices include vertex v: the firsts of children 1..7 at or below it.
+SLIM_INLINE uint32_t range_child(const ChildRanges& r, uint32_t v) {
+  uint32_t c = 0;
+  for (int j = 1; j < 8; ++j) c += r.first[j] <= v;
+  return c;
 }
 
 // Decodes the strip of child c (n triangles) into idx[corner][lane], lanes < n. get(pos, w) reads
@@ -741,6 +831,59 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
     }
   }
 }
+
+// The same for a lossy cluster with per-child vertex ranges whose vertices take at most 57 bits:
+// per lane the child of the vertex (7 compares with the firsts), its vertex's bit and the fields'
+// shifts, widths and bases from the ChildRanges by that child, one 64-bit window per vertex.
+SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const uint8_t* bits,
+                                             const ChildRanges& r, const uint32_t (&tri)[8],
+                                             Decoded8& d) {
+  const auto* base64 = reinterpret_cast<const long long*>(bits);
+  auto load = [](const uint32_t* p) {
+    return _mm256_load_si256(reinterpret_cast<const __m256i*>(p));
+  };
+  const __m256i lanes =
+      _mm256_min_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), _mm256_set1_epi32(d.n - 1));
+  const __m256i packed = _mm256_permutevar8x32_epi32(load(tri), lanes);
+  const __m256i rpos = load(r.pos), rw = load(r.w);
+  const __m256 step = _mm256_set1_ps(lat.step);
+  for (int k = 0; k < 3; ++k) {
+    const __m256i vi = _mm256_and_si256(_mm256_srli_epi32(packed, 8 * k), _mm256_set1_epi32(0xff));
+    // c = 7 less the children 1..7 whose first lies above vi.
+    __m256i c = _mm256_set1_epi32(7);
+    for (int j = 1; j < 8; ++j)
+      c = _mm256_add_epi32(c, _mm256_cmpgt_epi32(_mm256_set1_epi32(int(r.first[j])), vi));
+    const __m256i pos =
+        _mm256_add_epi32(_mm256_permutevar8x32_epi32(rpos, c),
+                         _mm256_mullo_epi32(vi, _mm256_permutevar8x32_epi32(rw, c)));
+    const __m256i byte = _mm256_srli_epi32(pos, 3);
+    const __m256i sh = _mm256_and_si256(pos, _mm256_set1_epi32(7));
+    const __m256i lo =
+        _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_castsi256_si128(byte), 1),
+                          _mm256_cvtepu32_epi64(_mm256_castsi256_si128(sh)));
+    const __m256i hi =
+        _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_extracti128_si256(byte, 1), 1),
+                          _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sh, 1)));
+    for (int a = 0; a < 3; ++a) {
+      const __m256i s = _mm256_permutevar8x32_epi32(load(r.shift[a]), c);
+      const __m256 pair =
+          _mm256_shuffle_ps(_mm256_castsi256_ps(_mm256_srlv_epi64(
+                                lo, _mm256_cvtepu32_epi64(_mm256_castsi256_si128(s)))),
+                            _mm256_castsi256_ps(_mm256_srlv_epi64(
+                                hi, _mm256_cvtepu32_epi64(_mm256_extracti128_si256(s, 1)))),
+                            _MM_SHUFFLE(2, 0, 2, 0));
+      const __m256i field = _mm256_permute4x64_epi64(_mm256_castps_si256(pair), 0xD8);
+      const __m256i w = _mm256_permutevar8x32_epi32(load(r.width[a]), c);
+      const __m256i mask =
+          _mm256_sub_epi32(_mm256_sllv_epi32(_mm256_set1_epi32(1), w), _mm256_set1_epi32(1));
+      const __m256i code = _mm256_add_epi32(_mm256_and_si256(field, mask),
+                                            _mm256_permutevar8x32_epi32(load(r.base[a]), c));
+      // q < 2^24: the signed conversion is the scalar float(q); the sum rounds as lattice_coord's.
+      _mm256_store_ps(d.v[k][a], _mm256_add_ps(_mm256_set1_ps(lat.origin[a]),
+                                               _mm256_mul_ps(_mm256_cvtepi32_ps(code), step)));
+    }
+  }
+}
 #endif
 
 // What every child of one cluster shares: its header, the stream layout, the child sizes and the
@@ -752,6 +895,8 @@ struct View {
   Layout L;
   uint32_t sizes = 0;       // child_sizes(h)
   uint32_t anchor[3] = {};  // per-axis anchor codes
+  bool ranges = false;      // per-child vertex ranges (has_ranges; lossy only)
+  ChildRanges r;            // if ranges
 };
 template <bool kLossless>
 SLIM_INLINE View view(const ClusterLattice& lat, const uint8_t* data, uint32_t children) {
@@ -773,6 +918,13 @@ SLIM_INLINE View view(const ClusterLattice& lat, const uint8_t* data, uint32_t c
   v.anchor[0] = uint32_t(x & ((uint64_t(1) << aw0) - 1));
   v.anchor[1] = uint32_t((x >> aw0) & ((uint64_t(1) << aw1) - 1));
   v.anchor[2] = read_bits(v.bits, aw0 + aw1, v.L.aw[2]);
+  if (has_ranges(v.h)) {  // a multi-leaf's cluster (check()): its boxes lie right before it
+    LatticeBoxes8 b;
+    std::memcpy(&b, data - sizeof(LatticeBoxes8), sizeof(b));
+    child_ranges(v.h, v.L, v.bits, v.anchor, b.q, b.scale, children, v.r);
+    v.L = layout(v.h, children, lat, false, v.r.total);
+    v.ranges = true;
+  }
   return v;
 }
 
@@ -786,19 +938,35 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const View& v, int chil
   alignas(32) uint32_t tri[8];
   decode_strip_packed(h, L, v.bits, uint32_t(child), uint32_t(d.first), uint32_t(d.n), tri);
 #if defined(SLIM_SIMD_AVX2)
-  decode_vertices_avx2<kLossless>(lat, h, v.bits, L, v.anchor, tri, d);
-#else
+  if (!v.ranges) {
+    decode_vertices_avx2<kLossless>(lat, h, v.bits, L, v.anchor, tri, d);
+    return;
+  }
+  if (v.r.wmax <= 57) {
+    decode_vertices_ranges_avx2(lat, v.bits, v.r, tri, d);
+    return;
+  }
+#endif
   for (int l = d.n; l < 8; ++l) tri[l] = tri[d.n - 1];
   for (int l = 0; l < 8; ++l)
     for (int k = 0; k < 3; ++k) {
-      uint64_t pos = L.verts + uint64_t((tri[l] >> (8 * k)) & 0xff) * L.vbits;
+      const uint32_t vi = (tri[l] >> (8 * k)) & 0xff;
+      if (v.ranges) {
+        const ChildRanges& r = v.r;
+        const uint32_t c = range_child(r, vi);
+        const uint32_t pos = r.pos[c] + vi * r.w[c];
+        for (int a = 0; a < 3; ++a)
+          d.v[k][a][l] = lattice_coord(
+              lat, a, r.base[a][c] + read_bits(v.bits, pos + r.shift[a][c], r.width[a][c]));
+        continue;
+      }
+      uint64_t pos = L.verts + uint64_t(vi) * L.vbits;
       for (int a = 0; a < 3; ++a) {
         d.v[k][a][l] = decode_coord<kLossless>(
             lat, a, v.anchor[a] + read_bits(v.bits, pos, axis_bits(h, a)), axis_mode(h, a));
         pos += axis_bits(h, a);
       }
     }
-#endif
 }
 // Child `child` of a cluster of `children` children (the multi-leaf's count).
 template <bool kLossless>
@@ -1077,9 +1245,11 @@ uint64_t next_cache_tag();
 // child sizes beyond the child count, every strip inside the topology stream with every vertex
 // index below nverts, every run index below nruns, the run highs' nruns - 1 one bits within
 // kMaxRunHighBits bits, the stream inside `size`). The decoders read only what this accepts (plus
-// kClusterReadSlack bytes).
+// kClusterReadSlack bytes). `boxes`: the LatticeBoxes8 right before a lossy multi-leaf's cluster,
+// from which its per-child vertex ranges come (nullptr elsewhere: a cluster with the ranges bit
+// fails).
 bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterLattice& lat,
-           bool lossless, std::string* why);
+           bool lossless, std::string* why, const uint8_t* boxes = nullptr);
 // The lattice fields the decoders take as given (lossy: anchor widths of at most 24 bits), else
 // what is wrong.
 std::string check_lattice(const ClusterLattice& lat);
@@ -1122,8 +1292,16 @@ struct ClusterSource {
 namespace cluster {
 // Encodes the triangles prims[c][0..counts[c]) of k <= 8 children (each <= 8 triangles) as one
 // cluster: header + stream, followed by kClusterReadSlack zero bytes only if `slack`.
+// ranges: the cluster will be a multi-leaf's (its LatticeBoxes8 right before it, as
+// multileaf_boxes below makes them): lossy, it takes per-child vertex ranges when they are smaller.
 std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims,
-                            const uint32_t* counts, int k, bool slack);
+                            const uint32_t* counts, int k, bool slack, bool ranges = false);
+// The multi-leaf boxes of a lossy cluster of these children with these anchors (the per-axis
+// smallest codes), as the build writes them: write_box_frame of the union of the children's boxes,
+// quantize_planes of each child's (the union of its triangles' decoded boxes: the BVH2 leaf's
+// box). False if no frame reaches the box (write_box_frame).
+bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const uint32_t* counts,
+                     int k, const uint32_t* anchor, LatticeBoxes8& out);
 
 // Codes and decoded positions of the vertices that the triangles use (others: code 0, position
 // unchanged). Lossy: origin = the box minimum, step = the largest power of two with
@@ -1190,7 +1368,8 @@ struct ClusterLeaf {
     }
     std::string why;
     if (avail < kClusterReadSlack) return "cluster beyond the leaf arena";
-    if (!cluster::check(data, avail - kClusterReadSlack, k, ctx.lattice, kLossless, &why))
+    if (!cluster::check(data, avail - kClusterReadSlack, k, ctx.lattice, kLossless, &why,
+                        kLossless ? nullptr : data - sizeof(cluster::LatticeBoxes8)))
       return why;
     return {};
   }
@@ -1249,7 +1428,7 @@ struct ClusterLeaf {
         if (same) return block;
       }
     }
-    return cluster::encode(s, prims, counts, k, false);
+    return cluster::encode(s, prims, counts, k, false, true);
   }
   static void encode(const ClusterSource& s, const uint32_t* prims, uint32_t n, uint8_t* out) {
     if (s.side_offsets && n == 1) {

@@ -13,7 +13,12 @@
 //      children: encode(), check() accepts it, and every child decodes to its triangles (in the
 //      encoder's strip order), the codes' positions and the ids bit for bit;
 //   3. lossy: the frame of the multi-leaf boxes on the lattice (cluster::LatticeBoxes8) made for
-//      that cluster decodes as the builder made it and encloses every child's decoded triangles.
+//      that cluster decodes as the builder made it and encloses every child's decoded triangles;
+//   4. lossy: the input's first 51 bytes as a multi-leaf's boxes and the rest as the cluster behind
+//      them (per-child vertex ranges come from the boxes): as 1., the decoders reading only inside
+//      the boxes and the block plus the read slack; the round trip of 2. encodes a multi-leaf's
+//      cluster (with ranges where they are smaller) and decodes it behind the boxes the builder
+//      makes (cluster::multileaf_boxes).
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -63,26 +68,27 @@ void decode_all(const ClusterLattice& lat, const uint8_t* block, uint32_t childr
 // q = 0 and q = 255 planes (one fma, as the traversal decodes them) enclose every decoded vertex of
 // every child, so the child boxes quantized in it (bvh8.cpp quantize_planes, not linked here)
 // can be conservative.
-void multileaf_boxes(const ClusterLattice& lat, const std::vector<uint8_t>& block,
+void multileaf_boxes(const ClusterLattice& lat, const std::vector<uint8_t>& ml,
                      const std::vector<Vec3f>& decoded, const std::vector<uint32_t>& tris,
                      const uint32_t* const* prims, const uint32_t* counts, int k) {
   Box3f all;
   for (int c = 0; c < k; ++c)
     for (uint32_t j = 0; j < counts[c]; ++j)
       for (int q = 0; q < 3; ++q) all.extend(decoded[tris[3 * size_t(prims[c][j]) + q]]);
-  std::vector<uint8_t> ml(sizeof(cluster::LatticeBoxes8) + block.size());
-  std::memcpy(ml.data() + sizeof(cluster::LatticeBoxes8), block.data(), block.size());
-  auto& lb = *reinterpret_cast<cluster::LatticeBoxes8*>(ml.data());
+  const uint8_t* block = ml.data() + sizeof(cluster::LatticeBoxes8);
+  cluster::LatticeBoxes8 lb;
   float start[4], extent[4], s2[4], e2[4];
-  SLIM_FUZZ_CHECK(cluster::write_box_frame(lat, block.data(), all, lb, start, extent),
-                  "no box frame");
+  SLIM_FUZZ_CHECK(cluster::write_box_frame(lat, block, all, lb, start, extent), "no box frame");
+  SLIM_FUZZ_CHECK(
+      std::memcmp(lb.scale, ml.data() + offsetof(cluster::LatticeBoxes8, scale), 3) == 0,
+      "the boxes' scales differ from the builder's frame");
   cluster::box_frame(cluster::lattice_frame(lat), ml.data(), s2, e2);
   SLIM_FUZZ_CHECK(std::memcmp(start, s2, 3 * sizeof(float)) == 0 &&
                       std::memcmp(extent, e2, 3 * sizeof(float)) == 0,
                   "box frame decodes differently from the builder's");
   for (int c = 0; c < k; ++c) {
     cluster::Decoded8 d;
-    cluster::decode_child<false>(lat, block.data(), uint32_t(k), c, d);
+    cluster::decode_child<false>(lat, block, uint32_t(k), c, d);
     for (int l = 0; l < 8; ++l)
       for (int q = 0; q < 3; ++q)
         for (int a = 0; a < 3; ++a)
@@ -145,17 +151,37 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
     prims[k] = &order[pos];
     pos += counts[k];
   }
-  std::vector<uint8_t> block = cluster::encode(src, prims, counts, k, true);
+  const std::vector<uint8_t> enc = cluster::encode(src, prims, counts, k, true, true);
+  // Lossy: behind the multi-leaf boxes the builder writes (the anchors are the stream's first
+  // fields); `block` points at the cluster, `ml` holds both.
+  std::vector<uint8_t> ml;
+  const uint8_t* block_ptr = nullptr;
+  if (!lossless) {
+    cluster::LatticeBoxes8 lb{};
+    uint32_t anchor[3];
+    for (int a = 0, at = 0; a < 3; at += lat.anchor_bits[a], ++a)
+      anchor[a] =
+          cluster::read_bits(enc.data() + sizeof(ClusterHeader), uint64_t(at), lat.anchor_bits[a]);
+    SLIM_FUZZ_CHECK(cluster::multileaf_boxes(src, prims, counts, k, anchor, lb), "no box frame");
+    ml.resize(sizeof(lb) + enc.size());
+    std::memcpy(ml.data(), &lb, sizeof(lb));
+    std::memcpy(ml.data() + sizeof(lb), enc.data(), enc.size());
+    block_ptr = ml.data() + sizeof(lb);
+  } else {
+    ml = enc;
+    block_ptr = ml.data();
+  }
+  const std::vector<uint8_t>& block = enc;
   std::string why;
-  SLIM_FUZZ_CHECK(cluster::check(block.data(), block.size() - kClusterReadSlack, uint32_t(k), lat,
-                                 lossless, &why),
+  SLIM_FUZZ_CHECK(cluster::check(block_ptr, block.size() - kClusterReadSlack, uint32_t(k), lat,
+                                 lossless, &why, lossless ? nullptr : ml.data()),
                   why);
   for (int c = 0; c < k; ++c) {
     cluster::Decoded8 d;
     if (lossless)
-      cluster::decode_child<true>(lat, block.data(), uint32_t(k), c, d);
+      cluster::decode_child<true>(lat, block_ptr, uint32_t(k), c, d);
     else
-      cluster::decode_child<false>(lat, block.data(), uint32_t(k), c, d);
+      cluster::decode_child<false>(lat, block_ptr, uint32_t(k), c, d);
     SLIM_FUZZ_CHECK(d.n == int(counts[c]), "child size");
     // The child's triangles in the encoder's strip order: each decoded triangle (ids and corner
     // bits) matches one of the child's source triangles not matched yet.
@@ -163,9 +189,9 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
     for (int l = 0; l < d.n; ++l) {
       uint32_t g, p;
       if (lossless)
-        cluster::decode_ids<true>(lat, block.data(), uint32_t(k), uint32_t(d.first + l), g, p);
+        cluster::decode_ids<true>(lat, block_ptr, uint32_t(k), uint32_t(d.first + l), g, p);
       else
-        cluster::decode_ids<false>(lat, block.data(), uint32_t(k), uint32_t(d.first + l), g, p);
+        cluster::decode_ids<false>(lat, block_ptr, uint32_t(k), uint32_t(d.first + l), g, p);
       bool found = false;
       for (int m = 0; m < d.n && !found; ++m) {
         const uint32_t t = prims[c][m];
@@ -179,7 +205,7 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
       SLIM_FUZZ_CHECK(found, "decoded triangle (vertex bits and ids) not in its child");
     }
   }
-  if (!lossless) multileaf_boxes(lat, block, decoded, tris, prims, counts, k);
+  if (!lossless) multileaf_boxes(lat, ml, decoded, tris, prims, counts, k);
 }
 
 }  // namespace
@@ -207,6 +233,16 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       decode_all<true>(lat, block.data(), children);
     else
       decode_all<false>(lat, block.data(), children);
+  }
+  // 4. Lossy: the first 51 bytes as the multi-leaf's boxes, the rest as the cluster behind them,
+  // in a buffer of exactly their size plus the read slack.
+  constexpr size_t kBoxes = sizeof(cluster::LatticeBoxes8);
+  if (!lossless && n > kBoxes) {
+    std::vector<uint8_t> ml(data + 1, data + size);
+    ml.resize(n + kClusterReadSlack, 0);
+    ml.shrink_to_fit();
+    if (cluster::check(ml.data() + kBoxes, n - kBoxes, children, lat, false, nullptr, ml.data()))
+      decode_all<false>(lat, ml.data() + kBoxes, children);
   }
   // 2. Round trip.
   Reader in{data + 1, size - 1};

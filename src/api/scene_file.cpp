@@ -43,10 +43,11 @@ constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
 // (prim/cluster.h), clusters of up to 64 triangles. Version 7: the cluster header of 15 bytes (no
 // triangle count, pb, gb, bb and hb packed in 3 bytes), the lossy anchors at the lattice's
 // per-axis widths (ClusterLattice::anchor_bits, in cluster.lattice). Version 8: a lossless
-// cluster's stream starts with its box start (3 floats), the anchors derived from them. Any change
+// cluster's stream starts with its box start (3 floats), the anchors derived from them. Version 9:
+// lossy clusters may store their vertices in per-child ranges from the multi-leaf boxes. Any change
 // of a section's layout (a node, block or context struct), of what its bytes decode to, or of the
 // header needs a new version: the sections are the in-memory structs byte for byte.
-constexpr uint32_t kVersion = 8;
+constexpr uint32_t kVersion = 9;
 constexpr uint32_t kByteOrder = 0x01020304;
 constexpr uint64_t kAlign = 64;
 // Bounds the table before it is read (the header size check then bounds it by the file size): a

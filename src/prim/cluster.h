@@ -19,7 +19,9 @@
 //     bases:    prim_base (bb bits), geom_base (hb bits)
 //     children: for children 1..k-1, the child's topology offset (tb bits) and its first new
 //               vertex (vbw bits), each a residual of a linear prediction (below)
-//     vertices: per vertex bx + by + bz bits (offsets from the anchor)
+//     vertices: per vertex bx + by + bz bits (offsets from the anchor); lossy clusters of 2..8
+//               children with the ranges bit: per vertex its first child's three range fields
+//               (offsets in ranges the multi-leaf's child boxes give: "per-child vertex ranges")
 //     run lows: for runs 1..nruns-1, the low pb bits of the run's e (below)
 //     repeats:  if the header's repeat bit (top bit of ob) is set, ntris bits: bit t set if
 //               triangle t has triangle t - 1's ids (never triangle 0's)
@@ -420,6 +422,15 @@ SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, const ClusterLatti
   l.end = l.topo + tbits;
   return l;
 }
+// The layout L of a cluster with header h (from layout() with kPlainVertexBits) for a vertex
+// section of vertex_bits bits: the sections behind it move (as layout() with vertex_bits).
+SLIM_INLINE void with_vertex_bits(Layout& L, const ClusterHeader& h, uint64_t vertex_bits) {
+  const uint64_t d = vertex_bits - uint64_t(h.nverts) * L.vbits;  // mod 2^64
+  L.runs += d;
+  L.ids += d;
+  L.topo += d;
+  L.end += d;
+}
 // The child table's predictions for the child after `first` triangles (the header comment's
 // formula, its bias subtracted, in 32-bit wrapping arithmetic): the entry's fields are the child's
 // topology offset and first new vertex less these (the encoder), and these plus the fields give
@@ -474,6 +485,7 @@ struct ChildRanges {
   alignas(32) uint32_t w[8];         // bits a vertex
   alignas(32) uint32_t shift[3][8];  // axis a's field in the vertex: from its bit shift[a]
   alignas(32) uint32_t width[3][8];  // ... width[a] bits
+  alignas(32) uint32_t mask[3][8];   // 2^width[a] - 1
   alignas(32) uint32_t base[3][8];   // the code of field 0: anchor + lo
   uint64_t total;                    // bits of the vertex section
   uint32_t wmax;                     // the widest child's w
@@ -502,6 +514,7 @@ SLIM_INLINE void child_ranges(const ClusterHeader& h, const Layout& L, const uin
       if (c < k) plane_range(q[2 * a][c], q[2 * a + 1][c], scale[a], lo, wa);
       r.shift[a][c] = wsum;
       r.width[a][c] = wa;
+      r.mask[a][c] = uint32_t((uint64_t(1) << wa) - 1);
       r.base[a][c] = anchor[a] + lo;
       wsum += wa;
     }
@@ -517,6 +530,103 @@ SLIM_INLINE void child_ranges(const ClusterHeader& h, const Layout& L, const uin
   }
   r.total = total;
 }
+#if defined(SLIM_SIMD_AVX2)
+// child_ranges with the 8 children in the lanes of AVX2 vectors (the traversal's view computes it
+// at every multi-leaf visit that decodes a child): the same fields bit for bit for a cluster
+// check() accepted (ranges of fewer than 2^24 steps: the float conversion that gives the fields'
+// widths is exact).
+SLIM_INLINE void child_ranges_avx2(const ClusterHeader& h, const Layout& L, const uint8_t* bits,
+                                   const uint32_t* anchor, const uint8_t (*q)[8],
+                                   const uint8_t* scale, uint32_t k, ChildRanges& r) {
+  auto store = [](uint32_t* p, __m256i x) { _mm256_store_si256(reinterpret_cast<__m256i*>(p), x); };
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  const __m256i zero = _mm256_setzero_si256(), one = _mm256_set1_epi32(1);
+  const __m256i used = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(k)), lane);  // c < k
+  // Inclusive prefix sums over the 8 lanes.
+  auto prefix = [&](__m256i x) {
+    x = _mm256_add_epi32(x, _mm256_slli_si256(x, 4));
+    x = _mm256_add_epi32(x, _mm256_slli_si256(x, 8));
+    const __m256i low_total = _mm256_permutevar8x32_epi32(x, _mm256_set1_epi32(3));
+    return _mm256_add_epi32(x, _mm256_blend_epi32(zero, low_total, 0xF0));
+  };
+  // The children's first triangles (the sizes before them) and their table entries' firsts.
+  const __m256i sizes = _mm256_add_epi32(
+      _mm256_and_si256(_mm256_srlv_epi32(_mm256_set1_epi32(int(child_sizes(h))),
+                                         _mm256_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21)),
+                       _mm256_set1_epi32(7)),
+      one);
+  const __m256i tri_first = _mm256_sub_epi32(prefix(sizes), sizes);
+  const uint32_t stride = L.tb + L.vbw;
+  // Entry c - 1 at bit table + (c - 1) x stride: 32 bits from its byte hold it (7 + 12 + 8 bits).
+  const __m256i epos = _mm256_add_epi32(
+      _mm256_set1_epi32(int(L.table)),
+      _mm256_mullo_epi32(_mm256_sub_epi32(lane, one), _mm256_set1_epi32(int(stride))));
+  const __m256i entry = _mm256_mask_i32gather_epi32(
+      zero, reinterpret_cast<const int*>(bits), _mm256_srli_epi32(epos, 3),
+      _mm256_and_si256(used, _mm256_cmpgt_epi32(lane, zero)), 1);
+  const __m256i field = _mm256_and_si256(
+      _mm256_srl_epi32(_mm256_srlv_epi32(entry, _mm256_and_si256(epos, _mm256_set1_epi32(7))),
+                       _mm_cvtsi32_si128(int(L.tb))),
+      _mm256_set1_epi32(int((1u << L.vbw) - 1)));
+  const __m256i predicted = _mm256_sub_epi32(
+      _mm256_srli_epi32(_mm256_mullo_epi32(tri_first, _mm256_set1_epi32(int(L.vs))), 12),
+      _mm256_set1_epi32(int(L.vbias)));
+  __m256i first = _mm256_blend_epi32(_mm256_add_epi32(field, predicted), zero, 1);  // child 0: 0
+  first = _mm256_blendv_epi8(_mm256_set1_epi32(int(kNoChildVertex)), first, used);
+  // The ranges per axis.
+  __m256i wsum = zero, shift[3], width[3], base[3];
+  for (int a = 0; a < 3; ++a) {
+    const __m128i e = _mm_cvtsi32_si128(int(scale[a] >> 3));
+    const __m256i m = _mm256_set1_epi32(int(8 + (scale[a] & 7)));
+    auto planes = [&](int i) {
+      return _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(q[i])));
+    };
+    const __m256i lo =
+        _mm256_srli_epi32(_mm256_sll_epi32(_mm256_mullo_epi32(planes(2 * a), m), e), 3);
+    const __m256i hi = _mm256_srli_epi32(
+        _mm256_add_epi32(_mm256_sll_epi32(_mm256_mullo_epi32(planes(2 * a + 1), m), e),
+                         _mm256_set1_epi32(7)),
+        3);
+    // bit_width(hi - lo): the exponent of its float (exact below 2^24), 0 for 0.
+    const __m256i span = _mm256_sub_epi32(hi, lo);
+    const __m256i exp = _mm256_srli_epi32(_mm256_castps_si256(_mm256_cvtepi32_ps(span)), 23);
+    width[a] = _mm256_and_si256(
+        _mm256_max_epi32(_mm256_sub_epi32(exp, _mm256_set1_epi32(126)), zero), used);
+    shift[a] = wsum;
+    base[a] = _mm256_blendv_epi8(_mm256_set1_epi32(int(anchor[a])),
+                                 _mm256_add_epi32(_mm256_set1_epi32(int(anchor[a])), lo), used);
+    wsum = _mm256_add_epi32(wsum, width[a]);
+  }
+  // Vertices per child: the next child's first (the last child's: nverts) less the child's.
+  const __m256i next = _mm256_blendv_epi8(
+      _mm256_permutevar8x32_epi32(
+          first, _mm256_min_epi32(_mm256_add_epi32(lane, one), _mm256_set1_epi32(7))),
+      _mm256_set1_epi32(int(h.nverts)), _mm256_cmpeq_epi32(lane, _mm256_set1_epi32(int(k) - 1)));
+  const __m256i n = _mm256_and_si256(_mm256_sub_epi32(next, first), used);
+  const __m256i bits_in = prefix(_mm256_mullo_epi32(n, wsum));  // through child c
+  const __m256i before = _mm256_sub_epi32(bits_in, _mm256_mullo_epi32(n, wsum));
+  const __m256i pos =
+      _mm256_and_si256(_mm256_sub_epi32(_mm256_add_epi32(_mm256_set1_epi32(int(L.verts)), before),
+                                        _mm256_mullo_epi32(first, wsum)),
+                       used);
+  store(r.first, first);
+  store(r.pos, pos);
+  store(r.w, wsum);
+  for (int a = 0; a < 3; ++a) {
+    store(r.shift[a], shift[a]);
+    store(r.width[a], width[a]);
+    store(r.mask[a], _mm256_sub_epi32(_mm256_sllv_epi32(one, width[a]), one));
+    store(r.base[a], base[a]);
+  }
+  alignas(32) uint32_t tot[8];
+  store(tot, bits_in);
+  r.total = tot[7];
+  const __m128i w4 = _mm_max_epu32(_mm256_castsi256_si128(wsum), _mm256_extracti128_si256(wsum, 1));
+  const __m128i w2 = _mm_max_epu32(w4, _mm_shuffle_epi32(w4, _MM_SHUFFLE(1, 0, 3, 2)));
+  r.wmax = uint32_t(
+      _mm_cvtsi128_si32(_mm_max_epu32(w2, _mm_shuffle_epi32(w2, _MM_SHUFFLE(2, 3, 0, 1)))));
+}
+#endif
 // The child whose new vertices include vertex v: the firsts of children 1..7 at or below it.
 SLIM_INLINE uint32_t range_child(const ChildRanges& r, uint32_t v) {
   uint32_t c = 0;
@@ -847,12 +957,16 @@ SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const ui
   const __m256i packed = _mm256_permutevar8x32_epi32(load(tri), lanes);
   const __m256i rpos = load(r.pos), rw = load(r.w);
   const __m256 step = _mm256_set1_ps(lat.step);
+  // Every corner's child at once, byte by byte: the children 1..7 whose first (at most 255: a
+  // vertex number is at most 254) lies at or below the vertex, each compare -1 where it does.
+  __m256i children = _mm256_setzero_si256();
+  for (int j = 1; j < 8; ++j) {
+    const __m256i f = _mm256_set1_epi8(char(std::min<uint32_t>(r.first[j], 255)));
+    children = _mm256_sub_epi8(children, _mm256_cmpeq_epi8(_mm256_max_epu8(packed, f), packed));
+  }
   for (int k = 0; k < 3; ++k) {
     const __m256i vi = _mm256_and_si256(_mm256_srli_epi32(packed, 8 * k), _mm256_set1_epi32(0xff));
-    // c = 7 less the children 1..7 whose first lies above vi.
-    __m256i c = _mm256_set1_epi32(7);
-    for (int j = 1; j < 8; ++j)
-      c = _mm256_add_epi32(c, _mm256_cmpgt_epi32(_mm256_set1_epi32(int(r.first[j])), vi));
+    const __m256i c = _mm256_and_si256(_mm256_srli_epi32(children, 8 * k), _mm256_set1_epi32(0xff));
     const __m256i pos =
         _mm256_add_epi32(_mm256_permutevar8x32_epi32(rpos, c),
                          _mm256_mullo_epi32(vi, _mm256_permutevar8x32_epi32(rw, c)));
@@ -865,17 +979,17 @@ SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const ui
         _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_extracti128_si256(byte, 1), 1),
                           _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sh, 1)));
     for (int a = 0; a < 3; ++a) {
-      const __m256i s = _mm256_permutevar8x32_epi32(load(r.shift[a]), c);
-      const __m256 pair =
-          _mm256_shuffle_ps(_mm256_castsi256_ps(_mm256_srlv_epi64(
-                                lo, _mm256_cvtepu32_epi64(_mm256_castsi256_si128(s)))),
-                            _mm256_castsi256_ps(_mm256_srlv_epi64(
-                                hi, _mm256_cvtepu32_epi64(_mm256_extracti128_si256(s, 1)))),
-                            _MM_SHUFFLE(2, 0, 2, 0));
+      // The low 32 bits of each lane's window from the field's bit (axis 0's: bit 0).
+      __m256i l = lo, u = hi;
+      if (a) {
+        const __m256i s = _mm256_permutevar8x32_epi32(load(r.shift[a]), c);
+        l = _mm256_srlv_epi64(lo, _mm256_cvtepu32_epi64(_mm256_castsi256_si128(s)));
+        u = _mm256_srlv_epi64(hi, _mm256_cvtepu32_epi64(_mm256_extracti128_si256(s, 1)));
+      }
+      const __m256 pair = _mm256_shuffle_ps(_mm256_castsi256_ps(l), _mm256_castsi256_ps(u),
+                                            _MM_SHUFFLE(2, 0, 2, 0));
       const __m256i field = _mm256_permute4x64_epi64(_mm256_castps_si256(pair), 0xD8);
-      const __m256i w = _mm256_permutevar8x32_epi32(load(r.width[a]), c);
-      const __m256i mask =
-          _mm256_sub_epi32(_mm256_sllv_epi32(_mm256_set1_epi32(1), w), _mm256_set1_epi32(1));
+      const __m256i mask = _mm256_permutevar8x32_epi32(load(r.mask[a]), c);
       const __m256i code = _mm256_add_epi32(_mm256_and_si256(field, mask),
                                             _mm256_permutevar8x32_epi32(load(r.base[a]), c));
       // q < 2^24: the signed conversion is the scalar float(q); the sum rounds as lattice_coord's.
@@ -899,8 +1013,8 @@ struct View {
   ChildRanges r;            // if ranges
 };
 template <bool kLossless>
-SLIM_INLINE View view(const ClusterLattice& lat, const uint8_t* data, uint32_t children) {
-  View v;
+SLIM_INLINE void view_into(View& v, const ClusterLattice& lat, const uint8_t* data,
+                           uint32_t children) {
   std::memcpy(&v.h, data, sizeof(v.h));
   v.bits = data + sizeof(ClusterHeader);
   v.L = layout(v.h, children, lat, kLossless);
@@ -910,7 +1024,8 @@ SLIM_INLINE View view(const ClusterLattice& lat, const uint8_t* data, uint32_t c
     std::memcpy(w, v.bits, 12);
     for (int a = 0; a < 3; ++a)
       v.anchor[a] = lossless_anchor(w[a], coord_mode(v.h), axis_digits(v.h, a));
-    return v;
+    v.ranges = false;
+    return;
   }
   uint64_t x;  // anchors 0 and 1 (at most 64 bits together)
   std::memcpy(&x, v.bits, 8);
@@ -921,10 +1036,23 @@ SLIM_INLINE View view(const ClusterLattice& lat, const uint8_t* data, uint32_t c
   if (has_ranges(v.h)) {  // a multi-leaf's cluster (check()): its boxes lie right before it
     LatticeBoxes8 b;
     std::memcpy(&b, data - sizeof(LatticeBoxes8), sizeof(b));
+#if defined(SLIM_SIMD_AVX2)
+    child_ranges_avx2(v.h, v.L, v.bits, v.anchor, b.q, b.scale, children, v.r);
+#else
     child_ranges(v.h, v.L, v.bits, v.anchor, b.q, b.scale, children, v.r);
-    v.L = layout(v.h, children, lat, false, v.r.total);
+#endif
+    with_vertex_bits(v.L, v.h, v.r.total);
     v.ranges = true;
+  } else {
+    v.ranges = false;
   }
+}
+// The view of a cluster (built in place by view_into where it is kept: the ranges make it some
+// 400 bytes).
+template <bool kLossless>
+SLIM_INLINE View view(const ClusterLattice& lat, const uint8_t* data, uint32_t children) {
+  View v;
+  view_into<kLossless>(v, lat, data, children);
   return v;
 }
 
@@ -1498,7 +1626,7 @@ struct ClusterLeaf {
     mutable Lazy lazy;
     SLIM_INLINE const cluster::View& get(const ClusterLattice& lat) const {
       if (!read) {
-        lazy.v = cluster::view<kLossless>(lat, data, children);
+        cluster::view_into<kLossless>(lazy.v, lat, data, children);
         read = true;
       }
       return lazy.v;

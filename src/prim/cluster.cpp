@@ -652,8 +652,14 @@ bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f
   uint8_t anchors[16] = {};
   std::memcpy(anchors, data + sizeof(ClusterHeader), (f.first[2] + f.width[2] + 7) / 8);
   box_start(f, anchors, start);
-  // Scale bytes e << 3 | m, e <= kMaxBoxScaleExp.
+  // Scale bytes e << 3 | m, e <= kMaxBoxScaleExp. The search per axis starts at e = ilogb(need /
+  // step) - 1, need = the span / 255: that extent, at most need / 2, cannot reach the top.
   uint32_t first[3] = {0, 0, 0}, sc[3];
+  for (int a = 0; a < 3; ++a) {
+    const float need = (box.hi[a] - start[a]) / 255.0f / lat.step;
+    if (need >= 4.0f && std::isfinite(need))
+      first[a] = std::min<uint32_t>(uint32_t(std::ilogb(need) - 1), kMaxBoxScaleExp) << 3;
+  }
   if (!reaching_extents(
           start, box, first, ((kMaxBoxScaleExp + 1) << 3) - 1,
           [&](uint32_t c) { return box_extent(lat, c); }, sc))

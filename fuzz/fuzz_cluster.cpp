@@ -16,7 +16,8 @@
 //      that cluster decodes as the builder made it and encloses every child's decoded triangles;
 //   4. lossy: the input's first 51 bytes as a multi-leaf's boxes and the rest as the cluster behind
 //      them (per-child vertex ranges come from the boxes): as 1., the decoders reading only inside
-//      the boxes and the block plus the read slack; the round trip of 2. encodes a multi-leaf's
+//      the boxes and the block plus the read slack (in 1. and 4. the vector vertex decode equals
+//      the scalar one bit for bit); the round trip of 2. encodes a multi-leaf's
 //      cluster (with ranges where they are smaller) and decodes it behind the boxes the builder
 //      makes (cluster::multileaf_boxes).
 #include <algorithm>
@@ -52,6 +53,14 @@ void decode_all(const ClusterLattice& lat, const uint8_t* block, uint32_t childr
     cluster::Decoded8 d;
     cluster::decode_child<kLossless>(lat, block, children, int(c), d);
     SLIM_FUZZ_CHECK(d.n >= 1 && d.n <= 8, "child size");
+    if constexpr (!kLossless) {
+      // The traversal's vertex decode (AVX2 where built, per-child ranges or not) gives the
+      // scalar decode's bits.
+      cluster::Decoded8 ds;
+      cluster::decode_child<false, true>(lat, view, int(c), ds);
+      SLIM_FUZZ_CHECK(std::memcmp(d.v, ds.v, sizeof(d.v)) == 0,
+                      "vector and scalar vertex decodes differ");
+    }
     const cluster::ChildIds ids = cluster::child_ids(view, uint32_t(d.first));
     for (int l = 0; l < d.n; ++l) {
       uint32_t g, p, gc, pc;

@@ -194,6 +194,40 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
     // One view of the cluster serves all its children (as in the traversal).
     const cluster::View view = lossless ? cluster::view<true>(z.lattice, cd, uint32_t(kk))
                                         : cluster::view<false>(z.lattice, cd, uint32_t(kk));
+    if (!lossless) {
+      // The traversal's vertex decode (AVX2 where built) gives the scalar decode's bits.
+      for (int c = 0; c < kk; ++c) {
+        cluster::Decoded8 d, ds;
+        cluster::decode_child<false>(z.lattice, view, c, d);
+        cluster::decode_child<false, true>(z.lattice, view, c, ds);
+        ASSERT_EQ(std::memcmp(d.v, ds.v, sizeof(d.v)), 0) << "child " << c;
+      }
+    }
+#if defined(SLIM_SIMD_AVX2)
+    if (view.ranges) {
+      // The AVX2 ranges (the traversal's view) equal the scalar ones (check()'s).
+      cluster::LatticeBoxes8 lb;
+      std::memcpy(&lb, ml.data(), sizeof(lb));
+      const cluster::Layout L0 = cluster::layout(hdr, uint32_t(kk), z.lattice, false);
+      cluster::ChildRanges rs;
+      cluster::child_ranges(hdr, L0, cd + sizeof(ClusterHeader), view.anchor, lb.q, lb.scale,
+                            uint32_t(kk), rs);
+      const cluster::ChildRanges& rv = view.r;
+      ASSERT_EQ(rs.total, rv.total);
+      ASSERT_EQ(rs.wmax, rv.wmax);
+      for (int c = 0; c < 8; ++c) {
+        ASSERT_EQ(rs.first[c], rv.first[c]) << c;
+        ASSERT_EQ(rs.pos[c], rv.pos[c]) << c;
+        ASSERT_EQ(rs.w[c], rv.w[c]) << c;
+        for (int a = 0; a < 3; ++a) {
+          ASSERT_EQ(rs.shift[a][c], rv.shift[a][c]) << c << " " << a;
+          ASSERT_EQ(rs.width[a][c], rv.width[a][c]) << c << " " << a;
+          ASSERT_EQ(rs.mask[a][c], rv.mask[a][c]) << c << " " << a;
+          ASSERT_EQ(rs.base[a][c], rv.base[a][c]) << c << " " << a;
+        }
+      }
+    }
+#endif
     for (int c = 0; c < kk; ++c) {
       cluster::Decoded8 d, dv;
       if (lossless) {
@@ -481,6 +515,111 @@ TEST(ClusterCodec, DecodeEqualsEncodeRealMesh) {
       EXPECT_GT(decimal, clusters * 9 / 10);
     }
   }
+}
+
+// Per-child vertex ranges: a child without new vertices whose range needs more than 24 bits (a
+// cluster spanning the whole 24-bit lattice) keeps the cluster out of the ranges, so that check()
+// accepts every cluster the encoder writes.
+TEST(ClusterCodec, RangesKeepEveryChildWithin24Bits) {
+  const uint32_t T = (1u << 24) - 1;
+  const std::vector<uint32_t> codes = {0, 0, 0, 1, 1, 0, 0, 1, 1, T, 0, 0, T - 1, 1, 0, T, 1, 1};
+  ClusterLattice lat;
+  lat.step = 1.0f;
+  for (int a = 0; a < 3; ++a) lat.anchor_bits[a] = a ? 1 : 24;
+  std::vector<Vec3f> decoded(6);
+  for (int i = 0; i < 6; ++i)
+    for (int a = 0; a < 3; ++a) decoded[i][a] = cluster::lattice_coord(lat, a, codes[3 * i + a]);
+  // Children 0 and 1 are narrow (their ranges win); child 2 spans the lattice with old vertices.
+  const std::vector<uint32_t> tris = {0, 1, 2, 3, 4, 5, 0, 3, 1};
+  const std::vector<uint32_t> geom(3, 0), prim = {0, 1, 2};
+  ClusterSource src;
+  src.vertices = decoded.data();
+  src.codes = codes.data();
+  src.tris = tris.data();
+  src.geom_ids = geom.data();
+  src.prim_ids = prim.data();
+  src.lattice = lat;
+  const uint32_t p[3] = {0, 1, 2}, counts[3] = {1, 1, 1};
+  const uint32_t* prims[3] = {&p[0], &p[1], &p[2]};
+  const std::vector<uint8_t> enc = cluster::encode(src, prims, counts, 3, true, true);
+  const uint32_t anchor[3] = {0, 0, 0};
+  cluster::LatticeBoxes8 lb;
+  ASSERT_TRUE(cluster::multileaf_boxes(src, prims, counts, 3, anchor, lb));
+  std::vector<uint8_t> ml(sizeof(lb) + enc.size());
+  std::memcpy(ml.data(), &lb, sizeof(lb));
+  std::memcpy(ml.data() + sizeof(lb), enc.data(), enc.size());
+  std::string why;
+  EXPECT_TRUE(cluster::check(ml.data() + sizeof(lb), enc.size() - kClusterReadSlack, 3, lat, false,
+                             &why, ml.data()))
+      << why;
+  ClusterHeader h;
+  std::memcpy(&h, enc.data(), sizeof(h));
+  EXPECT_FALSE(cluster::has_ranges(h));
+}
+
+// check() of a cluster with per-child vertex ranges: its boxes' scales, its children's range
+// widths and the order of their first new vertices; without boxes (an isolated leaf) it fails.
+TEST(ClusterCodec, CheckRejectsMalformedRanges) {
+  PolyMesh sphere = icosphere(4);
+  TriangleMesh tm = triangulate_fan({&sphere});
+  const cluster::Quantized z = cluster::quantize(tm.vertices.data(), tm.vertices.size(),
+                                                 tm.tris.data(), tm.tri_count(), 1e-5, false);
+  ClusterSource src = source_of(tm, z, false);
+  std::vector<uint32_t> order(64);
+  std::iota(order.begin(), order.end(), 0u);
+  const uint32_t* prims[8];
+  uint32_t counts[8];
+  for (int c = 0; c < 8; ++c) {
+    prims[c] = &order[8 * size_t(c)];
+    counts[c] = 8;
+  }
+  const std::vector<uint8_t> enc = cluster::encode(src, prims, counts, 8, true, true);
+  ClusterHeader h;
+  std::memcpy(&h, enc.data(), sizeof(h));
+  ASSERT_TRUE(cluster::has_ranges(h));
+  uint32_t anchor[3];
+  const cluster::Layout L = cluster::layout(h, 8, z.lattice, false);
+  for (int a = 0, at = 0; a < 3; at += int(L.aw[a]), ++a)
+    anchor[a] = cluster::read_bits(enc.data() + sizeof(ClusterHeader), uint64_t(at), L.aw[a]);
+  cluster::LatticeBoxes8 lb;
+  ASSERT_TRUE(cluster::multileaf_boxes(src, prims, counts, 8, anchor, lb));
+  auto checks = [&](const cluster::LatticeBoxes8& b, const std::vector<uint8_t>& data,
+                    std::string* why) {
+    std::vector<uint8_t> ml(sizeof(b) + data.size());
+    std::memcpy(ml.data(), &b, sizeof(b));
+    std::memcpy(ml.data() + sizeof(b), data.data(), data.size());
+    return cluster::check(ml.data() + sizeof(b), data.size() - kClusterReadSlack, 8, z.lattice,
+                          false, why, ml.data());
+  };
+  std::string why;
+  ASSERT_TRUE(checks(lb, enc, &why)) << why;
+  EXPECT_FALSE(cluster::check(enc.data(), enc.size() - kClusterReadSlack, 8, z.lattice, false,
+                              &why));  // no boxes
+  EXPECT_NE(why.find("outside a multi-leaf"), std::string::npos) << why;
+  cluster::LatticeBoxes8 b = lb;
+  b.scale[1] = uint8_t((cluster::kMaxRangeScaleExp + 1) << 3);  // products could wrap
+  EXPECT_FALSE(checks(b, enc, &why));
+  EXPECT_NE(why.find("scale exponent"), std::string::npos) << why;
+  b = lb;
+  b.scale[0] = uint8_t(cluster::kMaxRangeScaleExp << 3 | 7);  // 255 planes of 2^20 steps
+  b.q[0][3] = 0;
+  b.q[1][3] = 255;
+  EXPECT_FALSE(checks(b, enc, &why));
+  EXPECT_NE(why.find("beyond 24 bits"), std::string::npos) << why;
+  // Child 5's first new vertex past the vertices: the plain table code (vo = 3) and its field
+  // all ones.
+  std::vector<uint8_t> bad = enc;
+  ClusterHeader hb = h;
+  hb.tbits = uint16_t((hb.tbits & 0x3fffu) | 3u << 14);
+  std::memcpy(bad.data(), &hb, sizeof(hb));
+  const cluster::Layout Lb = cluster::layout(hb, 8, z.lattice, false);
+  for (uint32_t i = 0; i < Lb.vbw; ++i) {
+    const uint64_t bit =
+        8 * sizeof(ClusterHeader) + Lb.table + 4 * uint64_t(Lb.tb + Lb.vbw) + Lb.tb + i;
+    bad[bit >> 3] |= uint8_t(1u << (bit & 7));
+  }
+  EXPECT_FALSE(checks(lb, bad, &why));
+  EXPECT_NE(why.find("out of order"), std::string::npos) << why;
 }
 
 TEST(ClusterCodec, CheckRejectsMalformedBlocks) {

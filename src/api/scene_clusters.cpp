@@ -362,10 +362,11 @@ class ClusterScene : public BvhScene<ClusterLeaf<kLossless>> {
     DecodedTriangles out;
     auto append = [&](const uint8_t* data, uint32_t k, uint32_t i) {
       cluster::Decoded8 d;
-      cluster::decode_child<kLossless>(c.lattice, data, k, int(i), d);
+      const cluster::View v = cluster::view<kLossless>(c.lattice, data, k);
+      cluster::decode_child<kLossless>(c.lattice, v, int(i), d);
       for (int l = 0; l < d.n; ++l) {
         uint32_t geom, prim;
-        cluster::decode_ids<kLossless>(c.lattice, data, k, uint32_t(d.first + l), geom, prim);
+        cluster::decode_ids(v, uint32_t(d.first + l), geom, prim);
         for (int q = 0; q < 3; ++q)
           out.vertices.emplace_back(d.v[q][0][l], d.v[q][1][l], d.v[q][2][l]);
         out.geom.push_back(geom);

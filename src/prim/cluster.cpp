@@ -383,15 +383,17 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     if (ok) {
       uint64_t bits = 0;
       for (int c = 0; c < k && ok; ++c) {
-        for (int a = 0; a < 3; ++a)
+        // Every child's fields at most 24 bits (check()), a child without new vertices too.
+        for (int a = 0; a < 3; ++a) {
           plane_range(lb.q[2 * a][c], lb.q[2 * a + 1][c], lb.scale[a], range_lo[c][a],
                       range_w[c][a]);
+          ok &= range_w[c][a] <= 24;
+        }
         const uint32_t end = c + 1 < k ? child_cnt[c + 1] : nv;
         for (uint32_t i = child_cnt[c]; i < end && ok; ++i)
           for (int a = 0; a < 3; ++a) {
             const uint32_t off = codes[3 * i + a] - anchor[a] - range_lo[c][a];
-            ok &= range_w[c][a] <= 24 && codes[3 * i + a] >= anchor[a] + range_lo[c][a] &&
-                  (off >> range_w[c][a]) == 0;
+            ok &= codes[3 * i + a] >= anchor[a] + range_lo[c][a] && (off >> range_w[c][a]) == 0;
           }
         bits += uint64_t(end - child_cnt[c]) * (range_w[c][0] + range_w[c][1] + range_w[c][2]);
       }

@@ -146,7 +146,8 @@ static_assert(sizeof(ClusterLattice) == 20 && offsetof(ClusterLattice, step) == 
 struct ClusterHeader {
   uint8_t nverts;    // distinct vertices (codes) in the cluster, 1..255
   uint8_t bits[3];   // per-axis offset widths (low 6 bits: lossy <= 24, lossless <= 32); decimal
-                     // mode: the top 2 bits are the axis's digits below the cluster's k
+                     // mode: the top 2 bits are the axis's digits below the cluster's k; lossy:
+                     // bit 7 of bits[0] is the ranges bit (per-child vertex ranges, below)
   uint8_t ib;        // low 4 bits: bits of a reused vertex's distance back (<= 8); high 4 bits:
                      // lossless coordinate mode (0 float keys, 1 + k decimal q x 10^-k, k <= 9)
   uint8_t idw[3];    // 4 x 6 bits from bit 0 (each <= 32): pb, bits per primID run start's low
@@ -992,7 +993,8 @@ SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const ui
       const __m256i mask = _mm256_permutevar8x32_epi32(load(r.mask[a]), c);
       const __m256i code = _mm256_add_epi32(_mm256_and_si256(field, mask),
                                             _mm256_permutevar8x32_epi32(load(r.base[a]), c));
-      // q < 2^24: the signed conversion is the scalar float(q); the sum rounds as lattice_coord's.
+      // The code is below 2^31 for any block check() accepts (below 2^24 for one the encoder
+      // wrote): the signed conversion is the scalar float(q); the sum rounds as lattice_coord's.
       _mm256_store_ps(d.v[k][a], _mm256_add_ps(_mm256_set1_ps(lat.origin[a]),
                                                _mm256_mul_ps(_mm256_cvtepi32_ps(code), step)));
     }
@@ -1057,7 +1059,8 @@ SLIM_INLINE View view(const ClusterLattice& lat, const uint8_t* data, uint32_t c
 }
 
 // Child `child` of the cluster `v`.
-template <bool kLossless>
+// kScalar: the scalar vertex decode on AVX2 builds too (the tests' and fuzz target's reference).
+template <bool kLossless, bool kScalar = false>
 SLIM_INLINE void decode_child(const ClusterLattice& lat, const View& v, int child, Decoded8& d) {
   const ClusterHeader& h = v.h;
   const Layout& L = v.L;
@@ -1066,11 +1069,11 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const View& v, int chil
   alignas(32) uint32_t tri[8];
   decode_strip_packed(h, L, v.bits, uint32_t(child), uint32_t(d.first), uint32_t(d.n), tri);
 #if defined(SLIM_SIMD_AVX2)
-  if (!v.ranges) {
+  if (!kScalar && !v.ranges) {
     decode_vertices_avx2<kLossless>(lat, h, v.bits, L, v.anchor, tri, d);
     return;
   }
-  if (v.r.wmax <= 57) {
+  if (!kScalar && v.r.wmax <= 57) {
     decode_vertices_ranges_avx2(lat, v.bits, v.r, tri, d);
     return;
   }
@@ -1698,7 +1701,8 @@ struct ClusterLeaf {
   static void visit_in_multileaf(const Context& ctx, const uint8_t* data, uint32_t children, int i,
                                  F&& fn) {
     cluster::Decoded8 d;
-    cluster::decode_child<kLossless>(ctx.lattice, data, children, i, d);
+    const cluster::View v = cluster::view<kLossless>(ctx.lattice, data, children);
+    cluster::decode_child<kLossless>(ctx.lattice, v, i, d);
     for (int l = 0; l < d.n; ++l) {
       Vec3f c[3];
       Box3f box;
@@ -1707,8 +1711,7 @@ struct ClusterLeaf {
         box.extend(c[k]);
       }
       uint32_t geom, prim;
-      cluster::decode_ids<kLossless>(ctx.lattice, data, children, uint32_t(d.first + l), geom,
-                                     prim);
+      cluster::decode_ids(v, uint32_t(d.first + l), geom, prim);
       fn(box, triangle_key(c[0], c[1], c[2], geom, prim));
     }
   }

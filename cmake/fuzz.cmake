@@ -39,7 +39,7 @@ if(SLIM_FUZZ)
   set(SLIM_FUZZ_TARGETS obj ply gltf glb xz lossy_subgrid quantized_mesh pairing scene cluster
                         scene_file)
   set(SLIM_FUZZ_SOURCES_lossy_subgrid src/prim/lossy_subgrid.cpp)
-  set(SLIM_FUZZ_SOURCES_cluster src/prim/cluster.cpp)  # the cluster block decoder
+  set(SLIM_FUZZ_SOURCES_cluster src/prim/cluster.cpp src/bvh/quantize_boxes.cpp)  # the cluster block decoder, the multi-leaf boxes
   set(SLIM_FUZZ_LIBS_cluster TBB::tbb)  # cluster.cpp's quantize runs parallel_for
   set(SLIM_FUZZ_SOURCES_quantized_mesh src/prim/quantized_mesh.cpp src/mesh/tessellate.cpp)
   set(SLIM_FUZZ_LIBS_quantized_mesh ${SLIM_GLU_LIB})

@@ -64,6 +64,20 @@ ClusterSource source_of(const TriangleMesh& tm, const cluster::Quantized& z, boo
   return src;
 }
 
+// A lossy icosphere of `level` as the cluster encoder's source (quantized with the default bound).
+struct SphereSource {
+  TriangleMesh tm;
+  cluster::Quantized z;
+  ClusterSource src;
+  explicit SphereSource(int level) {
+    PolyMesh sphere = icosphere(level);
+    tm = triangulate_fan({&sphere});
+    z = cluster::quantize(tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(),
+                          1e-5, false);
+    src = source_of(tm, z, false);
+  }
+};
+
 // The multi-leaf boxes of the cluster `data` (k children with the given boxes) as the builder
 // writes them right ahead of it: Boxes is cluster::LatticeBoxes8 (lossy) or cluster::ExactBoxes8
 // (lossless), write(boxes, start, extent) the builder's frame, frame(p, start, extent) the
@@ -532,13 +546,8 @@ TEST(ClusterCodec, RangesKeepEveryChildWithin24Bits) {
   // Children 0 and 1 are narrow (their ranges win); child 2 spans the lattice with old vertices.
   const std::vector<uint32_t> tris = {0, 1, 2, 3, 4, 5, 0, 3, 1};
   const std::vector<uint32_t> geom(3, 0), prim = {0, 1, 2};
-  ClusterSource src;
-  src.vertices = decoded.data();
-  src.codes = codes.data();
-  src.tris = tris.data();
-  src.geom_ids = geom.data();
-  src.prim_ids = prim.data();
-  src.lattice = lat;
+  const ClusterSource src{decoded.data(), codes.data(), tris.data(), geom.data(),
+                          prim.data(),    false,        lat};
   const uint32_t p[3] = {0, 1, 2}, counts[3] = {1, 1, 1};
   const uint32_t* prims[3] = {&p[0], &p[1], &p[2]};
   const std::vector<uint8_t> enc = cluster::encode(src, prims, counts, 3, true, true);
@@ -560,11 +569,9 @@ TEST(ClusterCodec, RangesKeepEveryChildWithin24Bits) {
 // check() of a cluster with per-child vertex ranges: its boxes' scales, its children's range
 // widths and the order of their first new vertices; without boxes (an isolated leaf) it fails.
 TEST(ClusterCodec, CheckRejectsMalformedRanges) {
-  PolyMesh sphere = icosphere(4);
-  TriangleMesh tm = triangulate_fan({&sphere});
-  const cluster::Quantized z = cluster::quantize(tm.vertices.data(), tm.vertices.size(),
-                                                 tm.tris.data(), tm.tri_count(), 1e-5, false);
-  ClusterSource src = source_of(tm, z, false);
+  const SphereSource sp(4);  // kept in place: src points into z
+  const cluster::Quantized& z = sp.z;
+  const ClusterSource& src = sp.src;
   std::vector<uint32_t> order(64);
   std::iota(order.begin(), order.end(), 0u);
   const uint32_t* prims[8];

@@ -586,8 +586,7 @@ TEST(ClusterCodec, CheckRejectsMalformedRanges) {
   ASSERT_TRUE(cluster::has_ranges(h));
   uint32_t anchor[3];
   const cluster::Layout L = cluster::layout(h, 8, z.lattice, false);
-  for (int a = 0, at = 0; a < 3; at += int(L.aw[a]), ++a)
-    anchor[a] = cluster::read_bits(enc.data() + sizeof(ClusterHeader), uint64_t(at), L.aw[a]);
+  cluster::lossy_anchors(enc.data() + sizeof(ClusterHeader), L, anchor);
   cluster::LatticeBoxes8 lb;
   ASSERT_TRUE(cluster::multileaf_boxes(src, prims, counts, 8, anchor, lb));
   auto checks = [&](const cluster::LatticeBoxes8& b, const std::vector<uint8_t>& data,

@@ -753,7 +753,8 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
   if (h.nruns < 1 || h.nruns > ntris) return fail("run count must be 1..the triangle count");
   if (children < 8 && (sizes >> (3 * children)) != 0)
     return fail("sizes given for children beyond the child count");
-  if (sizeof(ClusterHeader) + (layout(h, children, lat, lossless).verts + 7) / 8 > size)
+  Layout L = layout(h, children, lat, lossless);  // the plain vertex section, moved below
+  if (sizeof(ClusterHeader) + (L.verts + 7) / 8 > size)
     return fail("stream runs past the data (child table)");
   if (!ranges && data_bytes(h, children, lat, lossless, 0) > size)
     return fail("stream runs past the data");
@@ -771,12 +772,10 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
       if (uint32_t(b.scale[a] >> 3) > kMaxRangeScaleExp)
         return fail("box scale exponent " + std::to_string(b.scale[a] >> 3) +
                     " beyond the vertex ranges' " + std::to_string(kMaxRangeScaleExp));
-    const Layout L0 = layout(h, children, lat, lossless);
     uint32_t anchor[3];
-    for (int a = 0, at = 0; a < 3; at += int(L0.aw[a]), ++a)
-      anchor[a] = read_bits(bits, uint64_t(at), L0.aw[a]);
+    lossy_anchors(bits, L, anchor);
     ChildRanges r;
-    child_ranges(h, L0, bits, anchor, b.q, b.scale, children, r);
+    child_ranges(h, L, bits, anchor, b.q, b.scale, children, r);
     for (uint32_t c = 0; c < children; ++c) {
       const uint32_t next = c + 1 < children ? r.first[c + 1] : h.nverts;
       if (r.first[c] > next || next > h.nverts)
@@ -790,7 +789,7 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
     if (data_bytes(h, children, lat, lossless, 0, vertex_bits) > size)
       return fail("stream runs past the data (vertex ranges)");
   }
-  const Layout L = layout(h, children, lat, lossless, vertex_bits);
+  if (ranges) with_vertex_bits(L, h, vertex_bits);
   // A decimal cluster's box start: per axis a float that is a decimal of the axis's digits (so
   // that the boxes start at the coordinate the anchor decodes to).
   if (lossless && coord_mode(h))

@@ -394,6 +394,15 @@ struct Layout {
   uint32_t vs = 0, vbias = 0;   // the first new vertex's slope and bias
   uint32_t rb = 0, idbits = 0;  // bits per run index; per triangle's ids (rb + ob + gb)
 };
+// The layout L of a cluster with header h (from layout() with kPlainVertexBits) for a vertex
+// section of vertex_bits bits: the sections behind it move (as layout() with vertex_bits).
+SLIM_INLINE void with_vertex_bits(Layout& L, const ClusterHeader& h, uint64_t vertex_bits) {
+  const uint64_t d = vertex_bits - uint64_t(h.nverts) * L.vbits;  // mod 2^64
+  L.runs += d;
+  L.ids += d;
+  L.topo += d;
+  L.end += d;
+}
 // vertex_bits: the vertex section's bits when the cluster has per-child vertex ranges (their
 // ChildRanges::total, below), else kPlainVertexBits: nverts x (bx + by + bz).
 constexpr uint64_t kPlainVertexBits = ~uint64_t(0);
@@ -417,20 +426,17 @@ SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, const ClusterLatti
   l.idbits = l.rb + offset_bits(h) + geom_bits(h);
   l.table = l.bases + prim_base_bits(h) + geom_base_bits(h);
   l.verts = l.table + uint64_t(k ? k - 1 : 0) * (l.tb + l.vbw);
-  l.runs = l.verts + (vertex_bits == kPlainVertexBits ? uint64_t(h.nverts) * l.vbits : vertex_bits);
+  l.runs = l.verts + uint64_t(h.nverts) * l.vbits;
   l.ids = l.runs + uint64_t(h.nruns ? h.nruns - 1 : 0) * run_low_bits(h);
   l.topo = l.ids + (has_repeats(h) ? l.ntris : 0);
   l.end = l.topo + tbits;
+  if (vertex_bits != kPlainVertexBits) with_vertex_bits(l, h, vertex_bits);
   return l;
 }
-// The layout L of a cluster with header h (from layout() with kPlainVertexBits) for a vertex
-// section of vertex_bits bits: the sections behind it move (as layout() with vertex_bits).
-SLIM_INLINE void with_vertex_bits(Layout& L, const ClusterHeader& h, uint64_t vertex_bits) {
-  const uint64_t d = vertex_bits - uint64_t(h.nverts) * L.vbits;  // mod 2^64
-  L.runs += d;
-  L.ids += d;
-  L.topo += d;
-  L.end += d;
+// A lossy cluster's anchors: the stream's first fields, at the lattice's widths (L.aw).
+SLIM_INLINE void lossy_anchors(const uint8_t* bits, const Layout& L, uint32_t* anchor) {
+  for (int a = 0, at = 0; a < 3; at += int(L.aw[a]), ++a)
+    anchor[a] = read_bits(bits, uint64_t(at), L.aw[a]);
 }
 // The child table's predictions for the child after `first` triangles (the header comment's
 // formula, its bias subtracted, in 32-bit wrapping arithmetic): the entry's fields are the child's

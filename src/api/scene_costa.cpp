@@ -123,6 +123,17 @@ class CostaScene : public BvhScene<CostaLeaf<P, F, V>> {
     c.face_base_count = face_base;
   }
 
+  // Every open: the BVH root; with the structure check, the store's primitives (once), then
+  // the walk of the BVH with the blocks' ranges.
+  void check_opened(bool deep) const override {
+    using Leaf = CostaLeaf<P, F, V>;
+    if (deep) {
+      const typename Leaf::StoreFault f = Leaf::check_store(this->ctx, this->bvh.leaves.size());
+      if (f.what) throw SectionFault{f.section, f.offset, f.what};
+    }
+    this->check_bvh("", deep);
+  }
+
   bool validate(std::string* why) const override {
     // An opened scene: the BVH walk only (its store is not a QuantizedMesh object).
     if (!data) return BvhScene<CostaLeaf<P, F, V>>::validate(why);

@@ -104,7 +104,8 @@ struct CostaLeaf {
         return "offset predictor out of range (costa.params)";
     }
     if constexpr (F)
-      if (r.face_bits > 32) return "face entry width beyond 32 bits (costa.params)";
+      if (r.face_bits == 0 || r.face_bits > 32)
+        return "face entry width outside 1..32 bits (costa.params)";
     const CostaFaceMap& m = ctx.faces;
     if (m.width > 32) return "face map width beyond 32 bits (costa.params)";
     if (uint64_t(m.mesh_count) + 1 > ctx.face_base_count)
@@ -116,44 +117,56 @@ struct CostaLeaf {
   static bool bits_readable(uint64_t bytes, uint32_t width, uint64_t i) {
     return ((i * width) >> 3) + 8 <= bytes;
   }
-  // A block: its primitive range inside the store, each primitive's two offsets, its 3+ face
-  // entries and the vertices they name, its face map entry (what intersect() and visit() read).
+  // What check_store found wrong: the section and byte offset of the field, and what.
+  struct StoreFault {
+    const char* section = nullptr;
+    uint64_t offset = 0;
+    const char* what = nullptr;
+  };
+  // The store's primitives, once per opened scene before the leaf walk (the scene's
+  // check_opened): each primitive's two offsets readable, 3+ face entries inside the face array,
+  // each naming a vertex inside the vertex array, its face map entry readable. Offsets rise by 3+
+  // from one primitive to the next, so the loop reads every face entry once: the work is bounded
+  // by the face array, whatever the blocks name (check_block then bounds only a block's range;
+  // a per-block scan of the entries would read a damaged file's huge primitive once per block
+  // naming it). prim_count itself is bounded by the leaf arena (kBlockPrims per block), the face
+  // entries by the face array's bytes (packed entries take 1+ bits: check_params).
+  static StoreFault check_store(const Context& ctx, uint64_t leaf_bytes) {
+    if (const char* e = check_params(ctx)) return {"costa.params", 0, e};
+    if (uint64_t(ctx.prim_count) > leaf_bytes / kBlockBytes * kBlockPrims)
+      return {"costa.params", 0, "primitive count beyond what the leaf blocks can hold"};
+    const CostaView<P, F, V>& s = ctx.view;
+    const QuantizedMesh::Counts& n = ctx.counts;
+    const char* offsets = P ? "costa.residuals" : "costa.offsets";
+    const char* faces = F ? "costa.packed_faces" : "costa.faces";
+    auto offset_byte = [&](uint64_t prim) { return P ? prim * s.r.residual_bits / 8 : prim * 4; };
+    auto face_byte = [&](uint64_t j) { return F ? j * s.r.face_bits / 8 : j * 4; };
+    for (uint64_t prim = 0; prim < ctx.prim_count; ++prim) {
+      if (P ? !bits_readable(n.residual_bytes, s.r.residual_bits, prim + 1) : prim + 1 >= n.offsets)
+        return {offsets, offset_byte(prim + 1), "primitive offset beyond the array"};
+      const uint32_t o0 = s.offset(uint32_t(prim)), o1 = s.offset(uint32_t(prim + 1));
+      if (uint64_t(o0) + 3 > o1)
+        return {offsets, offset_byte(prim), "primitive of fewer than 3 face entries"};
+      if (F ? !bits_readable(n.packed_face_bytes, s.r.face_bits, uint64_t(o1) - 1) : o1 > n.faces)
+        return {faces, face_byte(o1 - 1), "face entry beyond the face array"};
+      for (uint32_t j = o0; j < o1; ++j) {
+        uint32_t f = s.face(j);
+        if (j == o0 && o1 - o0 >= kFanStripFlagMin) f >>= 1;
+        if (V ? 3 * uint64_t(f) + 3 > n.qvertices : f >= n.vertices)
+          return {faces, face_byte(j), "face entry names a vertex beyond the vertex array"};
+      }
+      if (!bits_readable(ctx.face_map_bytes, ctx.faces.width, prim))
+        return {"costa.face_map", prim * ctx.faces.width / 8, "primitive beyond the face map"};
+    }
+    return {};
+  }
+  // A block: its primitive range inside the store (whose primitives check_store checked).
   static const char* check_block(const Context& ctx, const uint8_t* p) {
     CostaBlock blk;
     std::memcpy(&blk, p, sizeof(blk));
     if (blk.count == 0 || blk.count > kBlockPrims) return "primitive count outside 1..4";
     if (uint64_t(blk.first) + blk.count > ctx.prim_count)
       return "primitive range beyond the store (costa.params prim_count)";
-    if (const char* e = check_params(ctx)) return e;
-    const CostaView<P, F, V>& s = ctx.view;
-    const QuantizedMesh::Counts& n = ctx.counts;
-    for (uint64_t prim = blk.first; prim < uint64_t(blk.first) + blk.count; ++prim) {
-      if constexpr (P) {
-        if (!bits_readable(n.residual_bytes, s.r.residual_bits, prim + 1))
-          return "primitive offset beyond the residual array (costa.residuals)";
-      } else {
-        if (prim + 1 >= n.offsets)
-          return "primitive offset beyond the offset array (costa.offsets)";
-      }
-      const uint32_t o0 = s.offset(uint32_t(prim)), o1 = s.offset(uint32_t(prim + 1));
-      if (uint64_t(o0) + 3 > o1)
-        return "primitive of fewer than 3 face entries (costa.offsets or costa.residuals)";
-      if constexpr (F) {
-        if (!bits_readable(n.packed_face_bytes, s.r.face_bits, uint64_t(o1) - 1))
-          return "face entry beyond the face array (costa.packed_faces)";
-      } else {
-        if (o1 > n.faces) return "face entry beyond the face array (costa.faces)";
-      }
-      for (uint32_t j = o0; j < o1; ++j) {
-        uint32_t f = s.face(j);
-        if (j == o0 && o1 - o0 >= kFanStripFlagMin) f >>= 1;
-        if (V ? 3 * uint64_t(f) + 3 > n.qvertices : f >= n.vertices)
-          return "face entry names a vertex beyond the vertex array (costa.faces, "
-                 "costa.vertices)";
-      }
-      if (!bits_readable(ctx.face_map_bytes, ctx.faces.width, prim))
-        return "primitive beyond the face map (costa.face_map)";
-    }
     return nullptr;
   }
 

@@ -138,10 +138,12 @@ QuantizedMesh::QuantizedMesh(const NgonArrays& m, bool P, bool F, bool V, const 
     // PACKFACES (Listing 3) packs at log2(2 * vertices) bits, room for the flag bit. We pack at
     // the width of the largest entry actually stored: the same whenever a high-index fan or strip
     // carries a flag, one bit less when no entry needs it (triangle and quad meshes, whose kinds
-    // follow from the vertex count alone).
+    // follow from the vertex count alone). At least 1 bit: entries of 0 bits would cost no bytes,
+    // and a scene file's face range could then exceed any bound its size sets
+    // (CostaLeaf::check_params).
     uint32_t mx = 0;
     for (uint32_t e : m.faces) mx = std::max(mx, e);
-    packed_faces_ = BitArray(m.faces.size(), bits_for(mx));
+    packed_faces_ = BitArray(m.faces.size(), std::max(1u, bits_for(mx)));
     for (uint64_t j = 0; j < m.faces.size(); ++j) packed_faces_.set(j, m.faces[j]);
   }
 

@@ -15,6 +15,7 @@
 // above the clusters are QBVH8 nodes (136 B instead of 256 B: 3.8 bits per triangle less on
 // koala).
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numeric>
 #include <optional>
@@ -56,8 +57,12 @@ class ClusterReshaper {
     std::vector<Local> local(roots_.size());
     tbb::parallel_for(size_t(0), roots_.size(), [&](size_t c) {
       Local& l = local[c];
-      thread_local std::vector<uint32_t> v;  // a thread's own, kept between clusters
+      // A thread's own, kept between clusters. The cluster's tree is split into `scratch` (room
+      // for one leaf per triangle) and kept at its size: a reservation per cluster would spread
+      // the clusters' few nodes over a page each.
+      thread_local std::vector<uint32_t> v;
       thread_local std::vector<Item> items;
+      thread_local Local scratch;
       v.clear();
       collect(roots_[c].in, v);
       items.resize(v.size());
@@ -67,12 +72,16 @@ class ClusterReshaper {
         Item& x = items[k];
         x = {{b.lo.x, b.lo.y, b.lo.z, 0.0f}, {b.hi.x, b.hi.y, b.hi.z, 0.0f}, {m.x, m.y, m.z}, v[k]};
       }
-      l.nodes.reserve(2 * v.size());  // at most one leaf per triangle
-      l.prims.reserve(v.size());
-      l.nodes.push_back({});
+      scratch.nodes.clear();
+      scratch.prims.clear();
+      scratch.nodes.reserve(2 * v.size());  // at most one leaf per triangle
+      scratch.prims.reserve(v.size());
+      scratch.nodes.push_back({});
       // A whole scene of at most 8 triangles is one leaf (no box test, as the other formats).
       const bool whole = roots_[c].depth == 0 && items.size() <= 8;
-      l.depth = split(l, items, 0, uint32_t(items.size()), 0, !whole);
+      l.depth = split(scratch, items, 0, uint32_t(items.size()), 0, !whole);
+      l.nodes.assign(scratch.nodes.begin(), scratch.nodes.end());
+      l.prims.assign(scratch.prims.begin(), scratch.prims.end());
       if (l.nodes.size() > 1) {  // a multi-leaf: its block, keyed by its first triangle
         // Children in depth-first order (the collapse's order): their prims are consecutive.
         const uint32_t* prims[8];
@@ -224,26 +233,32 @@ class ClusterReshaper {
 
   // Sorts `order` (positions in a node of n <= kClusterMax items) stably by `centers` (the node's
   // centers on one axis, by position): position k goes to its rank, the centers below its own
-  // plus the equal ones before it, counted 8 at a time. Equal centers (neighbouring triangles
-  // often share one) keep their order, so the clusters do not depend on the standard library's
-  // sort. Returns false (order unchanged) if the ranks are not 0..n-1 once each (a NaN center).
+  // plus the equal ones before it, counted 8 at a time (one compare of (center, place) pairs: the
+  // lanes' places are kPlace). Equal centers (neighbouring triangles often share one) keep their
+  // order, so the clusters do not depend on the standard library's sort. Padding lanes hold +inf
+  // at places >= n: never below a center nor an equal one before it. Returns false (order
+  // unchanged) if the ranks are not 0..n-1 once each (a NaN center).
   static bool stable_order(const float* centers, uint8_t* order, uint32_t n) {
     constexpr uint32_t kPad = (kClusterMax + 7) / 8 * 8;
     static_assert(kPad <= 64, "ranks are bits of a 64-bit mask");
-    alignas(32) float w[kPad] = {};  // the centers in `order`'s order, padded
+    alignas(32) static constexpr auto kPlace = [] {
+      std::array<float, kPad> p{};
+      for (uint32_t k = 0; k < kPad; ++k) p[k] = float(k);
+      return p;
+    }();
+    alignas(32) float w[kPad];  // the centers in `order`'s order, padded
     for (uint32_t k = 0; k < n; ++k) w[k] = centers[order[k]];
     const uint32_t groups = (n + 7) / 8;
+    std::fill(w + n, w + 8 * groups, kInf);
     uint8_t out[kPad];
     uint64_t seen = 0;
     for (uint32_t k = 0; k < n; ++k) {
-      const simd::vfloat8 c(w[k]);
+      const simd::vfloat8 c(w[k]), place{float(k)};
       uint32_t r = 0;
       for (uint32_t g = 0; g < groups; ++g) {
         const simd::vfloat8 x = simd::vfloat8::load(w + 8 * g);
-        const uint32_t lanes = n - 8 * g >= 8 ? 0xFFu : (1u << (n - 8 * g)) - 1;
-        const uint32_t before = k >= 8 * g + 8 ? 0xFFu : k > 8 * g ? (1u << (k - 8 * g)) - 1 : 0u;
-        r += uint32_t(simd::popcount((x < c).mask() & lanes) +
-                      simd::popcount((x == c).mask() & before));
+        const simd::vfloat8 p = simd::vfloat8::load(kPlace.data() + 8 * g);
+        r += uint32_t(simd::popcount(((x < c) | ((x == c) & (p < place))).mask()));
       }
       if (r >= n) return false;
       out[r] = order[k];
@@ -281,15 +296,18 @@ class ClusterReshaper {
       for (int a = 0; a < 3; ++a) centers[a][k] = it[b + k].c[a];
     uint8_t order[kClusterMax];
     std::iota(order, order + n, uint8_t(0));
+    // Returns whether the sort was stable_order's (sorting its result again changes nothing).
     auto sort_by = [&](int a) {
-      if (stable_order(centers[a], order, n)) return;
+      if (stable_order(centers[a], order, n)) return true;
       Key key[kClusterMax];
       for (uint32_t k = 0; k < n; ++k) key[k] = {centers[a][order[k]], order[k]};
       std::sort(key, key + n, [](const Key& x, const Key& y) { return x.c < y.c; });
       for (uint32_t k = 0; k < n; ++k) order[k] = uint8_t(key[k].i);
+      return false;
     };
+    bool sorted_by_2 = false;  // order is stable_order's by axis 2
     for (int a = 0; a < 3; ++a) {
-      sort_by(a);
+      sorted_by_2 = sort_by(a) && a == 2;
       auto consider = [&](uint32_t nl, const Box3f& left) {
         const float cost = left.half_area() * float((nl + 7) / 8) +
                            right[nl / unit].half_area() * float((n - nl + 7) / 8);
@@ -329,7 +347,7 @@ class ClusterReshaper {
         consider(k + 1, grown_left.box3());
       }
     }
-    sort_by(best_axis);
+    if (best_axis != 2 || !sorted_by_2) sort_by(best_axis);
     Item sorted[kClusterMax];
     for (uint32_t k = 0; k < n; ++k) sorted[k] = it[b + order[k]];
     std::copy(sorted, sorted + n, it.begin() + b);

@@ -117,8 +117,10 @@ bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const
       for (int q = 0; q < 3; ++q) boxes[c].extend(s.vertices[s.tris[3 * size_t(prims[c][j]) + q]]);
     all.extend(boxes[c]);
   }
-  // The anchors as the stream's start holds them (write_box_frame reads them there).
-  std::vector<uint8_t> head(sizeof(ClusterHeader) + 24, 0);
+  // The anchors as the stream's start holds them (write_box_frame reads them there); a thread's
+  // own buffer, kept between calls.
+  thread_local std::vector<uint8_t> head;
+  head.assign(sizeof(ClusterHeader) + 24, 0);
   BitWriter aw{head, sizeof(ClusterHeader)};
   for (int a = 0; a < 3; ++a) aw.put(anchor[a], s.lattice.anchor_bits[a]);
   float start[4], extent[4];
@@ -487,6 +489,9 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   uint32_t best_ob = 0, best_pb = 0;
   bool repeats = false;
   for (uint32_t ob = 0; ob <= 32; ++ob) {
+    // Every entry takes at least ob + gb bits (entry_bits, with or without the repeat bits): once
+    // that alone reaches the best, no wider ob can take fewer bits.
+    if (uint64_t(ntris - nrep) * (ob + gb) >= best_bits) break;
     uint64_t nstarts = 0;
     uint32_t last = 0;
     for (uint32_t id : ids) {

@@ -813,8 +813,13 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
        "primitive count"},
       {"costa", "face entries", every("costa.faces", 4, 0, 0x7ffffff0u), "costa.faces",
        "face entry names a vertex beyond the vertex array"},
-      {"costa", "primitive offsets", every("costa.offsets", 4, 0, 5), "costa.offsets",
+      {"costa", "second primitive offset",
+       [](std::string& b) { put32(b, section(b, "costa.offsets").offset + 4, 1); }, "costa.offsets",
        "primitive of fewer than 3 face entries"},
+      // decoded_triangles reads from the first offset on, also where no block names a primitive.
+      {"costa", "first primitive offset",
+       [](std::string& b) { put32(b, section(b, "costa.offsets").offset, 0x40000000u); },
+       "costa.offsets", "first primitive offset not 0"},
       {"costa-P", "offset predictor",
        [](std::string& b) { put64(b, section(b, "costa.params").offset + 8, uint64_t(1) << 61); },
        "costa.params", "offset predictor out of range"},
@@ -859,6 +864,37 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
   EXPECT_NE(msg.find("section 'c0.bvh.leaves', offset"), std::string::npos) << msg;
   std::filesystem::remove(path);
   std::filesystem::remove(bad);
+}
+
+// Scenes without triangles (a mesh of vertices only) of every configuration open with the
+// structure check, and decode no triangles.
+TEST(SceneFile, EmptyScenesPassTheStructureCheck) {
+  PolyMesh verts;
+  verts.positions = {{0, 0, 0}, {1, 2, 3}};
+  const std::string path = temp_path("check_empty");
+  int tested = 0;
+  for (const std::string& name : all_config_names()) {
+    SCOPED_TRACE(name);
+    Scene::build(verts, BuildOptions::from_config(name)).save(path);
+    const Scene opened = Scene::open(path, structure_check());
+    EXPECT_EQ(opened.stats().triangles, 0u);
+    Ray r;
+    r.org = {0, 0, -1};
+    r.dir = {0, 0, 1};
+    EXPECT_FALSE(opened.intersect(r).valid());
+    if (const std::optional<DecodedTriangles> d = opened.decoded_triangles()) {
+      EXPECT_TRUE(d->face.empty());
+    }
+    ++tested;
+  }
+  EXPECT_EQ(tested, int(all_config_names().size()));
+  // An empty costa-F store with 0-bit face entries (as written before entries took 1+ bits).
+  Scene::build(verts, BuildOptions::from_config("costa-F")).save(path);
+  std::string b = read_all(path);
+  put32(b, section(b, "costa.params").offset + 44, 0);
+  EXPECT_EQ(try_open(temp_path("check_empty_bad"), b, structure_check(), {}), "");
+  std::filesystem::remove(temp_path("check_empty_bad"));
+  std::filesystem::remove(path);
 }
 
 }  // namespace

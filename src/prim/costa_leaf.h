@@ -103,8 +103,8 @@ struct CostaLeaf {
       if (!(avg >= 0.0 && avg * (double(ctx.prim_count) + 1.0) < 0x1p62) || min < -lim || min > lim)
         return "offset predictor out of range (costa.params)";
     }
-    if constexpr (F)
-      if (r.face_bits == 0 || r.face_bits > 32)
+    if constexpr (F)  // 0 bits only in an empty store (entries of 0 bits would cost no bytes)
+      if (r.face_bits > 32 || (r.face_bits == 0 && ctx.prim_count > 0))
         return "face entry width outside 1..32 bits (costa.params)";
     const CostaFaceMap& m = ctx.faces;
     if (m.width > 32) return "face map width beyond 32 bits (costa.params)";
@@ -141,6 +141,11 @@ struct CostaLeaf {
     const char* faces = F ? "costa.packed_faces" : "costa.faces";
     auto offset_byte = [&](uint64_t prim) { return P ? prim * s.r.residual_bits / 8 : prim * 4; };
     auto face_byte = [&](uint64_t j) { return F ? j * s.r.face_bits / 8 : j * 4; };
+    // The first offset is 0 (as the builder writes it; decoded_triangles starts there, also in a
+    // store without primitives).
+    if (P ? !bits_readable(n.residual_bytes, s.r.residual_bits, 0) : n.offsets == 0)
+      return {offsets, 0, "first primitive offset beyond the array"};
+    if (s.offset(0) != 0) return {offsets, 0, "first primitive offset not 0"};
     for (uint64_t prim = 0; prim < ctx.prim_count; ++prim) {
       if (P ? !bits_readable(n.residual_bytes, s.r.residual_bits, prim + 1) : prim + 1 >= n.offsets)
         return {offsets, offset_byte(prim + 1), "primitive offset beyond the array"};

@@ -722,7 +722,9 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
       EXPECT_NE(why.find("decimal mode with"), std::string::npos) << why;
       continue;
     }
-    if (mode >= 1 && mode <= 4) EXPECT_NE(why.find("box start"), std::string::npos) << why;
+    if (mode >= 1 && mode <= 4) {
+      EXPECT_NE(why.find("box start"), std::string::npos) << why;
+    }
     cluster::Decoded8 d;                        // another mode: other positions, but no failure
     b.resize(b.size() + kClusterReadSlack, 0);  // the decoders' read slack (check() has its size)
     for (int c = 0; c < 2; ++c) cluster::decode_child<true>(dz.lattice, b.data(), 2, c, d);
@@ -736,8 +738,12 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
     b[offsetof(ClusterHeader, ib)] = uint8_t(cluster::index_bits(lh) | mode << 4);
     b[offsetof(ClusterHeader, bits) + 1] = uint8_t(lh.bits[1] | 3 << 6);
     EXPECT_EQ(cluster::check(b.data(), b.size(), 2, dz.lattice, true, &why), mode >= 5) << mode;
-    if (mode < 4) EXPECT_NE(why.find("axis 1"), std::string::npos) << why;
-    if (mode == 4) EXPECT_NE(why.find("box start"), std::string::npos) << why;
+    if (mode < 4) {
+      EXPECT_NE(why.find("axis 1"), std::string::npos) << why;
+    }
+    if (mode == 4) {
+      EXPECT_NE(why.find("box start"), std::string::npos) << why;
+    }
   }
   // A decimal cluster's start beyond the 32-bit codes, or not a number.
   for (float bad : {3e9f, -0.0f, std::numeric_limits<float>::infinity(),

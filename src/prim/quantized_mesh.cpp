@@ -139,9 +139,8 @@ QuantizedMesh::QuantizedMesh(const NgonArrays& m, bool P, bool F, bool V, const 
     // the width of the largest entry actually stored: the same whenever a high-index fan or strip
     // carries a flag, one bit less when no entry needs it (triangle and quad meshes, whose kinds
     // follow from the vertex count alone). At least 1 bit: entries of 0 bits would cost no bytes,
-    // and a scene file's face range could then exceed any bound its size sets
-    // (CostaLeaf::check_params accepts 0 bits only in an empty store, as files written before
-    // this rule hold it).
+    // and a scene file's face range could then exceed any bound its size sets (CostaLeaf::
+    // check_params refuses 0 bits but in an empty store).
     uint32_t mx = 0;
     for (uint32_t e : m.faces) mx = std::max(mx, e);
     packed_faces_ = BitArray(m.faces.size(), std::max(1u, bits_for(mx)));

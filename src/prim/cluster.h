@@ -469,9 +469,9 @@ SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, const Cluste
 // (+ the anchor). The vertex section holds child 0's new vertices, then child 1's, and so on,
 // child c's at w_c (its three fields) bits each. A child of a scan's cluster spans about a third
 // of the cluster per axis: some 1.5 bits a coordinate fewer (docs/results.md, "Per-child vertex
-// ranges"). The encoder sets the bit when every
-// vertex lies in its child's range (unless a float plane rounds past a vertex's lattice point, it
-// does) and the ranges take fewer bits; the free box planes cost nothing to store.
+// ranges"). The encoder sets the bit when every vertex lies in its child's range (unless a float
+// plane rounds past a vertex's lattice point, it does) and the ranges take fewer bits; the free
+// box planes cost nothing to store.
 SLIM_INLINE bool has_ranges(const ClusterHeader& h) { return h.bits[0] >> 7; }
 // Scale exponents of a cluster with ranges at most: 255 x 15 x 2^20 < 2^32, so the ranges'
 // 32-bit products do not wrap (a cluster spans fewer than 2^24 steps: e <= 17 reaches it).

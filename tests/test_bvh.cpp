@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include "bvh/bvh8.h"
+#include "bvh/traverse.h"
+#include "core/simd.h"
 #include "test_util.h"
 
 using namespace slim;
@@ -106,6 +108,158 @@ TEST(Bvh, EmptyAndSingleTriangle) {
     EXPECT_FLOAT_EQ(h.t, 1.0f);
     EXPECT_EQ(h.primID, 0u);
     EXPECT_GT(std::fabs(h.Ng.z), 0.0f);
+  }
+}
+
+// A leaf format of one axis-aligned box per 4 KiB block (id, box), for the collapse test below:
+// big blocks make a leaf arena beyond a CQNode8's reach from a few thousand primitives.
+struct BigBoxLeaf {
+  struct Context {};
+  static constexpr uint32_t kBlockPrims = 1;
+  static constexpr uint32_t kBlockBytes = 4096;
+  struct Block {
+    uint32_t id;
+    Box3f box;
+  };
+  // Entry distance of the ray into the box, or +inf (the same float operations as the reference).
+  static float entry(const Box3f& b, const Vec3f& org, const Vec3f& rdir, float tnear, float tfar) {
+    float t0 = tnear, t1 = tfar;
+    for (int a = 0; a < 3; ++a) {
+      float u = (b.lo[a] - org[a]) * rdir[a], w = (b.hi[a] - org[a]) * rdir[a];
+      t0 = std::max(t0, std::min(u, w));
+      t1 = std::min(t1, std::max(u, w));
+    }
+    return t0 <= t1 ? t0 : kInf;
+  }
+  template <bool kAny, class Stats>
+  static bool intersect(const Context&, const uint8_t* block, TravRay& ray, Hit& hit, Stats&) {
+    Block blk;
+    std::memcpy(&blk, block, sizeof blk);
+    const float t = entry(blk.box, ray.org, ray.rdir, ray.tnear, ray.tfar);
+    if (!(t < ray.tfar)) return false;
+    ray.tfar = hit.t = t;
+    hit.primID = blk.id;
+    hit.geomID = 0;
+    return true;
+  }
+};
+
+// The clusters' kind of tree (QCompressedLeaf) over a leaf arena larger than a CQNode8 reaches
+// (16 MiB): the top nodes are wide QNode8 at multiples of 8 bytes, everything below them CQNode8,
+// and traversal finds the same nearest box as a loop over all boxes.
+TEST(Bvh, CompactNodesBelowWideOnes) {
+  Rng rng(5);
+  const uint32_t n = 6000;  // 6000 x 4 KiB of leaves: 24 MB
+  std::vector<PrimRef> refs(n);
+  for (uint32_t i = 0; i < n; ++i) {
+    const Vec3f c(rng.uniform(), rng.uniform(), rng.uniform());
+    const Vec3f h(0.001f + 0.004f * rng.uniform(), 0.001f + 0.004f * rng.uniform(),
+                  0.001f + 0.004f * rng.uniform());
+    refs[i] = {Box3f(c - h, c + h), i};
+  }
+  Bvh2BuildConfig cfg;
+  cfg.max_leaf_size = 1;
+  cfg.block_prims = 1;
+  const Bvh2 b2 = build_bvh2(refs, cfg);
+  LeafEncoder enc;
+  enc.block_prims = 1;
+  enc.block_bytes = BigBoxLeaf::kBlockBytes;
+  enc.encode = [&](const uint32_t* prims, uint32_t, uint8_t* out) {
+    const BigBoxLeaf::Block blk{prims[0], refs[prims[0]].box};
+    std::memcpy(out, &blk, sizeof blk);
+  };
+  const Bvh8 bvh = collapse_bvh8(b2, NodeKind::QCompressedLeaf, enc, CollapseRule::Optimal);
+  ASSERT_GT(bvh.leaves.size(), kCQOffsetLimit);
+  EXPECT_GT(bvh.stats.cqnode8, 0u);
+  EXPECT_LT(bvh.stats.cqnode8, bvh.stats.qnode8);
+  EXPECT_EQ(bvh.node_bytes, bvh.stats.cqnode8 * sizeof(CQNode8) +
+                                (bvh.stats.qnode8 - bvh.stats.cqnode8) * sizeof(QNode8));
+  EXPECT_EQ(NodeRef::tag(bvh.root), kRefQNode8);
+
+  // Every node aligned for its loads, no wide node below a compact one, every ref counted once.
+  uint64_t wide = 0, compact = 0;
+  std::function<void(uint64_t, bool)> walk = [&](uint64_t ref, bool below_compact) {
+    const uint64_t off = NodeRef::offset(ref);
+    if (NodeRef::tag(ref) == kRefQNode8) {
+      ++wide;
+      EXPECT_FALSE(below_compact);
+      EXPECT_EQ(off % 8, 0u);
+      ASSERT_LE(off + sizeof(QNode8), bvh.nodes.size());
+      const auto* q = reinterpret_cast<const QNode8*>(bvh.nodes.data() + off);
+      for (uint64_t c : q->child)
+        if (c) walk(c, false);
+    } else if (NodeRef::tag(ref) == kRefCQNode8) {
+      ++compact;
+      EXPECT_EQ(off % 4, 0u);
+      ASSERT_LE(off + sizeof(CQNode8), bvh.nodes.size());
+      CQNode8 q;
+      std::memcpy(&q, bvh.nodes.data() + off, sizeof q);
+      for (uint32_t c : q.child)
+        if (c) walk(cq_child_ref(c, off, uint64_t(q.leaf_base) * kCQLeafBaseUnit), true);
+    }
+  };
+  walk(bvh.root, false);
+  EXPECT_EQ(compact, bvh.stats.cqnode8);
+  EXPECT_EQ(wide + compact, bvh.stats.qnode8);
+
+  std::string why;
+  const LeafValidator leaf = [](const uint8_t* block, Box3f& bounds, std::string*) {
+    BigBoxLeaf::Block blk;
+    std::memcpy(&blk, block, sizeof blk);
+    bounds = blk.box;
+    return true;
+  };
+  ASSERT_TRUE(validate_bvh8(bvh, leaf, &why)) << why;
+
+  const Box3f all(Vec3f(0, 0, 0), Vec3f(1, 1, 1));
+  const RaySetupBounds sb(bvh.bounds);
+  int hits = 0;
+  for (int r = 0; r < 3000; ++r) {
+    const Ray ray = random_ray(rng, all);
+    TravRay tr;
+    ASSERT_TRUE(make_trav_ray(ray, sb, tr));
+    float best = kInf;
+    uint32_t best_id = kInvalidID;
+    for (const PrimRef& p : refs) {
+      const float t = BigBoxLeaf::entry(p.box, tr.org, tr.rdir, tr.tnear, tr.tfar);
+      if (t < best) {
+        best = t;
+        best_id = p.id;
+      }
+    }
+    Hit hit;
+    NoStats st;
+    const bool found = traverse_bvh8<BigBoxLeaf, false>(bvh, {}, tr, hit, st);
+    ASSERT_EQ(found, best_id != kInvalidID) << "ray " << r;
+    if (found) {
+      ++hits;
+      EXPECT_EQ(hit.primID, best_id) << "ray " << r;
+      EXPECT_EQ(hit.t, best) << "ray " << r;
+    }
+    TravRay any;
+    ASSERT_TRUE(make_trav_ray(ray, sb, any));
+    Hit ah;
+    EXPECT_EQ((traverse_bvh8<BigBoxLeaf, true>(bvh, {}, any, ah, st)), found) << "ray " << r;
+  }
+  EXPECT_GT(hits, 500);
+}
+
+// The traversal's expansion of a CQNode8's 8 child refs at once is cq_child_ref's, every tag.
+TEST(Bvh, CompactRefsWidenAsOne) {
+  Rng rng(3);
+  for (int iter = 0; iter < 2000; ++iter) {
+    uint32_t c[8];
+    for (uint32_t& x : c) x = uint32_t(rng.next());
+    c[iter % 8] = 0;
+    const uint64_t off = (uint64_t(rng.next()) << 8) + rng.next() % 256,
+                   leaf = uint64_t(rng.next() % (1u << 31)) * kCQLeafBaseUnit;
+    uint64_t wide[8];
+    simd::widen_add8(c, kNodeTags, off << 8, leaf << 8, wide);
+    for (int i = 0; i < 8; ++i) {
+      EXPECT_EQ(wide[i], cq_child_ref(c[i], off, leaf)) << std::hex << c[i];
+      EXPECT_EQ(NodeRef::tag(wide[i]), c[i] & 7);
+      EXPECT_EQ(NodeRef::offset(wide[i]), (is_node_tag(c[i] & 7) ? off : leaf) + (c[i] >> 8));
+    }
   }
 }
 

@@ -609,12 +609,21 @@ uint64_t first_leaf(const std::string& b, const std::string& prefix) {
   const SectionInfo meta = section(b, prefix + "bvh.meta"),
                     nodes = section(b, prefix + "bvh.nodes");
   uint64_t ref = get64(b, meta.offset);  // BvhMeta::root
-  while (NodeRef::tag(ref) == kRefNode8 || NodeRef::tag(ref) == kRefQNode8) {
-    const uint64_t child =
-        nodes.offset + NodeRef::offset(ref) +
-        (NodeRef::tag(ref) == kRefNode8 ? offsetof(Node8, child) : offsetof(QNode8, child));
+  while (is_node_tag(NodeRef::tag(ref))) {
+    const uint64_t at = nodes.offset + NodeRef::offset(ref);
     uint64_t next = 0;
-    for (int i = 0; i < 8 && next == 0; ++i) next = get64(b, child + 8 * i);
+    if (NodeRef::tag(ref) == kRefCQNode8) {
+      CQNode8 n;
+      std::memcpy(&n, b.data() + at, sizeof n);
+      for (int i = 0; i < 8 && next == 0; ++i)
+        if (n.child[i])
+          next = cq_child_ref(n.child[i], NodeRef::offset(ref),
+                              uint64_t(n.leaf_base) * kCQLeafBaseUnit);
+    } else {
+      const uint64_t child =
+          at + (NodeRef::tag(ref) == kRefNode8 ? offsetof(Node8, child) : offsetof(QNode8, child));
+      for (int i = 0; i < 8 && next == 0; ++i) next = get64(b, child + 8 * i);
+    }
     ref = next;
   }
   return ref;
@@ -637,6 +646,12 @@ void set_root_child(std::string& b, const std::string& prefix, uint64_t ref) {
       section(b, prefix + "bvh.nodes").offset + NodeRef::offset(root) +
       (NodeRef::tag(root) == kRefNode8 ? offsetof(Node8, child) : offsetof(QNode8, child));
   put64(b, child, ref);
+}
+// The root of the BVH under `prefix`, a CQNode8: its file offset.
+uint64_t cq_root(const std::string& b, const std::string& prefix) {
+  const uint64_t root = get64(b, section(b, prefix + "bvh.meta").offset);
+  EXPECT_EQ(NodeRef::tag(root), kRefCQNode8);
+  return section(b, prefix + "bvh.nodes").offset + NodeRef::offset(root);
 }
 
 // The clusters' multi-leaf boxes (cluster::LatticeBoxes8, cluster::ExactBoxes8: the planes come
@@ -783,6 +798,23 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
              NodeRef::make(kRefNode8, (section(b, "tris.bvh.nodes").size + 1024) & ~63ull));
        },
        "tris.bvh.nodes", "node outside the node arena"},
+      {"cluster", "CQNode8 child beyond the node arena",
+       [](std::string& b) {
+         put32(b, cq_root(b, "") + offsetof(CQNode8, child), (0xfffff0u << 8) | kRefCQNode8);
+       },
+       "bvh.nodes", "node outside the node arena"},
+      {"cluster", "CQNode8 child at a misaligned offset",
+       [](std::string& b) {
+         put32(b, cq_root(b, "") + offsetof(CQNode8, child),
+               (sizeof(CQNode8) + 1) << 8 | kRefCQNode8);
+       },
+       "bvh.nodes", "misaligned node"},
+      {"cluster", "CQNode8 child naming its own node",
+       [](std::string& b) { put32(b, cq_root(b, "") + offsetof(CQNode8, child), kRefCQNode8); },
+       "bvh.nodes", "more node references than a tree over the node arena can hold"},
+      {"cluster-lossless", "CQNode8 leaf base beyond the leaf arena",
+       [](std::string& b) { put32(b, cq_root(b, "") + offsetof(CQNode8, leaf_base), 0x7fffffffu); },
+       "bvh.leaves", "outside the leaf arena"},
       {"cluster", "cluster header",
        [](std::string& b) { put32(b, first_block(b, "", sizeof(cluster::LatticeBoxes8)), 0); },
        "bvh.leaves", "cluster"},

@@ -330,6 +330,7 @@ class BvhScene : public Scene::Impl {
     d.emplace_back("bvh8_depth", double(s.depth));
     d.emplace_back("node8_count", double(s.node8));
     d.emplace_back("qnode8_count", double(s.qnode8));
+    if (s.cqnode8) d.emplace_back("cqnode8_count", double(s.cqnode8));  // of the qnode8
     d.emplace_back("multileaf_count", double(s.multileaf));
     d.emplace_back("leaf_count", double(s.leaves));
     d.emplace_back("leaves_in_multileaf", double(s.leaves_in_multileaf));

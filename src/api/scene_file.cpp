@@ -44,10 +44,11 @@ constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
 // triangle count, pb, gb, bb and hb packed in 3 bytes), the lossy anchors at the lattice's
 // per-axis widths (ClusterLattice::anchor_bits, in cluster.lattice). Version 8: a lossless
 // cluster's stream starts with its box start (3 floats), the anchors derived from them. Version 9:
-// lossy clusters may store their vertices in per-child ranges from the multi-leaf boxes. Any change
+// lossy clusters may store their vertices in per-child ranges from the multi-leaf boxes. Version
+// 10: the clusters' inner nodes are CQNode8 (32-bit child refs) where they fit. Any change
 // of a section's layout (a node, block or context struct), of what its bytes decode to, or of the
 // header needs a new version: the sections are the in-memory structs byte for byte.
-constexpr uint32_t kVersion = 9;
+constexpr uint32_t kVersion = 10;
 constexpr uint32_t kByteOrder = 0x01020304;
 constexpr uint64_t kAlign = 64;
 // Bounds the table before it is read (the header size check then bounds it by the file size): a
@@ -442,6 +443,10 @@ void check_bvh_root(const Bvh8& bvh, const std::string& p, uint32_t block_bytes,
       ok = off % alignof(QNode8) == 0 && off < bvh.nodes.size() &&
            bvh.nodes.size() - off >= sizeof(QNode8);
       break;
+    case kRefCQNode8:
+      ok = off % alignof(CQNode8) == 0 && off < bvh.nodes.size() &&
+           bvh.nodes.size() - off >= sizeof(CQNode8);
+      break;
     case kRefLeaf:
       ok = NodeRef::blocks(bvh.root) > 0 && off % leaf_align == 0 && off <= bvh.leaves.size() &&
            bvh.leaves.size() - off >= uint64_t(NodeRef::blocks(bvh.root)) * block_bytes;
@@ -508,6 +513,21 @@ struct Walker {
         for (uint64_t c : child) visit(c, depth + 1, off);
         return;
       }
+      case kRefCQNode8: {
+        // Its children's refs are read as the traversal expands them (bvh8.h cq_child_ref).
+        if (off % alignof(CQNode8) != 0)
+          nodes_fault(off,
+                      "misaligned node (referenced from offset " + std::to_string(where) + ")");
+        if (!fits(off, sizeof(CQNode8), b.nodes.size()))
+          nodes_fault(off, "node outside the node arena (referenced from offset " +
+                               std::to_string(where) + ")");
+        CQNode8 n;
+        std::memcpy(&n, b.nodes.data() + off, sizeof n);
+        for (uint32_t c : n.child)
+          if (c)
+            visit(cq_child_ref(c, off, uint64_t(n.leaf_base) * kCQLeafBaseUnit), depth + 1, off);
+        return;
+      }
       case kRefLeaf: {
         const uint32_t nb = NodeRef::blocks(ref);
         if (nb == 0) leaves_fault(off, "leaf of zero blocks");
@@ -538,7 +558,7 @@ struct Walker {
 }  // namespace
 
 void walk_bvh_checked(const Bvh8& bvh, const std::string& p, const BvhWalkHooks& h) {
-  Walker w{bvh, p, h, 8 * (bvh.nodes.size() / sizeof(QNode8)) + 2};
+  Walker w{bvh, p, h, 8 * (bvh.nodes.size() / sizeof(CQNode8)) + 2};
   w.visit(bvh.root, 0, 0);
 }
 

@@ -1,6 +1,7 @@
 // BVH2 -> BVH8 collapse and the node encodings of bvh8.h.
 #include "bvh/bvh8.h"
 
+#include "core/assert.h"
 #include "core/progress.h"
 
 #include <algorithm>
@@ -65,6 +66,7 @@ struct SubtreeStats {
   void add(const SubtreeStats& o) {
     st.node8 += o.st.node8;
     st.qnode8 += o.st.qnode8;
+    st.cqnode8 += o.st.cqnode8;
     st.multileaf += o.st.multileaf;
     st.leaves += o.st.leaves;
     st.leaf_blocks += o.st.leaf_blocks;
@@ -140,6 +142,9 @@ class Collapser {
     out_.node_bytes = m.node_bytes;
     out_.multileaf_bytes = m.multileaf_bytes;
     out_.leaf_data_bytes = m.leaf_data_bytes;
+    // CQNode8::leaf_base is 32 bits of kCQLeafBaseUnit bytes.
+    if (leaf_size_[0] / kCQLeafBaseUnit >= (uint64_t(1) << 32))
+      throw std::length_error("BVH leaf arena beyond 256 GiB");
     out_.nodes.append(node_size_[0], 64, false);
     out_.leaves.append(leaf_size_[0], 64, false);
     out_.root = emit(0, 0, 0);
@@ -169,7 +174,25 @@ class Collapser {
   bool quantized_nodes() const {
     return kind_ == NodeKind::QBvh8 || kind_ == NodeKind::QCompressedLeaf;
   }
-  uint32_t node_bytes() const { return quantized_nodes() ? sizeof(QNode8) : sizeof(Node8); }
+  // The bytes of the inner node over kids[0..k): a CQNode8 in the clusters' trees where its
+  // children's offsets fit (all but the top of a tree of millions of triangles), else a QNode8
+  // or Node8. Children of a wide node start at multiples of 8 (a QNode8's refs are 8 bytes; the
+  // CQNode8 of a subtree are multiples of 4 bytes).
+  bool compact(const uint32_t* kids, int k) const {
+    if (kind_ != NodeKind::QCompressedLeaf) return false;
+    uint64_t nb = 0, lb = 0;
+    for (int c = 0; c < k; ++c) {
+      nb += node_size_[kids[c]];
+      lb += leaf_size_[kids[c]];
+    }
+    return cq_fits(nb, lb);
+  }
+  uint32_t node_bytes(bool compact) const {
+    return compact ? sizeof(CQNode8) : quantized_nodes() ? sizeof(QNode8) : sizeof(Node8);
+  }
+  static uint64_t child_node_off(uint64_t off, bool compact) {
+    return compact ? off : (off + 7) & ~uint64_t(7);
+  }
 
   bool multileaf_candidate(uint32_t i) const {
     if (kind_ != NodeKind::CompressedLeaf && kind_ != NodeKind::QCompressedLeaf) return false;
@@ -421,20 +444,22 @@ class Collapser {
     uint32_t kids[8];
     int k = gather(i, kids);
     s.st.sah_cost += double(n.box.half_area()) / root_area_;
-    if (quantized_nodes())
-      s.st.qnode8++;
-    else
-      s.st.node8++;
-    s.node_bytes += node_bytes();
     SubtreeStats sub[8];
     // The multi-leaf cache (clbvh-compact) is a map: filled serially.
     for_children(
         i, k, [&](int c) { sub[c] = measure(kids[c], depth + 1); }, !enc_.encode_multileaf);
     report_small_children(i, kids, k);
-    uint64_t nb = node_bytes(), lb = 0;
+    const bool cq = compact(kids, k);
+    if (cq) s.st.cqnode8++;
+    if (quantized_nodes())
+      s.st.qnode8++;
+    else
+      s.st.node8++;
+    s.node_bytes += node_bytes(cq);
+    uint64_t nb = node_bytes(cq), lb = 0;
     for (int c = 0; c < k; ++c) {
       s.add(sub[c]);
-      nb += node_size_[kids[c]];
+      nb = child_node_off(nb, cq) + node_size_[kids[c]];
       lb += leaf_size_[kids[c]];
     }
     node_size_[i] = nb;
@@ -490,20 +515,37 @@ class Collapser {
       // The block count field of a multi-leaf ref holds its number of children.
       return NodeRef::make(kRefMulti, leaf_off, parts * uint32_t(k));
     }
-    std::memset(out_.nodes.data() + node_off, 0, node_bytes());
     uint32_t kids[8];
     int k = gather(i, kids);
+    const bool cq = compact(kids, k);
+    std::memset(out_.nodes.data() + node_off, 0, node_bytes(cq));
     uint64_t refs[8] = {};
     uint64_t noff[8], loff[8];
-    uint64_t no = node_off + node_bytes(), lo = leaf_off;
+    uint64_t no = node_off + node_bytes(cq), lo = leaf_off;
     for (int c = 0; c < k; ++c) {
-      noff[c] = no;
+      noff[c] = no = child_node_off(no, cq);
       loff[c] = lo;
       no += node_size_[kids[c]];
       lo += leaf_size_[kids[c]];
     }
     for_children(i, k, [&](int c) { refs[c] = emit(kids[c], noff[c], loff[c]); });
     report_small_children(i, kids, k);
+    if (cq) {
+      auto* q = reinterpret_cast<CQNode8*>(out_.nodes.data() + node_off);
+      Box3f boxes[8];
+      for (int c = 0; c < k; ++c) boxes[c] = b2_.nodes[kids[c]].box;
+      quantize_boxes(n.box, boxes, k, q->boxes);
+      q->leaf_base = uint32_t(leaf_off / kCQLeafBaseUnit);
+      const uint64_t leaf_base = uint64_t(q->leaf_base) * kCQLeafBaseUnit;
+      for (int c = 0; c < k; ++c) {
+        const uint64_t r = refs[c];
+        const uint64_t d =
+            NodeRef::offset(r) - (is_node_tag(NodeRef::tag(r)) ? node_off : leaf_base);
+        q->child[c] = uint32_t(d << 8) | uint32_t(r & 255);
+        SLIM_ASSERT(d < kCQOffsetLimit && cq_child_ref(q->child[c], node_off, leaf_base) == r);
+      }
+      return NodeRef::make(kRefCQNode8, node_off);
+    }
     if (quantized_nodes()) {
       auto* q = reinterpret_cast<QNode8*>(out_.nodes.data() + node_off);
       Box3f boxes[8];
@@ -652,6 +694,24 @@ struct Validator {
           Box3f g;
           if (!visit(n->child[c], cb, depth + 1, g)) return false;
           if (!box.contains(cb)) return fail("child box outside its parent box");
+          geom.extend(g);
+        }
+        return any ? true : fail("node without children");
+      }
+      case kRefCQNode8: {
+        uint64_t off = NodeRef::offset(ref);
+        if (off + sizeof(CQNode8) > bvh.nodes.size()) return fail("node outside the node arena");
+        const auto* n = reinterpret_cast<const CQNode8*>(bvh.nodes.data() + off);
+        const uint64_t leaf_base = uint64_t(n->leaf_base) * kCQLeafBaseUnit;
+        bool any = false;
+        for (int c = 0; c < 8; ++c) {
+          if (n->child[c] == 0) continue;
+          any = true;
+          Box3f g;
+          if (!visit(cq_child_ref(n->child[c], off, leaf_base), dequantize_box(n->boxes, c),
+                     depth + 1, g))
+            return false;
+          if (!box.contains(g)) return fail("quantized node: primitives outside the parent box");
           geom.extend(g);
         }
         return any ? true : fail("node without children");

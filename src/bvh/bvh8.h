@@ -7,6 +7,9 @@
 //   QNode8      136 B  float3 start + float3 extent + 8 boxes as 8-bit fixed point + 8 refs
 //                      (Embree's QBVH8; section 4.1 "Node Compression and Decompression",
 //                      Listing 1).
+//   CQNode8     108 B  a QNode8 with 32-bit child refs relative to its own offset (inner nodes)
+//                      and to a leaf base (leaves): the clusters' inner nodes below the top of
+//                      a large tree (QCompressedLeaf; wide QNode8 where an offset does not fit).
 //   MultiLeaf8   72 B  start/extent + 8 quantized boxes, no refs: the leaf blocks of its (up to)
 //                      8 children follow it in memory (section 4.2 "Introducing Compressed
 //                      Multi-Leaf Nodes"). A leaf layout may store its multi-leaf boxes its own
@@ -29,14 +32,18 @@ class PhaseProgress;  // core/progress.h
 
 // ---- child references -----------------------------------------------------------------------
 // 64 bits: bits 0-2 tag, bits 3-7 leaf block count (1..31), bits 8-63 byte offset into the
-// node arena (Node8, QNode8) or the leaf arena (Leaf, MultiLeaf).
+// node arena (Node8, QNode8, CQNode8) or the leaf arena (Leaf, MultiLeaf).
 enum RefTag : uint32_t {
   kRefEmpty = 0,
   kRefNode8 = 1,
   kRefQNode8 = 2,
   kRefLeaf = 3,
-  kRefMulti = 4
+  kRefMulti = 4,
+  kRefCQNode8 = 5
 };
+// Whether a tag names an inner node (in the node arena).
+constexpr uint32_t kNodeTags = (1u << kRefNode8) | (1u << kRefQNode8) | (1u << kRefCQNode8);
+SLIM_INLINE bool is_node_tag(uint32_t tag) { return (kNodeTags >> tag) & 1; }
 
 struct NodeRef {
   static SLIM_INLINE uint64_t make(RefTag tag, uint64_t offset, uint32_t blocks = 0) {
@@ -71,6 +78,34 @@ struct QNode8 {
   uint64_t child[8];  // 64 B
 };
 static_assert(sizeof(QNode8) == 136, "QBVH8 multi-node is 136 bytes");
+
+// A QNode8 whose child refs take 32 bits: bits 0-7 as a NodeRef's (tag, block count), bits 8-31
+// a byte offset: for an inner node, after this node's own offset (the layout is depth-first: a
+// node's subtree follows it); for a leaf or multi-leaf, after the leaf base, leaf_base x
+// kCQLeafBaseUnit (the subtree's first leaf byte, rounded down). So a child's 64-bit ref is its
+// 32 bits plus one base shifted by 8 (cq_child_ref). A node is compact when every child's offset
+// fits (cq_fits); a damaged file's offsets stay inside the arenas only after scene_file.cpp's
+// walk, as every reference.
+struct CQNode8 {
+  QuantBoxes8 boxes;   // 72 B
+  uint32_t leaf_base;  // 4 B
+  uint32_t child[8];   // 32 B
+};
+static_assert(sizeof(CQNode8) == 108 && alignof(CQNode8) == 4, "compact QBVH8 node is 108 bytes");
+constexpr uint64_t kCQLeafBaseUnit = 64;  // leaf arenas up to 256 GiB
+constexpr uint64_t kCQOffsetLimit = uint64_t(1) << 24;
+// Whether a CQNode8 can hold its children: node_bytes of inner nodes after it (its subtree but
+// itself) and leaf_bytes of leaves below it.
+inline bool cq_fits(uint64_t node_bytes, uint64_t leaf_bytes) {
+  return sizeof(CQNode8) + node_bytes < kCQOffsetLimit &&
+         leaf_bytes + kCQLeafBaseUnit < kCQOffsetLimit;
+}
+// The 64-bit ref of a non-zero child c of the CQNode8 at node offset `off` with leaf base
+// `leaf_base_bytes` (its leaf_base x kCQLeafBaseUnit).
+// The traversal expands all 8 at once (simd::widen_add8 with kNodeTags), with the same result.
+SLIM_INLINE uint64_t cq_child_ref(uint32_t c, uint64_t off, uint64_t leaf_base_bytes) {
+  return uint64_t(c) + ((is_node_tag(c & 7) ? off : leaf_base_bytes) << 8);
+}
 
 using MultiLeaf8 = QuantBoxes8;  // 72 B; leaf blocks of child i follow at + 72 + i * block bytes
 
@@ -137,8 +172,9 @@ enum class NodeKind : uint8_t {
   Bvh8,            // Node8 everywhere
   QBvh8,           // QNode8 everywhere
   CompressedLeaf,  // Node8 inner nodes, MultiLeaf8 for small subtrees (Benthin et al. 2018)
-  // QNode8 inner nodes, MultiLeaf8 for small subtrees: the cluster formats, whose inner nodes
-  // are the largest part of the BVH (136 B per node instead of 256 B).
+  // QNode8 inner nodes (CQNode8 where the offsets fit), MultiLeaf8 for small subtrees: the
+  // cluster formats, whose inner nodes are the largest part of the BVH (108 B per node instead
+  // of 256 B).
   QCompressedLeaf,
 };
 
@@ -180,7 +216,7 @@ struct Bvh8Stats {
   double sah_cost = 0;   // SAH cost of the BVH8 (node visit = 1, block test = 1)
   double leaf_fill = 0;  // average primitives per leaf block / block_prims
   int depth = 0;
-  int32_t reserved = 0;  // the tail padding, named and zero: scene files store this struct
+  uint32_t cqnode8 = 0;  // of the qnode8, those stored as CQNode8 (scene files store this struct)
 };
 
 struct Bvh8 {

@@ -1,7 +1,7 @@
 // Single-ray BVH8 traversal: one template over (leaf format, closest/any hit, statistics).
-// Node formats (Node8, QNode8, MultiLeaf8) are told apart by the tag of the child reference, so
-// one loop serves BVH8, QBVH8 and the compressed-leaf BVH. The leaf format is a parameter that
-// satisfies the LeafFormat concept below (the leaf contract, written once).
+// Node formats (Node8, QNode8, CQNode8, MultiLeaf8) are told apart by the tag of the child
+// reference, so one loop serves BVH8, QBVH8 and the compressed-leaf BVH. The leaf format is a
+// parameter that satisfies the LeafFormat concept below (the leaf contract, written once).
 #pragma once
 
 #include <concepts>
@@ -241,8 +241,7 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
 // Node8, or a multi-leaf header and its first blocks), so that a later pop finds it in cache.
 SLIM_INLINE void prefetch_ref(const uint8_t* nodes, const uint8_t* leaves, uint64_t ref) {
   const uint32_t tag = NodeRef::tag(ref);
-  const uint8_t* p =
-      (tag == kRefNode8 || tag == kRefQNode8 ? nodes : leaves) + NodeRef::offset(ref);
+  const uint8_t* p = (is_node_tag(tag) ? nodes : leaves) + NodeRef::offset(ref);
   for (int l = 0; l < 4; ++l) simd::prefetch(p + 64 * l);
 }
 
@@ -270,12 +269,21 @@ bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& 
     // Descend through inner nodes, nearest child first.
     for (;;) {
       const uint32_t tag = NodeRef::tag(cur);
-      if (tag != kRefNode8 && tag != kRefQNode8) break;
+      if (!is_node_tag(tag)) break;
       simd::vfloat8 dist;
       uint32_t mask;
       const uint64_t* child;
+      uint64_t expanded[8];  // a CQNode8's children the ray enters, as 64-bit refs
       const uint8_t* np = nodes + NodeRef::offset(cur);
-      if (tag == kRefNode8) {
+      if (tag == kRefCQNode8) {
+        const auto* n = reinterpret_cast<const CQNode8*>(np);
+        mask = detail::intersect_quant8(&n->boxes, ray, dist);
+        if (mask) mask &= ~simd::zero_mask8(n->child);  // as for QNode8 below
+        // cq_child_ref for all 8 at once
+        simd::widen_add8(n->child, kNodeTags, NodeRef::offset(cur) << 8,
+                         (uint64_t(n->leaf_base) * kCQLeafBaseUnit) << 8, expanded);
+        child = expanded;
+      } else if (tag == kRefNode8) {
         const auto* n = reinterpret_cast<const Node8*>(np);
         simd::prefetch(n->child);  // read once the box test is done
         mask = detail::intersect_node8(n, ray, dist);

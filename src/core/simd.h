@@ -69,6 +69,41 @@ SLIM_INLINE uint32_t zero_mask8(const uint64_t* p) {
 #endif
 }
 
+// Bit i (i < 8) set where the 32-bit word p[i] is zero.
+SLIM_INLINE uint32_t zero_mask8(const uint32_t* p) {
+#if defined(SLIM_SIMD_AVX2)
+  const __m256i z = _mm256_cmpeq_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)),
+                                       _mm256_setzero_si256());
+  return uint32_t(_mm256_movemask_ps(_mm256_castsi256_ps(z)));
+#else
+  uint32_t m = 0;
+  for (int i = 0; i < 8; ++i) m |= uint32_t(p[i] == 0) << i;
+  return m;
+#endif
+}
+
+// out[i] = p[i] + (bit (p[i] & 7) of `kinds` set ? a : b), in 64 bits, for i < 8.
+SLIM_INLINE void widen_add8(const uint32_t* p, uint32_t kinds, uint64_t a, uint64_t b,
+                            uint64_t* out) {
+#if defined(SLIM_SIMD_AVX2)
+  const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+  const __m256i bit = _mm256_srlv_epi32(_mm256_set1_epi32(int(kinds)),
+                                        _mm256_and_si256(v, _mm256_set1_epi32(7)));
+  const __m256i sel = _mm256_srai_epi32(_mm256_slli_epi32(bit, 31), 31);  // all ones: a
+  const __m256i va = _mm256_set1_epi64x(int64_t(a)), vb = _mm256_set1_epi64x(int64_t(b));
+  const __m256i lo = _mm256_add_epi64(
+      _mm256_cvtepu32_epi64(_mm256_castsi256_si128(v)),
+      _mm256_blendv_epi8(vb, va, _mm256_cvtepi32_epi64(_mm256_castsi256_si128(sel))));
+  const __m256i hi = _mm256_add_epi64(
+      _mm256_cvtepu32_epi64(_mm256_extracti128_si256(v, 1)),
+      _mm256_blendv_epi8(vb, va, _mm256_cvtepi32_epi64(_mm256_extracti128_si256(sel, 1))));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out), lo);
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + 4), hi);
+#else
+  for (int i = 0; i < 8; ++i) out[i] = uint64_t(p[i]) + ((kinds >> (p[i] & 7)) & 1 ? a : b);
+#endif
+}
+
 #if defined(SLIM_SIMD_AVX2)
 
 // ------------------------------------------------------------------------------------------------

@@ -176,8 +176,10 @@ TEST(Bvh, CompactNodesBelowWideOnes) {
                                 (bvh.stats.qnode8 - bvh.stats.cqnode8) * sizeof(QNode8));
   EXPECT_EQ(NodeRef::tag(bvh.root), kRefQNode8);
 
-  // Every node aligned for its loads, no wide node below a compact one, every ref counted once.
+  // Every node aligned for its loads, no wide node below a compact one, every ref counted once,
+  // the padding between nodes zero (scene files store the arena as it is).
   uint64_t wide = 0, compact = 0;
+  std::vector<uint8_t> is_node(bvh.nodes.size(), 0);
   std::function<void(uint64_t, bool)> walk = [&](uint64_t ref, bool below_compact) {
     const uint64_t off = NodeRef::offset(ref);
     if (NodeRef::tag(ref) == kRefQNode8) {
@@ -185,6 +187,7 @@ TEST(Bvh, CompactNodesBelowWideOnes) {
       EXPECT_FALSE(below_compact);
       EXPECT_EQ(off % 8, 0u);
       ASSERT_LE(off + sizeof(QNode8), bvh.nodes.size());
+      std::fill_n(is_node.begin() + off, sizeof(QNode8), 1);
       const auto* q = reinterpret_cast<const QNode8*>(bvh.nodes.data() + off);
       for (uint64_t c : q->child)
         if (c) walk(c, false);
@@ -192,6 +195,7 @@ TEST(Bvh, CompactNodesBelowWideOnes) {
       ++compact;
       EXPECT_EQ(off % 4, 0u);
       ASSERT_LE(off + sizeof(CQNode8), bvh.nodes.size());
+      std::fill_n(is_node.begin() + off, sizeof(CQNode8), 1);
       CQNode8 q;
       std::memcpy(&q, bvh.nodes.data() + off, sizeof q);
       for (uint32_t c : q.child)
@@ -201,6 +205,14 @@ TEST(Bvh, CompactNodesBelowWideOnes) {
   walk(bvh.root, false);
   EXPECT_EQ(compact, bvh.stats.cqnode8);
   EXPECT_EQ(wide + compact, bvh.stats.qnode8);
+  uint64_t padding = 0;
+  for (uint64_t i = 0; i < bvh.nodes.size(); ++i) {
+    if (is_node[i]) continue;
+    ++padding;
+    ASSERT_EQ(bvh.nodes.data()[i], 0) << "padding byte " << i;
+  }
+  EXPECT_EQ(padding, bvh.nodes.size() - bvh.node_bytes);
+  EXPECT_GT(padding, 0u);
 
   std::string why;
   const LeafValidator leaf = [](const uint8_t* block, Box3f& bounds, std::string*) {

@@ -222,7 +222,8 @@ class BvhScene : public Scene::Impl {
   struct Bvh2Hooks {
     uint32_t max_leaf_size = 0, block_prims = 0;  // override the BVH2 config when nonzero
     uint32_t full_blocks_below = 0;               // Bvh2BuildConfig::full_blocks_below
-    bool quantized_inner = false;  // CompressedLeaf with QNode8 inner nodes (QCompressedLeaf)
+    // CompressedLeaf with QNode8 / CQNode8 inner nodes (QCompressedLeaf).
+    bool quantized_inner = false;
     std::function<void(Bvh2&)> reshape;
     // Bvh2BuildConfig::thin_stack, for leaves whose primitives hold several triangles.
     std::function<void(const uint32_t* ids, uint32_t n, uint8_t* keep)> thin_stack;

@@ -143,7 +143,8 @@ class Collapser {
     out_.multileaf_bytes = m.multileaf_bytes;
     out_.leaf_data_bytes = m.leaf_data_bytes;
     // CQNode8::leaf_base is 32 bits of kCQLeafBaseUnit bytes.
-    if (leaf_size_[0] / kCQLeafBaseUnit >= (uint64_t(1) << 32))
+    if (kind_ == NodeKind::QCompressedLeaf &&
+        leaf_size_[0] / kCQLeafBaseUnit >= (uint64_t(1) << 32))
       throw std::length_error("BVH leaf arena beyond 256 GiB");
     out_.nodes.append(node_size_[0], 64, false);
     out_.leaves.append(leaf_size_[0], 64, false);
@@ -523,7 +524,9 @@ class Collapser {
     uint64_t noff[8], loff[8];
     uint64_t no = node_off + node_bytes(cq), lo = leaf_off;
     for (int c = 0; c < k; ++c) {
-      noff[c] = no = child_node_off(no, cq);
+      const uint64_t at = child_node_off(no, cq);
+      std::memset(out_.nodes.data() + no, 0, at - no);  // the padding ahead of a wide node's child
+      noff[c] = no = at;
       loff[c] = lo;
       no += node_size_[kids[c]];
       lo += leaf_size_[kids[c]];

@@ -220,12 +220,12 @@ struct Bvh8Stats {
 };
 
 struct Bvh8 {
-  AlignedBytes nodes;   // Node8 / QNode8 (inner nodes)
+  AlignedBytes nodes;   // Node8 / QNode8 / CQNode8 (inner nodes)
   AlignedBytes leaves;  // leaf blocks; multi-leaf nodes with their blocks
   uint64_t root = 0;    // NodeRef of the root (kRefEmpty for an empty scene)
   Box3f bounds;
   uint32_t block_bytes = 0;
-  uint64_t node_bytes = 0;       // inner node bytes (BVH memory)
+  uint64_t node_bytes = 0;       // inner node bytes (nodes.size() adds the padding between them)
   uint64_t multileaf_bytes = 0;  // MultiLeaf8 headers inside `leaves` (BVH memory)
   uint64_t leaf_data_bytes = 0;  // leaf blocks (geometry memory)
   Bvh8Stats stats;
@@ -249,9 +249,9 @@ enum class CollapseRule : uint8_t {
 
 // The clusters' optimal collapse: a QNode8 costs, beyond its SAH visit, this many times the mean
 // area of the collapse's terminals (the clusters and the rare isolated leaves, relative to the
-// root's), which trades a little SAH for fuller nodes (136 B each) where the two are close. On
-// canyon:1024 6861 QNode8 (Slots, SAH cost 20.5) become 6052 (18.7); without the memory term 6752
-// (18.5).
+// root's), which trades a little SAH for fuller nodes (CQNode8, 108 B each) where the two are
+// close. On canyon:1024 6861 QNode8 (Slots, SAH cost 20.5) become 6052 (18.7); without the memory
+// term 6752 (18.5).
 constexpr float kClusterNodeCost = 16;
 
 // The rule each node kind is best served by (the figures above).

@@ -272,17 +272,13 @@ bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& 
       if (!is_node_tag(tag)) break;
       simd::vfloat8 dist;
       uint32_t mask;
-      const uint64_t* child;
-      uint64_t expanded[8];  // a CQNode8's children the ray enters, as 64-bit refs
+      const uint64_t* child = nullptr;
+      const CQNode8* compact = nullptr;
       const uint8_t* np = nodes + NodeRef::offset(cur);
       if (tag == kRefCQNode8) {
-        const auto* n = reinterpret_cast<const CQNode8*>(np);
-        mask = detail::intersect_quant8(&n->boxes, ray, dist);
-        if (mask) mask &= ~simd::zero_mask8(n->child);  // as for QNode8 below
-        // cq_child_ref for all 8 at once
-        simd::widen_add8(n->child, kNodeTags, NodeRef::offset(cur) << 8,
-                         (uint64_t(n->leaf_base) * kCQLeafBaseUnit) << 8, expanded);
-        child = expanded;
+        compact = reinterpret_cast<const CQNode8*>(np);
+        mask = detail::intersect_quant8(&compact->boxes, ray, dist);
+        if (mask) mask &= ~simd::zero_mask8(compact->child);  // as for QNode8 below
       } else if (tag == kRefNode8) {
         const auto* n = reinterpret_cast<const Node8*>(np);
         simd::prefetch(n->child);  // read once the box test is done
@@ -298,32 +294,39 @@ bool traverse_bvh8(const Bvh8& bvh, const typename Leaf::Context& ctx, TravRay& 
       }
       st.node(8);
       if (mask == 0) goto pop;
+      // The 64-bit ref of child i, read once per child the ray enters (a CQNode8's expanded).
+      const uint64_t node_off = NodeRef::offset(cur);
+      auto ref = [&](int i) {
+        return compact ? cq_child_ref(compact->child[i], node_off,
+                                      uint64_t(compact->leaf_base) * kCQLeafBaseUnit)
+                       : child[i];
+      };
       alignas(32) float d[8];
       dist.store(d);
       int i0 = simd::pop_lowest(mask);
       if (mask == 0) {  // one child hit: descend
-        cur = child[i0];
+        cur = ref(i0);
         continue;
       }
       int i1 = simd::pop_lowest(mask);
       if (mask == 0) {  // two: push the far one
         if (d[i0] <= d[i1]) {
-          stack[sp++] = {child[i1], d[i1]};
-          cur = child[i0];
+          stack[sp++] = {ref(i1), d[i1]};
+          cur = ref(i0);
         } else {
-          stack[sp++] = {child[i0], d[i0]};
-          cur = child[i1];
+          stack[sp++] = {ref(i0), d[i0]};
+          cur = ref(i1);
         }
         prefetch_ref(nodes, leaves, stack[sp - 1].ref);
         continue;
       }
       // Three or more: push all, sort the pushed entries far to near, pop the nearest.
       int base = sp;
-      stack[sp++] = {child[i0], d[i0]};
-      stack[sp++] = {child[i1], d[i1]};
+      stack[sp++] = {ref(i0), d[i0]};
+      stack[sp++] = {ref(i1), d[i1]};
       while (mask) {
         int i = simd::pop_lowest(mask);
-        stack[sp++] = {child[i], d[i]};
+        stack[sp++] = {ref(i), d[i]};
       }
       for (int k = base + 1; k < sp; ++k) {
         Entry e = stack[k];

@@ -102,7 +102,6 @@ inline bool cq_fits(uint64_t node_bytes, uint64_t leaf_bytes) {
 }
 // The 64-bit ref of a non-zero child c of the CQNode8 at node offset `off` with leaf base
 // `leaf_base_bytes` (its leaf_base x kCQLeafBaseUnit).
-// The traversal expands all 8 at once (simd::widen_add8 with kNodeTags), with the same result.
 SLIM_INLINE uint64_t cq_child_ref(uint32_t c, uint64_t off, uint64_t leaf_base_bytes) {
   return uint64_t(c) + ((is_node_tag(c & 7) ? off : leaf_base_bytes) << 8);
 }

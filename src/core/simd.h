@@ -82,28 +82,6 @@ SLIM_INLINE uint32_t zero_mask8(const uint32_t* p) {
 #endif
 }
 
-// out[i] = p[i] + (bit (p[i] & 7) of `kinds` set ? a : b), in 64 bits, for i < 8.
-SLIM_INLINE void widen_add8(const uint32_t* p, uint32_t kinds, uint64_t a, uint64_t b,
-                            uint64_t* out) {
-#if defined(SLIM_SIMD_AVX2)
-  const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
-  const __m256i bit = _mm256_srlv_epi32(_mm256_set1_epi32(int(kinds)),
-                                        _mm256_and_si256(v, _mm256_set1_epi32(7)));
-  const __m256i sel = _mm256_srai_epi32(_mm256_slli_epi32(bit, 31), 31);  // all ones: a
-  const __m256i va = _mm256_set1_epi64x(int64_t(a)), vb = _mm256_set1_epi64x(int64_t(b));
-  const __m256i lo = _mm256_add_epi64(
-      _mm256_cvtepu32_epi64(_mm256_castsi256_si128(v)),
-      _mm256_blendv_epi8(vb, va, _mm256_cvtepi32_epi64(_mm256_castsi256_si128(sel))));
-  const __m256i hi = _mm256_add_epi64(
-      _mm256_cvtepu32_epi64(_mm256_extracti128_si256(v, 1)),
-      _mm256_blendv_epi8(vb, va, _mm256_cvtepi32_epi64(_mm256_extracti128_si256(sel, 1))));
-  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out), lo);
-  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + 4), hi);
-#else
-  for (int i = 0; i < 8; ++i) out[i] = uint64_t(p[i]) + ((kinds >> (p[i] & 7)) & 1 ? a : b);
-#endif
-}
-
 #if defined(SLIM_SIMD_AVX2)
 
 // ------------------------------------------------------------------------------------------------

@@ -181,25 +181,22 @@ TEST(Bvh, CompactNodesBelowWideOnes) {
   std::vector<uint8_t> is_node(bvh.nodes.size(), 0);
   std::function<void(uint64_t, bool)> walk = [&](uint64_t ref, bool below_compact) {
     const uint64_t off = NodeRef::offset(ref);
-    if (NodeRef::tag(ref) == kRefQNode8) {
+    const uint32_t tag = NodeRef::tag(ref);
+    if (tag != kRefQNode8 && tag != kRefCQNode8) return;
+    if (tag == kRefQNode8) {
       ++wide;
       EXPECT_FALSE(below_compact);
       EXPECT_EQ(off % 8, 0u);
-      ASSERT_LE(off + sizeof(QNode8), bvh.nodes.size());
-      std::fill_n(is_node.begin() + off, sizeof(QNode8), 1);
-      const auto* q = reinterpret_cast<const QNode8*>(bvh.nodes.data() + off);
-      for (uint64_t c : q->child)
-        if (c) walk(c, false);
-    } else if (NodeRef::tag(ref) == kRefCQNode8) {
+    } else {
       ++compact;
       EXPECT_EQ(off % 4, 0u);
-      ASSERT_LE(off + sizeof(CQNode8), bvh.nodes.size());
-      std::fill_n(is_node.begin() + off, sizeof(CQNode8), 1);
-      CQNode8 q;
-      std::memcpy(&q, bvh.nodes.data() + off, sizeof q);
-      for (uint32_t c : q.child)
-        if (c) walk(cq_child_ref(c, off, uint64_t(q.leaf_base) * kCQLeafBaseUnit), true);
     }
+    ASSERT_LE(off + node_size(tag), bvh.nodes.size());
+    std::fill_n(is_node.begin() + off, node_size(tag), 1);
+    uint64_t child[8];
+    child_refs(ref, bvh.nodes.data() + off, child);
+    for (uint64_t c : child)
+      if (c) walk(c, tag == kRefCQNode8);
   };
   walk(bvh.root, false);
   EXPECT_EQ(compact, bvh.stats.cqnode8);

@@ -610,20 +610,12 @@ uint64_t first_leaf(const std::string& b, const std::string& prefix) {
                     nodes = section(b, prefix + "bvh.nodes");
   uint64_t ref = get64(b, meta.offset);  // BvhMeta::root
   while (is_node_tag(NodeRef::tag(ref))) {
-    const uint64_t at = nodes.offset + NodeRef::offset(ref);
+    uint64_t child[8];
+    child_refs(ref,
+               reinterpret_cast<const uint8_t*>(b.data()) + nodes.offset + NodeRef::offset(ref),
+               child);
     uint64_t next = 0;
-    if (NodeRef::tag(ref) == kRefCQNode8) {
-      CQNode8 n;
-      std::memcpy(&n, b.data() + at, sizeof n);
-      for (int i = 0; i < 8 && next == 0; ++i)
-        if (n.child[i])
-          next = cq_child_ref(n.child[i], NodeRef::offset(ref),
-                              uint64_t(n.leaf_base) * kCQLeafBaseUnit);
-    } else {
-      const uint64_t child =
-          at + (NodeRef::tag(ref) == kRefNode8 ? offsetof(Node8, child) : offsetof(QNode8, child));
-      for (int i = 0; i < 8 && next == 0; ++i) next = get64(b, child + 8 * i);
-    }
+    for (int i = 0; i < 8 && next == 0; ++i) next = child[i];
     ref = next;
   }
   return ref;

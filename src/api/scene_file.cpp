@@ -436,17 +436,13 @@ void check_bvh_root(const Bvh8& bvh, const std::string& p, uint32_t block_bytes,
       ok = bvh.root == 0;
       break;
     case kRefNode8:
-      ok = off % alignof(Node8) == 0 && off < bvh.nodes.size() &&
-           bvh.nodes.size() - off >= sizeof(Node8);
-      break;
     case kRefQNode8:
-      ok = off % alignof(QNode8) == 0 && off < bvh.nodes.size() &&
-           bvh.nodes.size() - off >= sizeof(QNode8);
+    case kRefCQNode8: {
+      const uint32_t tag = NodeRef::tag(bvh.root);
+      ok = off % node_align(tag) == 0 && off < bvh.nodes.size() &&
+           bvh.nodes.size() - off >= node_size(tag);
       break;
-    case kRefCQNode8:
-      ok = off % alignof(CQNode8) == 0 && off < bvh.nodes.size() &&
-           bvh.nodes.size() - off >= sizeof(CQNode8);
-      break;
+    }
     case kRefLeaf:
       ok = NodeRef::blocks(bvh.root) > 0 && off % leaf_align == 0 && off <= bvh.leaves.size() &&
            bvh.leaves.size() - off >= uint64_t(NodeRef::blocks(bvh.root)) * block_bytes;
@@ -497,35 +493,20 @@ struct Walker {
         if (ref != 0) nodes_fault(where, "empty reference with bits set");
         return;
       case kRefNode8:
-      case kRefQNode8: {
-        const bool n8 = NodeRef::tag(ref) == kRefNode8;
-        // Aligned as the traversal's typed loads need (Node8: 64 bytes, QNode8: 8).
-        if (off % (n8 ? alignof(Node8) : alignof(QNode8)) != 0)
+      case kRefQNode8:
+      case kRefCQNode8: {
+        const uint32_t tag = NodeRef::tag(ref);
+        // Aligned as the traversal's typed loads need (Node8: 64 bytes, QNode8: 8, CQNode8: 4);
+        // a CQNode8's 32-bit refs read as the traversal expands them (bvh8.h cq_child_ref).
+        if (off % node_align(tag) != 0)
           nodes_fault(off,
                       "misaligned node (referenced from offset " + std::to_string(where) + ")");
-        if (!fits(off, n8 ? sizeof(Node8) : sizeof(QNode8), b.nodes.size()))
+        if (!fits(off, node_size(tag), b.nodes.size()))
           nodes_fault(off, "node outside the node arena (referenced from offset " +
                                std::to_string(where) + ")");
         uint64_t child[8];
-        std::memcpy(child,
-                    b.nodes.data() + off + (n8 ? offsetof(Node8, child) : offsetof(QNode8, child)),
-                    sizeof child);
+        child_refs(ref, b.nodes.data() + off, child);
         for (uint64_t c : child) visit(c, depth + 1, off);
-        return;
-      }
-      case kRefCQNode8: {
-        // Its children's refs are read as the traversal expands them (bvh8.h cq_child_ref).
-        if (off % alignof(CQNode8) != 0)
-          nodes_fault(off,
-                      "misaligned node (referenced from offset " + std::to_string(where) + ")");
-        if (!fits(off, sizeof(CQNode8), b.nodes.size()))
-          nodes_fault(off, "node outside the node arena (referenced from offset " +
-                               std::to_string(where) + ")");
-        CQNode8 n;
-        std::memcpy(&n, b.nodes.data() + off, sizeof n);
-        for (uint32_t c : n.child)
-          if (c)
-            visit(cq_child_ref(c, off, uint64_t(n.leaf_base) * kCQLeafBaseUnit), depth + 1, off);
         return;
       }
       case kRefLeaf: {

@@ -701,34 +701,21 @@ struct Validator {
         }
         return any ? true : fail("node without children");
       }
-      case kRefCQNode8: {
-        uint64_t off = NodeRef::offset(ref);
-        if (off + sizeof(CQNode8) > bvh.nodes.size()) return fail("node outside the node arena");
-        const auto* n = reinterpret_cast<const CQNode8*>(bvh.nodes.data() + off);
-        const uint64_t leaf_base = uint64_t(n->leaf_base) * kCQLeafBaseUnit;
+      case kRefQNode8:
+      case kRefCQNode8: {  // both start with their QuantBoxes8
+        const uint64_t off = NodeRef::offset(ref);
+        if (off + node_size(NodeRef::tag(ref)) > bvh.nodes.size())
+          return fail("node outside the node arena");
+        QuantBoxes8 q;
+        std::memcpy(&q, bvh.nodes.data() + off, sizeof q);
+        uint64_t child[8];
+        child_refs(ref, bvh.nodes.data() + off, child);
         bool any = false;
         for (int c = 0; c < 8; ++c) {
-          if (n->child[c] == 0) continue;
+          if (child[c] == 0) continue;
           any = true;
           Box3f g;
-          if (!visit(cq_child_ref(n->child[c], off, leaf_base), dequantize_box(n->boxes, c),
-                     depth + 1, g))
-            return false;
-          if (!box.contains(g)) return fail("quantized node: primitives outside the parent box");
-          geom.extend(g);
-        }
-        return any ? true : fail("node without children");
-      }
-      case kRefQNode8: {
-        uint64_t off = NodeRef::offset(ref);
-        if (off + sizeof(QNode8) > bvh.nodes.size()) return fail("node outside the node arena");
-        const auto* n = reinterpret_cast<const QNode8*>(bvh.nodes.data() + off);
-        bool any = false;
-        for (int c = 0; c < 8; ++c) {
-          if (n->child[c] == 0) continue;
-          any = true;
-          Box3f g;
-          if (!visit(n->child[c], dequantize_box(n->boxes, c), depth + 1, g)) return false;
+          if (!visit(child[c], dequantize_box(q, c), depth + 1, g)) return false;
           if (!box.contains(g)) return fail("quantized node: primitives outside the parent box");
           geom.extend(g);
         }

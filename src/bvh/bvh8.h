@@ -16,6 +16,7 @@
 //                      way instead (LeafEncoder::multileaf_boxes: the lossy clusters' 51 B).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
@@ -92,6 +93,8 @@ struct CQNode8 {
   uint32_t child[8];   // 32 B
 };
 static_assert(sizeof(CQNode8) == 108 && alignof(CQNode8) == 4, "compact QBVH8 node is 108 bytes");
+static_assert(offsetof(QNode8, boxes) == 0 && offsetof(CQNode8, boxes) == 0,
+              "quantized nodes start with their boxes");
 constexpr uint64_t kCQLeafBaseUnit = 64;  // leaf arenas up to 256 GiB
 constexpr uint64_t kCQOffsetLimit = uint64_t(1) << 24;
 // Whether a CQNode8 can hold its children: node_bytes of inner nodes after it (its subtree but
@@ -104,6 +107,30 @@ inline bool cq_fits(uint64_t node_bytes, uint64_t leaf_bytes) {
 // `leaf_base_bytes` (its leaf_base x kCQLeafBaseUnit).
 SLIM_INLINE uint64_t cq_child_ref(uint32_t c, uint64_t off, uint64_t leaf_base_bytes) {
   return uint64_t(c) + ((is_node_tag(c & 7) ? off : leaf_base_bytes) << 8);
+}
+
+// Size and alignment of the inner node a node tag names (is_node_tag).
+inline uint64_t node_size(uint32_t tag) {
+  return tag == kRefNode8 ? sizeof(Node8) : tag == kRefQNode8 ? sizeof(QNode8) : sizeof(CQNode8);
+}
+inline uint64_t node_align(uint32_t tag) {
+  return tag == kRefNode8 ? alignof(Node8) : tag == kRefQNode8 ? alignof(QNode8) : alignof(CQNode8);
+}
+// The 8 child refs of the inner node `ref` whose node_size(tag) bytes start at p (any alignment),
+// as 64-bit refs (kRefEmpty where a slot is unused): for the walks that check a BVH (validation,
+// scene files, tests); the traversal reads them in place.
+inline void child_refs(uint64_t ref, const uint8_t* p, uint64_t out[8]) {
+  const uint32_t tag = NodeRef::tag(ref);
+  if (tag == kRefCQNode8) {
+    CQNode8 n;
+    std::memcpy(&n, p, sizeof n);
+    const uint64_t leaf_base = uint64_t(n.leaf_base) * kCQLeafBaseUnit;
+    for (int c = 0; c < 8; ++c)
+      out[c] = n.child[c] ? cq_child_ref(n.child[c], NodeRef::offset(ref), leaf_base) : 0;
+  } else {
+    std::memcpy(out, p + (tag == kRefNode8 ? offsetof(Node8, child) : offsetof(QNode8, child)),
+                8 * sizeof(uint64_t));
+  }
 }
 
 using MultiLeaf8 = QuantBoxes8;  // 72 B; leaf blocks of child i follow at + 72 + i * block bytes

@@ -119,7 +119,7 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
   std::vector<Vec3f> decoded(nv);
   ClusterLattice lat;
   lat.origin[1] = -3.0f;
-  lat.step = 0.5f;
+  for (int a = 0; a < 3; ++a) lat.step[a] = std::ldexp(0.5f, -a);  // a step of its own per axis
   for (uint32_t i = 0; i < nv; ++i)
     for (int a = 0; a < 3; ++a) {
       uint32_t c = 0;
@@ -234,7 +234,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   // (0..24 bits per axis, from the input's size).
   ClusterLattice lat;
   lat.origin[0] = 1.0f;
-  lat.step = 0.25f;
+  for (int a = 0; a < 3; ++a) lat.step[a] = std::ldexp(0.25f, a);
   for (int pass = 0; pass < (lossless ? 1 : 2); ++pass) {
     if (pass == 1)
       for (int a = 0; a < 3; ++a) lat.anchor_bits[a] = uint8_t((size >> (5 * a)) % 25);

@@ -169,7 +169,7 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
           },
           [&](int a, float start, float extent) {
             const double need = (double(all.hi[a]) - double(start)) / 255.0;
-            EXPECT_LE(double(extent), std::max(1.125 * need, double(z.lattice.step)) * 1.0001);
+            EXPECT_LE(double(extent), std::max(1.125 * need, double(z.lattice.step[a])) * 1.0001);
           },
           ml);
     } else {
@@ -537,8 +537,7 @@ TEST(ClusterCodec, DecodeEqualsEncodeRealMesh) {
 TEST(ClusterCodec, RangesKeepEveryChildWithin24Bits) {
   const uint32_t T = (1u << 24) - 1;
   const std::vector<uint32_t> codes = {0, 0, 0, 1, 1, 0, 0, 1, 1, T, 0, 0, T - 1, 1, 0, T, 1, 1};
-  ClusterLattice lat;
-  lat.step = 1.0f;
+  ClusterLattice lat;  // steps 1
   for (int a = 0; a < 3; ++a) lat.anchor_bits[a] = a ? 1 : 24;
   std::vector<Vec3f> decoded(6);
   for (int i = 0; i < 6; ++i)
@@ -1111,18 +1110,21 @@ TEST(ClusterScene, CollapseSpendsFewerNodesThanSlots) {
 }
 
 // The lossy multi-leaf boxes' extent: scale byte e << 3 | m is (8 + m) 2^e lattice steps / 8
-// (computed on the step's float bits), growing with the byte.
+// on its axis (computed on the step's float bits), growing with the byte.
 TEST(ClusterCodec, BoxExtentIsTheScaleInSteps) {
   for (float step : {std::ldexp(1.0f, -20), 1.0f, 0.25f, std::ldexp(1.0f, 40)}) {
     ClusterLattice lat;
-    lat.step = step;
-    float prev = 0;
-    for (uint32_t sc = 0; (sc >> 3) <= cluster::kMaxBoxScaleExp; ++sc) {
-      const float e = cluster::box_extent(lat, sc);
-      EXPECT_EQ(e, std::ldexp(float(8 + (sc & 7)), int(sc >> 3) - 3) * step) << sc;
-      EXPECT_GT(e, prev);
-      prev = e;
+    for (int a = 0; a < 3; ++a) lat.step[a] = std::ldexp(step, a);  // a step of its own per axis
+    for (int a = 0; a < 3; ++a) {
+      float prev = 0;
+      for (uint32_t sc = 0; (sc >> 3) <= cluster::kMaxBoxScaleExp; ++sc) {
+        const float e = cluster::box_extent(lat, a, sc);
+        EXPECT_EQ(e, std::ldexp(float(8 + (sc & 7)), int(sc >> 3) - 3) * lat.step[a]) << sc;
+        EXPECT_GT(e, prev);
+        prev = e;
+      }
     }
+    EXPECT_EQ(cluster::check_lattice(lat), "");
   }
 }
 
@@ -1155,12 +1157,12 @@ TEST(ClusterScene, AnchorWidthsFollowTheLattice) {
                                                  tm.tris.data(), tm.tri_count(), err, false);
   const cluster::Quantized zb = cluster::quantize(
       tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(), err / 64, false, big);
-  ASSERT_EQ(zb.lattice.step, z.lattice.step);
+  for (int a = 0; a < 3; ++a) ASSERT_EQ(zb.lattice.step[a], z.lattice.step[a]) << a;
   ASSERT_EQ(z.codes, zb.codes);
   for (int a = 0; a < 3; ++a) {
     auto top = [&](const Box3f& b) {
       return cluster::bit_width(
-          uint32_t(std::nearbyint((double(b.hi[a]) - double(b.lo[a])) / z.lattice.step)));
+          uint32_t(std::nearbyint((double(b.hi[a]) - double(b.lo[a])) / z.lattice.step[a])));
     };
     EXPECT_EQ(z.lattice.anchor_bits[a], top(box)) << a;
     EXPECT_EQ(zb.lattice.anchor_bits[a], top(big)) << a;
@@ -1204,6 +1206,59 @@ TEST(ClusterScene, CoarserStepWhenTheLatticeNeedsMoreBits) {
   EXPECT_TRUE(s.validate(&why)) << why;
   opt.cluster_error = 0;
   EXPECT_THROW(Scene::build(sphere, opt), Error);
+}
+
+// The lattice's steps: per axis s (the largest power of two with s sqrt(3) / 2 <= the bound) or 2s
+// on the widest axes while the largest rounding error, half the steps' diagonal, stays within the
+// bound: by the bound's place r = 2 bound / s in [sqrt(3), 2 sqrt(3)), no axis below sqrt(6), one
+// below 3, two above. An extent beyond 2^24 - 1 steps coarsens its axis (reported).
+TEST(ClusterCodec, LatticeStepsPerAxis) {
+  const Box3f box({-1, -2, -0.5f}, {3, 1, 0.5f});  // extents x 4, y 3, z 1: the widest first
+  const double s = std::ldexp(1.0, -10);
+  for (auto [r, doubled] :
+       {std::pair{1.75, 0}, {2.0, 0}, {2.4, 0}, {2.5, 1}, {2.9, 1}, {3.1, 2}, {3.45, 2}}) {
+    double step[3];
+    ASSERT_TRUE(cluster::lattice_steps(r * s / 2, box, step)) << r;
+    double e2 = 0;
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_EQ(step[a], a < doubled ? 2 * s : s) << r << " axis " << a;
+      e2 += step[a] * step[a] / 4;
+    }
+    EXPECT_LE(std::sqrt(e2), r * s / 2) << r;
+  }
+  double step[3];
+  const Box3f wide({0, 0, 0}, {1e6f, 1, 1});
+  EXPECT_FALSE(cluster::lattice_steps(1e-3, wide, step));
+  EXPECT_LE(1e6 / step[0], double((1u << 24) - 1));
+  EXPECT_EQ(step[1], step[2]);  // only x coarsened
+  EXPECT_LT(step[1], step[0]);
+}
+
+// A scene on such a lattice: two axes of 2s at r = 3.2, none at r = 2.2; every vertex within the
+// bound either way, and the coarser axes take fewer position bits.
+TEST(ClusterScene, CoarserAxesWhereTheBoundAllows) {
+  PolyMesh sphere = icosphere(5);
+  const double diag =
+      length(Scene::build(sphere, BuildOptions::from_config("bvh8-tri4v")).bounds().size());
+  const double s = std::ldexp(1.0, -10);
+  double bits[2];
+  for (int doubled : {0, 2}) {
+    BuildOptions opt = BuildOptions::from_config("cluster");
+    opt.cluster_error = (doubled ? 3.2 : 2.2) * s / 2 / diag;
+    const Scene sc = Scene::build(sphere, opt);
+    std::string why;
+    ASSERT_TRUE(sc.validate(&why)) << why;
+    int twice = 0;
+    for (const char* k : {"lattice_step_x", "lattice_step_y", "lattice_step_z"}) {
+      EXPECT_TRUE(detail(sc, k) == s || detail(sc, k) == 2 * s) << k << " " << detail(sc, k);
+      twice += detail(sc, k) == 2 * s;
+    }
+    EXPECT_EQ(twice, doubled);
+    EXPECT_EQ(detail(sc, "lattice_coarsened"), 0);
+    EXPECT_LE(detail(sc, "max_error_diag_pct"), 100 * opt.cluster_error);
+    bits[doubled / 2] = detail(sc, "position_bits_avg");
+  }
+  EXPECT_LT(bits[1], bits[0] - 0.4);  // about 2/3 of a bit a coordinate
 }
 
 TEST(ClusterScene, BadInput) {

@@ -456,13 +456,15 @@ TEST(LossyAccuracy, LossyGridsWithinThePerVertexBoundOnAKnownSubgridPatch) {
 
 // cluster: every decoded vertex against its INPUT vertex, with the promise of the format's
 // specification (prim/cluster.h): one scene-wide lattice with its origin at the low corner of the
-// box (the input's box, or BuildOptions::lattice_box when given) and a power-of-two step, the
-// largest with step * sqrt(3) / 2 <= cluster_error x the box diagonal; every coordinate rounds to
-// the nearest lattice point. So per axis |decoded - input| <= step / 2, |decoded - input| <=
-// cluster_error x diagonal, and (decoded - origin) / step is an integer (up to one float rounding
-// of origin + q * step). The correspondence decoded corner -> input vertex comes from the input
-// faces alone: cluster_triangles() gives the fan triangles of each face in triangulation order with
-// their corners in input order (v0, vk, vk+1).
+// box (the input's box, or BuildOptions::lattice_box when given) and a power-of-two step per axis:
+// s, the largest with s * sqrt(3) / 2 <= cluster_error x the box diagonal, or 2s on the widest axes
+// (ties in axis order) while half the steps' diagonal, with half an ulp of the box's largest
+// coordinate per axis, stays within that bound; every coordinate rounds to the nearest lattice
+// point. So per axis |decoded - input| <= step / 2, |decoded - input| <= cluster_error x diagonal,
+// and (decoded - origin) / step is an integer (up to one float rounding of origin + q * step). The
+// correspondence decoded corner -> input vertex comes from the input faces alone:
+// cluster_triangles() gives the fan triangles of each face in triangulation order with their
+// corners in input order (v0, vk, vk+1).
 TEST(LossyAccuracy, ClusterVerticesFollowClusterError) {
   std::vector<PolyMesh> meshes;
   meshes.push_back(icosphere(4));
@@ -493,9 +495,21 @@ TEST(LossyAccuracy, ClusterVerticesFollowClusterError) {
     opt.lattice_box = c.lattice_box;
     const double diag = length(box.size());
     const double e = c.err * diag;
-    const double step = std::exp2(std::floor(std::log2(2.0 * e / std::sqrt(3.0))));
-    ASSERT_LE(step * std::sqrt(3.0) / 2, e);
-    ASSERT_GT(2 * step * std::sqrt(3.0) / 2, e);
+    const double s = std::exp2(std::floor(std::log2(2.0 * e / std::sqrt(3.0))));
+    ASSERT_LE(s * std::sqrt(3.0) / 2, e);
+    ASSERT_GT(2 * s * std::sqrt(3.0) / 2, e);
+    double step[3] = {s, s, s}, extent[3], ulp[3];
+    int order[3] = {0, 1, 2};
+    for (int a = 0; a < 3; ++a) {
+      extent[a] = double(box.hi[a]) - double(box.lo[a]);
+      ulp[a] = std::max(std::fabs(box.lo[a]), std::fabs(box.hi[a])) * 0x1p-24;
+    }
+    std::stable_sort(order, order + 3, [&](int a, int b) { return extent[a] > extent[b]; });
+    for (int a : order) {
+      double d2 = 0;
+      for (int b = 0; b < 3; ++b) d2 += std::pow((b == a ? step[b] : step[b] / 2) + ulp[b], 2);
+      if (std::sqrt(d2) <= e) step[a] *= 2;
+    }
     const double round = rounding(box);
     const ClusterTriangles ct = cluster_triangles(ptrs, opt);
     uint64_t expect_tris = 0;
@@ -523,13 +537,13 @@ TEST(LossyAccuracy, ClusterVerticesFollowClusterError) {
         for (int a = 0; a < 3; ++a) {
           const double d = std::fabs(double(dec[a]) - double(in[a]));
           d2 += d * d;
-          worst_axis = std::max(worst_axis, d / (step / 2));
-          if (d > step / 2 + round && over_axis++ < 3)
+          worst_axis = std::max(worst_axis, d / (step[a] / 2));
+          if (d > step[a] / 2 + round && over_axis++ < 3)
             first += " vertex " + std::to_string(g) + "/" + std::to_string(corner[j]) + " axis " +
                      std::to_string(a) + " off by " + std::to_string(d) + " > half the step " +
-                     std::to_string(step / 2) + ";";
-          const double q = (double(dec[a]) - double(box.lo[a])) / step;
-          if (std::fabs(q - std::nearbyint(q)) > round / step && off_lattice++ < 3)
+                     std::to_string(step[a] / 2) + ";";
+          const double q = (double(dec[a]) - double(box.lo[a])) / step[a];
+          if (std::fabs(q - std::nearbyint(q)) > round / step[a] && off_lattice++ < 3)
             first += " vertex " + std::to_string(g) + "/" + std::to_string(corner[j]) + " axis " +
                      std::to_string(a) + " at " + std::to_string(q) + " steps from the origin;";
         }
@@ -545,9 +559,10 @@ TEST(LossyAccuracy, ClusterVerticesFollowClusterError) {
         EXPECT_EQ(fan_seen[std::make_pair(g, f)] + 2, meshes[g].face_sizes[f])
             << "face " << g << "/" << f;
     std::printf(
-        "  cluster_error %.0e%s: step 2^%d, decoded axes within %.3f of step/2, vertices "
-        "within %.3f of cluster_error x diagonal\n",
-        c.err, given ? " (lattice_box)" : "", int(std::log2(step)), worst_axis, worst_vertex);
+        "  cluster_error %.0e%s: steps 2^%d, 2^%d, 2^%d, decoded axes within %.3f of step/2, "
+        "vertices within %.3f of cluster_error x diagonal\n",
+        c.err, given ? " (lattice_box)" : "", int(std::log2(step[0])), int(std::log2(step[1])),
+        int(std::log2(step[2])), worst_axis, worst_vertex);
     EXPECT_EQ(over_axis, 0u) << first;
     EXPECT_EQ(over_vertex, 0u) << first;
     EXPECT_EQ(off_lattice, 0u) << first;

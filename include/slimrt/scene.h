@@ -120,7 +120,7 @@ struct BuildOptions {
   int max_leaf_size = 4;  // primitives per leaf (triangles; pairs and sub-grids use their own)
   int threads = 0;        // build threads; 0 = all cores
   // Leaf::Clusters: every vertex lies within this fraction of the scene's box diagonal of its
-  // input position (the lattice step is the largest power of two meeting it).
+  // input position (the lattice's steps, one per axis, are the largest powers of two meeting it).
   double cluster_error = 1e-5;
   // The box the lossy formats derive their scene-wide quantities from (the cluster lattice's origin
   // and step, the grids' displacement bias); empty = the bounds of the meshes being built. A

@@ -1,4 +1,4 @@
-// Compressed triangle clusters: `cluster` (lossy, one scene-wide power-of-two lattice) and
+// Compressed triangle clusters: `cluster` (lossy, one scene-wide lattice, power-of-two steps) and
 // `cluster-lossless` (exact floats). Format: prim/cluster.h.
 //
 // Clusters come from the SAH BVH2, built with leaves of up to 64 triangles (the multi-leaf limit
@@ -365,12 +365,12 @@ template <bool kLossless>
 class ClusterScene : public BvhScene<ClusterLeaf<kLossless>> {
  public:
   using Leaf = ClusterLeaf<kLossless>;
-  // Every open: the lattice fields the decoders take as given (the anchors' widths), then the BVH.
+  // Every open: the lattice fields the decoders take as given (anchor widths, steps), then the BVH.
   void check_opened(bool deep) const override {
     if (!kLossless) {
-      const std::string bad = cluster::check_lattice(this->ctx.lattice);
-      if (!bad.empty())
-        throw SectionFault{"cluster.lattice", offsetof(ClusterLattice, anchor_bits), bad};
+      size_t at = 0;
+      const std::string bad = cluster::check_lattice(this->ctx.lattice, &at);
+      if (!bad.empty()) throw SectionFault{"cluster.lattice", at, bad};
     }
     this->check_bvh("", deep);
   }
@@ -486,7 +486,8 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   if (kLossless)  // clusters whose coordinates are decimals q x 10^-k (cluster.h, coordinate mode)
     d.emplace_back("decimal_cluster_fraction",
                    est.clusters ? double(est.decimal_clusters) / double(est.clusters) : 0.0);
-  d.emplace_back("lattice_step", kLossless ? 0.0 : double(lat.step));
+  for (int a = 0; a < 3; ++a)
+    d.emplace_back(std::string("lattice_step_") + "xyz"[a], kLossless ? 0.0 : double(lat.step[a]));
   d.emplace_back("lattice_coarsened", z->coarsened ? 1.0 : 0.0);
   // Bits of a cluster's anchors (cluster.h: lossy, the lattice's per-axis widths; lossless, the
   // start floats the anchors are derived from).

@@ -645,7 +645,7 @@ bool reaching_extents(const float* start, const Box3f& box, uint32_t (&first)[3]
     if (!(start[a] <= box.lo[a])) return false;
     for (code[a] = first[a];; ++code[a]) {
       if (code[a] > last) return false;
-      const float e = extent_of(code[a]);
+      const float e = extent_of(a, code[a]);
       if (e > 0.0f && std::isfinite(e) && std::fma(255.0f, e, start[a]) >= box.hi[a]) break;
     }
   }
@@ -663,17 +663,17 @@ bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f
   // step) - 1, need = the span / 255: that extent, at most need / 2, cannot reach the top.
   uint32_t first[3] = {0, 0, 0}, sc[3];
   for (int a = 0; a < 3; ++a) {
-    const float need = (box.hi[a] - start[a]) / 255.0f / lat.step;
+    const float need = (box.hi[a] - start[a]) / 255.0f / lat.step[a];
     if (need >= 4.0f && std::isfinite(need))
       first[a] = std::min<uint32_t>(uint32_t(std::ilogb(need) - 1), kMaxBoxScaleExp) << 3;
   }
   if (!reaching_extents(
           start, box, first, ((kMaxBoxScaleExp + 1) << 3) - 1,
-          [&](uint32_t c) { return box_extent(lat, c); }, sc))
+          [&](int a, uint32_t c) { return box_extent(lat, a, c); }, sc))
     return false;
   for (int a = 0; a < 3; ++a) {
     boxes.scale[a] = uint8_t(sc[a]);
-    extent[a] = box_extent(lat, sc[a]);
+    extent[a] = box_extent(lat, a, sc[a]);
   }
   extent[3] = 0.0f;
   return true;
@@ -695,7 +695,8 @@ bool write_exact_box_frame(const uint8_t* data, const Box3f& box, ExactBoxes8& b
     first[a] = std::max<uint32_t>(u >> 16, 0x0080);
   }
   if (!reaching_extents(
-          start, box, first, 0x7f7f, [](uint32_t c) { return bfloat16_float(uint16_t(c)); }, b))
+          start, box, first, 0x7f7f, [](int, uint32_t c) { return bfloat16_float(uint16_t(c)); },
+          b))
     return false;
   for (int a = 0; a < 3; ++a) {
     boxes.extent[a] = uint16_t(b[a]);
@@ -705,11 +706,21 @@ bool write_exact_box_frame(const uint8_t* data, const Box3f& box, ExactBoxes8& b
   return true;
 }
 
-std::string check_lattice(const ClusterLattice& lat) {
-  for (int a = 0; a < 3; ++a)
+std::string check_lattice(const ClusterLattice& lat, size_t* offset) {
+  for (int a = 0; a < 3; ++a) {
+    if (offset) *offset = offsetof(ClusterLattice, anchor_bits) + size_t(a);
     if (lat.anchor_bits[a] > 24)
       return "lattice anchor width " + std::to_string(lat.anchor_bits[a]) + " of axis " +
              std::to_string(a) + " beyond 24 bits";
+    // A positive normal power of two (mantissa 0) that box_extent's largest scale keeps finite.
+    uint32_t u;
+    std::memcpy(&u, &lat.step[a], 4);
+    const uint32_t exponent = u >> 23;
+    if (offset) *offset = offsetof(ClusterLattice, step) + 4 * size_t(a);
+    if ((u & 0x807fffffu) != 0 || exponent == 0 || exponent + kMaxBoxScaleExp + 1 >= 255)
+      return "lattice step " + std::to_string(lat.step[a]) + " of axis " + std::to_string(a) +
+             " is not a power of two in [2^-126, 2^102]";
+  }
   return {};
 }
 
@@ -856,9 +867,40 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
   return true;
 }
 
+constexpr uint32_t kLatticeMax = (1u << 24) - 1;  // the largest lattice code
+
+bool lattice_steps(double bound, const Box3f& box, double* step) {
+  double extent[3], slack[3];
+  for (int a = 0; a < 3; ++a) {
+    const bool empty = !(box.lo[a] <= box.hi[a]);
+    extent[a] = empty ? 0.0 : double(box.hi[a]) - double(box.lo[a]);
+    // Half an ulp (at most) of a decoded coordinate: origin + float(q) x step rounds once.
+    slack[a] = empty ? 0.0 : std::max(std::fabs(box.lo[a]), std::fabs(box.hi[a])) * 0x1p-24;
+  }
+  // s: the largest power of two with s sqrt(3) / 2 <= bound; per axis the extent must span fewer
+  // than kLatticeMax - 1 steps (else the step doubles: coarsened).
+  const double s = bound > 0 ? std::exp2(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) : 1.0;
+  bool within = true;
+  for (int a = 0; a < 3; ++a)
+    for (step[a] = s; extent[a] / step[a] > double(kLatticeMax) - 1; step[a] *= 2) within = false;
+  // Then 2s on an axis, the widest first, while the largest error (half a step and the decode's
+  // rounding per axis) stays within the bound: at most two axes (2s on all three would be a
+  // larger s).
+  int order[3] = {0, 1, 2};
+  std::stable_sort(order, order + 3, [&](int a, int b) { return extent[a] > extent[b]; });
+  for (int a : order) {
+    double e2 = 0;
+    for (int b = 0; b < 3; ++b) {
+      const double e = (b == a ? step[b] : step[b] / 2) + slack[b];
+      e2 += e * e;
+    }
+    if (bound > 0 && std::sqrt(e2) <= bound) step[a] *= 2;
+  }
+  return within;
+}
+
 Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_t ntris,
                    double rel_error, bool lossless, const Box3f& lattice_box) {
-  constexpr uint32_t kLatticeMax = (1u << 24) - 1;
   constexpr size_t kGrain = 4096;  // vertices or corners a task
   Quantized z;
   // The marks, the codes and each vertex's error are computed in parallel; the box and the error
@@ -874,30 +916,25 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
   if (!given)
     for (size_t i = 0; i < nv; ++i)
       if (used[i]) box.extend(vertices[i]);
-  double ext = 0, d2 = 0;
+  double d2 = 0;
   if (ntris || given)
     for (int a = 0; a < 3; ++a) {
       const double e = double(box.hi[a]) - double(box.lo[a]);
-      ext = std::max(ext, e);
       d2 += e * e;
     }
   z.diag = std::sqrt(d2);
   z.codes.assign(3 * nv, 0);
   z.decoded.assign(vertices, vertices + nv);
-  double step = 1.0;
+  double step[3] = {1.0, 1.0, 1.0};
   if (!lossless) {
     if (!(rel_error > 0.0) || !std::isfinite(rel_error))
       throw Error(
           "cluster: the error bound (BuildOptions::cluster_error) must be positive and finite");
-    // Rounding to the nearest lattice point moves a vertex by at most step * sqrt(3) / 2.
-    const double bound = rel_error * z.diag;
-    step = bound > 0 ? std::exp2(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) : 1.0;
-    while (ext / step > double(kLatticeMax) - 1) {
-      step *= 2;
-      z.coarsened = true;
+    z.coarsened = !lattice_steps(rel_error * z.diag, ntris || given ? box : Box3f(), step);
+    for (int a = 0; a < 3; ++a) {
+      z.lattice.step[a] = float(step[a]);
+      z.lattice.origin[a] = ntris || given ? box.lo[a] : 0.0f;
     }
-    z.lattice.step = float(step);
-    for (int a = 0; a < 3; ++a) z.lattice.origin[a] = ntris || given ? box.lo[a] : 0.0f;
   }
   // Per used vertex: its distance to its input position, and that squared.
   LargeArray<double> err(2 * nv);  // huge pages: the first touch of 4 KB pages is slow here
@@ -911,7 +948,7 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
               continue;
             }
             const double q =
-                std::nearbyint((double(vertices[i][a]) - double(z.lattice.origin[a])) / step);
+                std::nearbyint((double(vertices[i][a]) - double(z.lattice.origin[a])) / step[a]);
             const uint32_t qi = uint32_t(std::clamp(q, 0.0, double(kLatticeMax)));
             z.codes[3 * i + a] = qi;
             z.decoded[i][a] = lattice_coord(z.lattice, a, qi);
@@ -932,8 +969,8 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
   if (!lossless && (ntris || given))
     for (int a = 0; a < 3; ++a)
       top[a] = uint32_t(
-          std::clamp(std::nearbyint((double(box.hi[a]) - double(z.lattice.origin[a])) / step), 0.0,
-                     double(kLatticeMax)));
+          std::clamp(std::nearbyint((double(box.hi[a]) - double(z.lattice.origin[a])) / step[a]),
+                     0.0, double(kLatticeMax)));
   double sum_sq = 0, sum = 0;
   uint64_t n = 0;
   for (size_t i = 0; i < nv; ++i) {

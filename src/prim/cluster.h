@@ -80,7 +80,8 @@
 // when the bits save more than their ntris bits cost.
 //
 // Lossy (`cluster`): a vertex's code is its lattice integer q = round((x - origin) / step) per
-// axis, decoded as origin + float(q) * step. Every cluster decodes a vertex with the same float
+// axis, decoded as origin + float(q) * step (a power of two per axis: the largest that meet the
+// error bound, lattice_steps). Every cluster decodes a vertex with the same float
 // operations from the same integer (the product is exact: q < 2^24, step a power of two), so a
 // vertex shared by clusters decodes bit-identically in all of them and the watertight test
 // (core/watertight.h) sees one closed surface.
@@ -132,15 +133,15 @@ namespace slim {
 // The scene-wide lattice of the lossy variant.
 struct ClusterLattice {
   float origin[3] = {0, 0, 0};
-  float step = 1.0f;  // a power of two
+  float step[3] = {1.0f, 1.0f, 1.0f};  // per axis a power of two (quantize)
   // Bits of a lossy cluster's anchor per axis (<= 24): bit_width of the largest lattice code a
   // vertex of the scene can take on the axis (quantize: from the lattice's box, which a chunked
   // build shares with the other chunks). The anchors of canyon:1024 take 16 bits.
   uint8_t anchor_bits[3] = {24, 24, 24};
   uint8_t pad = 0;
 };
-static_assert(sizeof(ClusterLattice) == 20 && offsetof(ClusterLattice, step) == 12,
-              "origin[3], step, the anchor widths");
+static_assert(sizeof(ClusterLattice) == 28 && offsetof(ClusterLattice, step) == 12,
+              "origin[3], step[3], the anchor widths");
 
 #pragma pack(push, 1)
 struct ClusterHeader {
@@ -283,14 +284,14 @@ SLIM_INLINE uint32_t lossless_anchor(uint32_t start_bits, uint32_t mode, uint32_
 
 // The one decoding of a lossy coordinate (build and traversal use this function only).
 SLIM_INLINE float lattice_coord(const ClusterLattice& lat, int axis, uint32_t q) {
-  return lat.origin[axis] + float(q) * lat.step;  // the product is exact (power-of-two step)
+  return lat.origin[axis] + float(q) * lat.step[axis];  // exact product: a power-of-two step
 }
 
 // ---- the lossy clusters' multi-leaf boxes (ClusterLeaf<false>, traverse.h HasMultiLeafBoxes) ----
 // A MultiLeaf8 spends 24 of its 72 bytes on a float start and extent per axis. A lossy cluster's
 // lowest vertex lies on the lattice at its anchor (the stream's first field), so its boxes start
 // there, start_a = lattice_coord(anchor_a), and the extent (one of the 255 steps) is one scale
-// byte per axis, e << 3 | m: extent_a = (8 + m) 2^e x step / 8, at most 1/8 above the smallest
+// byte per axis, e << 3 | m: extent_a = (8 + m) 2^e x step_a / 8, at most 1/8 above the smallest
 // extent that reaches the cluster's top (a power of two alone would waste up to 2x in looser child
 // boxes). The planes decode as a QNode8's, start + q x extent with one fma, so the traversal tests
 // them with the same instructions; the builder takes the smallest scale whose q = 255 decodes at or
@@ -328,9 +329,9 @@ SLIM_INLINE bool extent_ok(uint16_t b) { return b >= 0x0080 && b < 0x7f80; }
 // power of two: mantissa 0) with e added to its exponent and m as its top 3 mantissa bits, which
 // is (8 + m) 2^e x step / 8 while the step and the result are normal floats, in 2 integer
 // instructions.
-SLIM_INLINE float box_extent(const ClusterLattice& lat, uint32_t scale) {
+SLIM_INLINE float box_extent(const ClusterLattice& lat, int axis, uint32_t scale) {
   uint32_t u;
-  std::memcpy(&u, &lat.step, 4);
+  std::memcpy(&u, &lat.step[axis], 4);
   u += (scale & 0xff) << 20;
   float f;
   std::memcpy(&f, &u, 4);
@@ -899,13 +900,13 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
   auto mask = [](uint32_t w) { return _mm256_set1_epi32(int(uint32_t((uint64_t(1) << w) - 1))); };
   // Per-axis constants, broadcast once for the 3 corners.
   __m256i anchors[3], masks[3];
-  __m256 origins[3];
+  __m256 origins[3], steps[3];
   for (int a = 0; a < 3; ++a) {
     anchors[a] = _mm256_set1_epi32(int(anchor[a]));
     masks[a] = mask(axis_bits(h, a));
     origins[a] = _mm256_set1_ps(lat.origin[a]);
+    steps[a] = _mm256_set1_ps(lat.step[a]);
   }
-  const __m256 step = _mm256_set1_ps(lat.step);
   const uint32_t mode = coord_mode(h);
   __m256d inv_pow10[3] = {};
   if (kLossless && mode)
@@ -919,7 +920,7 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
                : key_floats8(code);
     } else {
       // q < 2^24: the signed conversion is the scalar float(q).
-      x = _mm256_add_ps(origins[a], _mm256_mul_ps(_mm256_cvtepi32_ps(code), step));
+      x = _mm256_add_ps(origins[a], _mm256_mul_ps(_mm256_cvtepi32_ps(code), steps[a]));
     }
     _mm256_store_ps(d.v[k][a], x);
   };
@@ -964,7 +965,6 @@ SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const ui
       _mm256_min_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), _mm256_set1_epi32(d.n - 1));
   const __m256i packed = _mm256_permutevar8x32_epi32(load(tri), lanes);
   const __m256i rpos = load(r.pos), rw = load(r.w);
-  const __m256 step = _mm256_set1_ps(lat.step);
   // Every corner's child at once, byte by byte: the children 1..7 whose first (at most 255: a
   // vertex number is at most 254) lies at or below the vertex, each compare -1 where it does.
   __m256i children = _mm256_setzero_si256();
@@ -1003,7 +1003,8 @@ SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const ui
       // The code is below 2^31 for any block check() accepts (below 2^24 for one the encoder
       // wrote): the signed conversion is the scalar float(q); the sum rounds as lattice_coord's.
       _mm256_store_ps(d.v[k][a], _mm256_add_ps(_mm256_set1_ps(lat.origin[a]),
-                                               _mm256_mul_ps(_mm256_cvtepi32_ps(code), step)));
+                                               _mm256_mul_ps(_mm256_cvtepi32_ps(code),
+                                                             _mm256_set1_ps(lat.step[a]))));
     }
   }
 }
@@ -1216,19 +1217,17 @@ struct LatticeFrame {
   alignas(16) uint32_t shift[4] = {};
   alignas(16) uint32_t mask[4] = {};
   alignas(16) float origin[4] = {};        // lane 3: 0
-  alignas(16) float step[4] = {};          // 4 x lat.step
-  alignas(16) uint32_t step_bits[4] = {};  // 4 x lat.step's bits
+  alignas(16) float step[4] = {};          // lat.step, lane 3: 0
+  alignas(16) uint32_t step_bits[4] = {};  // lat.step's bits, lane 3: 0
   uint32_t first[3] = {}, width[3] = {};
 };
 SLIM_INLINE LatticeFrame lattice_frame(const ClusterLattice& lat) {
   LatticeFrame f;
   f.lat = lat;
-  uint32_t step_bits;
-  std::memcpy(&step_bits, &lat.step, 4);
-  for (int a = 0; a < 4; ++a) {
-    f.origin[a] = a < 3 ? lat.origin[a] : 0.0f;
-    f.step[a] = lat.step;
-    f.step_bits[a] = step_bits;
+  for (int a = 0; a < 3; ++a) {
+    f.origin[a] = lat.origin[a];
+    f.step[a] = lat.step[a];
+    std::memcpy(&f.step_bits[a], &lat.step[a], 4);
   }
   uint32_t o = 0;
   for (int a = 0; a < 3; ++a) {
@@ -1282,7 +1281,7 @@ SLIM_INLINE void box_frame(const LatticeFrame& f, const uint8_t* p, float* start
                                   _mm_load_si128(reinterpret_cast<const __m128i*>(f.step_bits)));
   _mm_storeu_ps(extent, _mm_castsi128_ps(e));
 #else
-  for (int a = 0; a < 3; ++a) extent[a] = box_extent(f.lat, scale[a]);
+  for (int a = 0; a < 3; ++a) extent[a] = box_extent(f.lat, a, scale[a]);
   extent[3] = 0.0f;
 #endif
 }
@@ -1388,9 +1387,9 @@ uint64_t next_cache_tag();
 // fails).
 bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterLattice& lat,
            bool lossless, std::string* why, const uint8_t* boxes = nullptr);
-// The lattice fields the decoders take as given (lossy: anchor widths of at most 24 bits), else
-// what is wrong.
-std::string check_lattice(const ClusterLattice& lat);
+// The lattice fields the decoders take as given (lossy: anchor widths of at most 24 bits, steps
+// powers of two that box_extent keeps finite), else what is wrong (and its byte in `offset`).
+std::string check_lattice(const ClusterLattice& lat, size_t* offset = nullptr);
 
 // Per-scene encoding figures (info --clusters). The four parts add up to the clusters' bytes
 // (but for the padding to whole bytes and of short streams to kMinStreamBytes).
@@ -1441,15 +1440,22 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
 bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const uint32_t* counts,
                      int k, const uint32_t* anchor, LatticeBoxes8& out);
 
+// The lossy lattice's steps (per axis a power of two) for an error bound (rel_error x the box
+// diagonal) over `box` (empty: steps 1): s, the largest power of two with s sqrt(3) / 2 <= bound
+// (rounding to the nearest lattice point moves a vertex by at most half a step per axis), or 2s on
+// one or two axes (the widest first) where the bound still holds with the decode's rounding (half
+// an ulp of the box's largest coordinate per axis); an axis is coarsened (its step doubled) until
+// the box's extent spans fewer than 2^24 - 1 steps (so that every offset fits a block's 24 bits
+// and float(q) is exact). Returns false if an axis was coarsened (the bound may not hold).
+bool lattice_steps(double bound, const Box3f& box, double* step);
+
 // Codes and decoded positions of the vertices that the triangles use (others: code 0, position
-// unchanged). Lossy: origin = the box minimum, step = the largest power of two with
-// step * sqrt(3) / 2 <= rel_error x the box diagonal, coarsened (doubled) until the box extent
-// spans fewer than 2^24 - 1 steps (so that every offset fits a block's 24 bits and float(q) is
-// exact). The box is `lattice_box` when it is not empty (BuildOptions::lattice_box, which must
-// contain the vertices: meshes quantized with the same box share one lattice, so a vertex they
-// share gets the same code and decodes to the same bits in each), else the used vertices' box.
-// The lattice's anchor_bits: per axis the bit width of the largest code of the box (or of a used
-// vertex, if larger). Lossless: the order keys of the exact floats.
+// unchanged). Lossy: origin = the box minimum, the steps lattice_steps'. The box is `lattice_box`
+// when it is not empty (BuildOptions::lattice_box, which must contain the vertices: meshes
+// quantized with the same box share one lattice, so a vertex they share gets the same code and
+// decodes to the same bits in each), else the used vertices' box. The lattice's anchor_bits: per
+// axis the bit width of the largest code of the box (or of a used vertex, if larger). Lossless: the
+// order keys of the exact floats.
 struct Quantized {
   ClusterLattice lattice;
   bool coarsened = false;

@@ -695,6 +695,7 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
     std::string what;  // what the corruption does
     std::function<void(std::string&)> corrupt;
     std::string section, message;  // expected in the error
+    int64_t field = -1;            // if >= 0: the offset in the section the error names
   };
   auto far_node = [](RefTag tag) {
     return [tag](std::string& b) {
@@ -845,20 +846,38 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
        [](std::string& b) { put32(b, section(b, "costa.offsets").offset, 0x40000000u); },
        "costa.offsets", "first primitive offset not 0"},
       {"costa-P", "offset predictor",
-       [](std::string& b) { put64(b, section(b, "costa.params").offset + 8, uint64_t(1) << 61); },
-       "costa.params", "offset predictor out of range"},
+       [](std::string& b) {
+         put64(b, section(b, "costa.params").offset + offsetof(CostaParams, residual_min),
+               uint64_t(1) << 61);
+       },
+       "costa.params", "offset predictor out of range", offsetof(CostaParams, residual_min)},
       {"costa-F", "packed face entries", every("costa.packed_faces", 4, 0, 0xffffffffu),
        "costa.packed_faces", "face entry"},
       // Entries of 0 bits would cost no bytes: a face range beyond any bound the file sets.
       {"costa-F", "packed face width 0",
-       [](std::string& b) { put32(b, section(b, "costa.params").offset + 44, 0); }, "costa.params",
-       "face entry width outside 1..32 bits"},
+       [](std::string& b) {
+         put32(b, section(b, "costa.params").offset + offsetof(CostaParams, face_bits), 0);
+       },
+       "costa.params", "face entry width outside 1..32 bits", offsetof(CostaParams, face_bits)},
       {"costa-PFV", "face map",
-       [](std::string& b) { put32(b, section(b, "costa.params").offset + 48, 40); }, "costa.params",
-       "face map width"},
+       [](std::string& b) {
+         put32(b, section(b, "costa.params").offset + offsetof(CostaParams, face_width), 40);
+       },
+       "costa.params", "face map width", offsetof(CostaParams, face_width)},
       {"costa-PF", "primitive count",
-       [](std::string& b) { put32(b, section(b, "costa.params").offset + 56, 0x7fffffffu); },
-       "costa.params", "primitive count beyond what the leaf blocks can hold"},
+       [](std::string& b) {
+         put32(b, section(b, "costa.params").offset + offsetof(CostaParams, prim_count),
+               0x7fffffffu);
+       },
+       "costa.params", "primitive count beyond what the leaf blocks can hold",
+       offsetof(CostaParams, prim_count)},
+      // The lossy lattice's steps: powers of two (box_extent adds to their exponents).
+      {"cluster", "lattice step",
+       [](std::string& b) {
+         put32(b, section(b, "cluster.lattice").offset + offsetof(ClusterLattice, step) + 4,
+               0x3f800001u);
+       },
+       "cluster.lattice", "lattice step", offsetof(ClusterLattice, step) + 4},
   };
   int checked = 0;
   for (const Case& c : cases) {
@@ -874,6 +893,10 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
     EXPECT_NE(msg.find(bad), std::string::npos) << msg;
     EXPECT_NE(msg.find("section '" + c.section + "', offset"), std::string::npos) << msg;
     EXPECT_NE(msg.find(c.message), std::string::npos) << msg;
+    if (c.field >= 0) {
+      const uint64_t at = section(read_all(path), c.section).offset + uint64_t(c.field);
+      EXPECT_NE(msg.find("offset " + std::to_string(at) + ":"), std::string::npos) << msg;
+    }
     // Without the structure check, the section checksums catch the same bytes.
     EXPECT_NE(try_open(bad, b, {}, rays).find("checksum"), std::string::npos);
     ++checked;

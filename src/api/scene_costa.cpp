@@ -93,12 +93,7 @@ class CostaScene : public BvhScene<CostaLeaf<P, F, V>> {
     v.array("costa.qvertices", r.qvertices, n.qvertices);
     v.array("costa.face_map", c.faces.bits, face_map_bytes);
     v.array("costa.face_base", c.faces.face_base, face_base);
-    struct {
-      double avg;
-      int64_t residual_min;
-      VertexQuantizer quant;
-      uint32_t residual_bits, face_bits, face_width, mesh_count, prim_count, reserved;
-    } k;
+    CostaParams k;
     std::memset(static_cast<void*>(&k), 0, sizeof k);
     k.avg = r.avg;
     k.residual_min = r.residual_min;

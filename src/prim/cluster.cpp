@@ -5,6 +5,7 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <iterator>
 #include <memory>
@@ -717,9 +718,12 @@ std::string check_lattice(const ClusterLattice& lat, size_t* offset) {
     std::memcpy(&u, &lat.step[a], 4);
     const uint32_t exponent = u >> 23;
     if (offset) *offset = offsetof(ClusterLattice, step) + 4 * size_t(a);
-    if ((u & 0x807fffffu) != 0 || exponent == 0 || exponent + kMaxBoxScaleExp + 1 >= 255)
-      return "lattice step " + std::to_string(lat.step[a]) + " of axis " + std::to_string(a) +
-             " is not a power of two in [2^-126, 2^102]";
+    if ((u & 0x807fffffu) != 0 || exponent == 0 || exponent + kMaxBoxScaleExp + 1 >= 255) {
+      char bits[16];
+      std::snprintf(bits, sizeof bits, "0x%08x", u);
+      return "lattice step of axis " + std::to_string(a) + " (float bits " + bits +
+             ") is not a power of two in [2^-126, 2^102]";
+    }
   }
   return {};
 }

@@ -18,6 +18,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <type_traits>
@@ -73,6 +74,15 @@ struct CostaFaceMap {
   }
 };
 
+// A Costa scene file's section costa.params (api/scene_costa.cpp): the store's scalars.
+struct CostaParams {
+  double avg;
+  int64_t residual_min;
+  VertexQuantizer quant;
+  uint32_t residual_bits, face_bits, face_width, mesh_count, prim_count, reserved;
+};
+static_assert(sizeof(CostaParams) == 64, "costa.params is 64 bytes");
+
 template <bool P, bool F, bool V>
 struct CostaLeaf {
   struct Context {
@@ -91,38 +101,48 @@ struct CostaLeaf {
   // their sizes are.
   static constexpr uint32_t kLeafAlign = 8;
 
-  // Scene files' structure check (OpenOptions::check_structure) of the store's parameters: bit
-  // widths the readers take, a linear predictor whose sums fit int64 (predict_offset), a face
-  // map whose mesh search stays inside face_base.
-  static const char* check_params(const Context& ctx) {
-    const auto& r = ctx.view.r;
-    if constexpr (P) {
-      if (r.residual_bits > 32) return "offset residual width beyond 32 bits (costa.params)";
-      const double avg = r.avg;
-      const int64_t min = r.residual_min, lim = int64_t(1) << 60;
-      if (!(avg >= 0.0 && avg * (double(ctx.prim_count) + 1.0) < 0x1p62) || min < -lim || min > lim)
-        return "offset predictor out of range (costa.params)";
-    }
-    if constexpr (F)  // 0 bits only in an empty store (entries of 0 bits would cost no bytes)
-      if (r.face_bits > 32 || (r.face_bits == 0 && ctx.prim_count > 0))
-        return "face entry width outside 1..32 bits (costa.params)";
-    const CostaFaceMap& m = ctx.faces;
-    if (m.width > 32) return "face map width beyond 32 bits (costa.params)";
-    if (uint64_t(m.mesh_count) + 1 > ctx.face_base_count)
-      return "mesh count beyond the face bases (costa.face_base)";
-    if (m.mesh_count > 1 && m.face_base[0] != 0) return "first face base not 0 (costa.face_base)";
-    return nullptr;
-  }
-  // Whether bit_read(data, width, i) stays inside `bytes` (it loads 8 bytes).
-  static bool bits_readable(uint64_t bytes, uint32_t width, uint64_t i) {
-    return ((i * width) >> 3) + 8 <= bytes;
-  }
   // What check_store found wrong: the section and byte offset of the field, and what.
   struct StoreFault {
     const char* section = nullptr;
     uint64_t offset = 0;
     const char* what = nullptr;
   };
+  // Scene files' structure check (OpenOptions::check_structure) of the store's parameters: bit
+  // widths the readers take, a linear predictor whose sums fit int64 (predict_offset), a face
+  // map whose mesh search stays inside face_base. The fields' offsets are CostaParams'.
+  static StoreFault check_params(const Context& ctx) {
+    auto param = [](uint64_t offset, const char* what) {
+      return StoreFault{"costa.params", offset, what};
+    };
+    const auto& r = ctx.view.r;
+    if constexpr (P) {
+      if (r.residual_bits > 32)
+        return param(offsetof(CostaParams, residual_bits), "offset residual width beyond 32 bits");
+      const double avg = r.avg;
+      const int64_t min = r.residual_min, lim = int64_t(1) << 60;
+      if (!(avg >= 0.0 && avg * (double(ctx.prim_count) + 1.0) < 0x1p62))
+        return param(offsetof(CostaParams, avg), "offset predictor out of range (its slope)");
+      if (min < -lim || min > lim)
+        return param(offsetof(CostaParams, residual_min),
+                     "offset predictor out of range (its smallest residual)");
+    }
+    if constexpr (F)  // 0 bits only in an empty store (entries of 0 bits would cost no bytes)
+      if (r.face_bits > 32 || (r.face_bits == 0 && ctx.prim_count > 0))
+        return param(offsetof(CostaParams, face_bits), "face entry width outside 1..32 bits");
+    const CostaFaceMap& m = ctx.faces;
+    if (m.width > 32)
+      return param(offsetof(CostaParams, face_width), "face map width beyond 32 bits");
+    if (uint64_t(m.mesh_count) + 1 > ctx.face_base_count)
+      return param(offsetof(CostaParams, mesh_count),
+                   "mesh count beyond the face bases (costa.face_base)");
+    if (m.mesh_count > 1 && m.face_base[0] != 0)
+      return {"costa.face_base", 0, "first face base not 0"};
+    return {};
+  }
+  // Whether bit_read(data, width, i) stays inside `bytes` (it loads 8 bytes).
+  static bool bits_readable(uint64_t bytes, uint32_t width, uint64_t i) {
+    return ((i * width) >> 3) + 8 <= bytes;
+  }
   // The store's primitives, once per opened scene before the leaf walk (the scene's
   // check_opened): each primitive's two offsets readable, 3+ face entries inside the face array,
   // each naming a vertex inside the vertex array, its face map entry readable. Offsets rise by 3+
@@ -132,9 +152,10 @@ struct CostaLeaf {
   // naming it). prim_count itself is bounded by the leaf arena (kBlockPrims per block), the face
   // entries by the face array's bytes (packed entries take 1+ bits: check_params).
   static StoreFault check_store(const Context& ctx, uint64_t leaf_bytes) {
-    if (const char* e = check_params(ctx)) return {"costa.params", 0, e};
+    if (const StoreFault f = check_params(ctx); f.what) return f;
     if (uint64_t(ctx.prim_count) > leaf_bytes / kBlockBytes * kBlockPrims)
-      return {"costa.params", 0, "primitive count beyond what the leaf blocks can hold"};
+      return {"costa.params", offsetof(CostaParams, prim_count),
+              "primitive count beyond what the leaf blocks can hold"};
     const CostaView<P, F, V>& s = ctx.view;
     const QuantizedMesh::Counts& n = ctx.counts;
     const char* offsets = P ? "costa.residuals" : "costa.offsets";

@@ -1261,6 +1261,49 @@ TEST(ClusterScene, CoarserAxesWhereTheBoundAllows) {
   EXPECT_LT(bits[1], bits[0] - 0.4);  // about 2/3 of a bit a coordinate
 }
 
+// A terrain's grid rows lie on a lattice 2^k times coarser than the bound needs: x and y take that
+// step (their codes k bits shorter), z keeps the bound's. The vertices decode to the same bits as
+// on the lattice of a given box (which keeps the box's steps, as every piece of a chunked build
+// derives them): the same hits bit for bit, in fewer position bits.
+TEST(ClusterScene, ExactAxesTakeTheirCoarserLattice) {
+  const PolyMesh grid = load("terrain:64");
+  BuildOptions own = BuildOptions::from_config("cluster"), boxed = own;
+  boxed.lattice_box = grid.bounds();
+  const Scene s = Scene::build(grid, own), sb = Scene::build(grid, boxed);
+  std::string why;
+  ASSERT_TRUE(s.validate(&why)) << why;
+  ASSERT_TRUE(sb.validate(&why)) << why;
+  const double z = detail(s, "lattice_step_z");
+  EXPECT_EQ(detail(sb, "lattice_step_z"), z);
+  for (const char* k : {"lattice_step_x", "lattice_step_y"}) {
+    EXPECT_EQ(detail(sb, k), z) << k;
+    const double ratio = detail(s, k) / z;
+    EXPECT_GE(ratio, 16) << k;
+    EXPECT_EQ(ratio, std::exp2(std::round(std::log2(ratio)))) << k;  // a power of two
+  }
+  EXPECT_LT(detail(s, "position_bits_avg"), detail(sb, "position_bits_avg") - 2);
+  EXPECT_LT(s.memory().total(), sb.memory().total());
+  EXPECT_EQ(detail(s, "max_error"), detail(sb, "max_error"));
+  const ClusterTriangles a = cluster_triangles({&grid}, own), b = cluster_triangles({&grid}, boxed);
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t i = 0; i < a.vertices.size(); ++i)
+    for (int c = 0; c < 3; ++c)
+      ASSERT_EQ(bits_of(a.vertices[i][c]), bits_of(b.vertices[i][c])) << i;
+  Rng rng(12);
+  int hits = 0;
+  for (int i = 0; i < 2000; ++i) {
+    const Ray r = random_ray(rng, s.bounds());
+    const Hit h = s.intersect(r), hb = sb.intersect(r);
+    hits += h.valid();
+    ASSERT_EQ(h.valid(), hb.valid()) << i;
+    ASSERT_EQ(bits_of(h.t), bits_of(hb.t)) << i;
+    ASSERT_EQ(bits_of(h.u), bits_of(hb.u)) << i;
+    ASSERT_EQ(bits_of(h.v), bits_of(hb.v)) << i;
+    ASSERT_EQ(h.primID, hb.primID) << i;
+  }
+  EXPECT_GT(hits, 500);
+}
+
 TEST(ClusterScene, BadInput) {
   PolyMesh m;
   m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {NAN, 0, 0}, {1, 1, 0}, {1, 0, 0}};

@@ -878,6 +878,13 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
                0x3f800001u);
        },
        "cluster.lattice", "lattice step", offsetof(ClusterLattice, step) + 4},
+      // A valid step so large that the multi-leaves' scales overflow its exponent.
+      {"cluster", "lattice step 2^127",
+       [](std::string& b) {
+         put32(b, section(b, "cluster.lattice").offset + offsetof(ClusterLattice, step),
+               0x7f000000u);
+       },
+       "bvh.leaves", "gives no positive finite extent on the lattice"},
   };
   int checked = 0;
   for (const Case& c : cases) {

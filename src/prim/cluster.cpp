@@ -713,16 +713,17 @@ std::string check_lattice(const ClusterLattice& lat, size_t* offset) {
     if (lat.anchor_bits[a] > 24)
       return "lattice anchor width " + std::to_string(lat.anchor_bits[a]) + " of axis " +
              std::to_string(a) + " beyond 24 bits";
-    // A positive normal power of two (mantissa 0) that box_extent's largest scale keeps finite.
+    // A positive normal power of two (mantissa 0); box_extent adds the scales to its exponent
+    // (the multi-leaves' extents are checked finite where they are read in).
     uint32_t u;
     std::memcpy(&u, &lat.step[a], 4);
     const uint32_t exponent = u >> 23;
     if (offset) *offset = offsetof(ClusterLattice, step) + 4 * size_t(a);
-    if ((u & 0x807fffffu) != 0 || exponent == 0 || exponent + kMaxBoxScaleExp + 1 >= 255) {
+    if ((u & 0x807fffffu) != 0 || exponent == 0 || exponent == 255) {
       char bits[16];
       std::snprintf(bits, sizeof bits, "0x%08x", u);
       return "lattice step of axis " + std::to_string(a) + " (float bits " + bits +
-             ") is not a power of two in [2^-126, 2^102]";
+             ") is not a positive normal power of two";
     }
   }
   return {};
@@ -977,14 +978,37 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
                      0.0, double(kLatticeMax)));
   double sum_sq = 0, sum = 0;
   uint64_t n = 0;
+  uint32_t any[3] = {0, 0, 0};  // the codes' bits, or-ed
   for (size_t i = 0; i < nv; ++i) {
     if (!used[i]) continue;
-    for (int a = 0; a < 3; ++a) top[a] = std::max(top[a], z.codes[3 * i + a]);
+    for (int a = 0; a < 3; ++a) {
+      top[a] = std::max(top[a], z.codes[3 * i + a]);
+      any[a] |= z.codes[3 * i + a];
+    }
     z.max_error = std::max(z.max_error, err[2 * i]);
     sum += err[2 * i];
     sum_sq += err[2 * i + 1];
     n++;
   }
+  // An axis whose codes all end in k zero bits (every vertex on a 2^k times coarser lattice, as
+  // the rows of a terrain's grid) takes the step 2^k step and the codes q >> k: float(q >> k) x
+  // (2^k step) is the product float(q) x step (exact: q < 2^24, powers of two), so every vertex
+  // decodes to the same bits, in k bits less. Only on the vertices' own box: pieces quantized on a
+  // given box keep the box's steps, which every piece derives alike.
+  if (!lossless && !given)
+    for (int a = 0; a < 3; ++a) {
+      uint32_t u;
+      std::memcpy(&u, &z.lattice.step[a], 4);
+      const uint32_t k = any[a] ? std::min(uint32_t(__builtin_ctz(any[a])), 254 - (u >> 23)) : 0;
+      if (!k) continue;  // (an axis of codes 0 alone, a flat one, keeps its step)
+      z.lattice.step[a] = std::ldexp(z.lattice.step[a], int(k));
+      for (size_t i = 0; i < nv; ++i) {
+        z.codes[3 * i + a] >>= k;
+        if (used[i] && lattice_coord(z.lattice, a, z.codes[3 * i + a]) != z.decoded[i][a])
+          throw std::logic_error("cluster: a coarser exact axis moved a vertex");
+      }
+      top[a] >>= k;
+    }
   if (!lossless)
     for (int a = 0; a < 3; ++a) z.lattice.anchor_bits[a] = uint8_t(bit_width(top[a]));
   z.rms_error = n ? std::sqrt(sum_sq / double(n)) : 0.0;

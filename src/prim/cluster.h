@@ -1388,7 +1388,7 @@ uint64_t next_cache_tag();
 bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterLattice& lat,
            bool lossless, std::string* why, const uint8_t* boxes = nullptr);
 // The lattice fields the decoders take as given (lossy: anchor widths of at most 24 bits, steps
-// powers of two that box_extent keeps finite), else what is wrong (and its byte in `offset`).
+// positive normal powers of two), else what is wrong (and its byte in `offset`).
 std::string check_lattice(const ClusterLattice& lat, size_t* offset = nullptr);
 
 // Per-scene encoding figures (info --clusters). The four parts add up to the clusters' bytes
@@ -1498,10 +1498,16 @@ struct ClusterLeaf {
   static std::string check_multileaf(const Context& ctx, const uint8_t* data, uint32_t k,
                                      uint64_t avail) {
     if constexpr (!kLossless) {  // the box scales right before the data (the walk checked them in)
-      for (const uint8_t* sc = data - 3; sc < data; ++sc)
-        if (uint32_t(*sc >> 3) > cluster::kMaxBoxScaleExp)
-          return "multi-leaf box scale exponent " + std::to_string(*sc >> 3) + " beyond " +
+      for (int a = 0; a < 3; ++a) {
+        const uint8_t sc = data[a - 3];
+        if (uint32_t(sc >> 3) > cluster::kMaxBoxScaleExp)
+          return "multi-leaf box scale exponent " + std::to_string(sc >> 3) + " beyond " +
                  std::to_string(cluster::kMaxBoxScaleExp);
+        const float e = cluster::box_extent(ctx.lattice, a, sc);  // the axis's step and scale
+        if (!(e > 0.0f) || !std::isfinite(e))
+          return "multi-leaf box scale " + std::to_string(sc) + " of axis " + std::to_string(a) +
+                 " gives no positive finite extent on the lattice";
+      }
     } else {  // the box extents right before the data
       uint16_t e[3];
       std::memcpy(e, data - sizeof(e), sizeof(e));

@@ -1232,6 +1232,23 @@ TEST(ClusterCodec, LatticeStepsPerAxis) {
   EXPECT_LE(1e6 / step[0], double((1u << 24) - 1));
   EXPECT_EQ(step[1], step[2]);  // only x coarsened
   EXPECT_LT(step[1], step[0]);
+  // Steps stay normal floats whose box extents are finite: a bound beyond the box gives the
+  // widest extent's power of two, one below the smallest normal float that float (coarsened),
+  // a bound beyond 2^102 that step, coordinates beyond 2^126 an error.
+  ASSERT_TRUE(cluster::lattice_steps(1e40, box, step));
+  for (int a = 0; a < 3; ++a) EXPECT_EQ(step[a], 4.0) << a;
+  EXPECT_FALSE(cluster::lattice_steps(1e-45, Box3f({0, 0, 0}, {1e-37f, 1e-37f, 1e-37f}), step));
+  for (int a = 0; a < 3; ++a) EXPECT_EQ(step[a], 0x1p-126) << a;
+  EXPECT_THROW(cluster::lattice_steps(1e30, Box3f({-3e38f, 0, 0}, {3e38f, 1, 1}), step), Error);
+  ASSERT_TRUE(cluster::lattice_steps(1e36, Box3f({-1e33f, 0, 0}, {1e33f, 1, 1}), step));
+  EXPECT_EQ(step[0], 0x1p102);  // the largest step a lattice takes, 2^9 of them span the box
+  PolyMesh sphere = icosphere(2);
+  BuildOptions opt = BuildOptions::from_config("cluster");
+  opt.cluster_error = 1e30;
+  const Scene coarse = Scene::build(sphere, opt);
+  std::string why;
+  EXPECT_TRUE(coarse.validate(&why)) << why;
+  EXPECT_LE(detail(coarse, "lattice_step_x"), 4.0);
 }
 
 // A scene on such a lattice: two axes of 2s at r = 3.2, none at r = 2.2; every vertex within the
@@ -1273,11 +1290,9 @@ TEST(ClusterScene, ExactAxesTakeTheirCoarserLattice) {
   std::string why;
   ASSERT_TRUE(s.validate(&why)) << why;
   ASSERT_TRUE(sb.validate(&why)) << why;
-  const double z = detail(s, "lattice_step_z");
-  EXPECT_EQ(detail(sb, "lattice_step_z"), z);
+  EXPECT_EQ(detail(s, "lattice_step_z"), detail(sb, "lattice_step_z"));
   for (const char* k : {"lattice_step_x", "lattice_step_y"}) {
-    EXPECT_EQ(detail(sb, k), z) << k;
-    const double ratio = detail(s, k) / z;
+    const double ratio = detail(s, k) / detail(sb, k);
     EXPECT_GE(ratio, 16) << k;
     EXPECT_EQ(ratio, std::exp2(std::round(std::log2(ratio)))) << k;  // a power of two
   }

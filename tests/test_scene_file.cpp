@@ -878,13 +878,14 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
                0x3f800001u);
        },
        "cluster.lattice", "lattice step", offsetof(ClusterLattice, step) + 4},
-      // A valid step so large that the multi-leaves' scales overflow its exponent.
+      // A power of two so large that the multi-leaves' scales would overflow its exponent.
       {"cluster", "lattice step 2^127",
        [](std::string& b) {
          put32(b, section(b, "cluster.lattice").offset + offsetof(ClusterLattice, step),
                0x7f000000u);
        },
-       "bvh.leaves", "gives no positive finite extent on the lattice"},
+       "cluster.lattice", "is not a power of two in [2^-126, 2^102]",
+       offsetof(ClusterLattice, step)},
   };
   int checked = 0;
   for (const Case& c : cases) {

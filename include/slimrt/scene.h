@@ -120,12 +120,14 @@ struct BuildOptions {
   int max_leaf_size = 4;  // primitives per leaf (triangles; pairs and sub-grids use their own)
   int threads = 0;        // build threads; 0 = all cores
   // Leaf::Clusters: every vertex lies within this fraction of the scene's box diagonal of its
-  // input position (the lattice's steps, one per axis, are the largest powers of two meeting it).
+  // input position (the lattice's steps, one per axis, are powers of two: the largest meeting it,
+  // or coarser on an axis whose vertices all lie on a coarser lattice, as a grid's rows).
   double cluster_error = 1e-5;
   // The box the lossy formats derive their scene-wide quantities from (the cluster lattice's origin
-  // and step, the grids' displacement bias); empty = the bounds of the meshes being built. A
+  // and steps, the grids' displacement bias); empty = the bounds of the meshes being built. A
   // chunked build gives every chunk the whole input's box, so that chunks quantize onto one
   // lattice. Must contain every finite vertex of the meshes (check_mesh-style error otherwise).
+  // With a box, the cluster lattice's steps depend on the box alone (no coarser exact axes).
   Box3f lattice_box;
   // Optional progress report and cancellation (BuildProgress above). Empty: nothing is reported
   // and the build does no extra work.

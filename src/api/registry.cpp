@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/simd.h"
+#include "prim/cluster.h"
 #include "slimrt/analysis.h"
 #include "slimrt/clusters.h"
 #include "slimrt/scene.h"
@@ -328,10 +329,9 @@ double ConfigInfo::promised_error(const std::vector<const MeshView*>& meshes) co
   // Float rounding of a decoded coordinate: a few ulps of the largest coordinate magnitude.
   const double largest = std::max(double(reduce_max(abs(box.lo))), double(reduce_max(abs(box.hi))));
   const double rounding = 8.0 * std::ldexp(largest, -24);
-  double ext = 0, d2 = 0;
+  double d2 = 0;
   for (int a = 0; a < 3; ++a) {
     const double e = double(box.hi[a]) - double(box.lo[a]);
-    ext = std::max(ext, e);
     d2 += e * e;
   }
   switch (options.leaf) {
@@ -346,14 +346,13 @@ double ConfigInfo::promised_error(const std::vector<const MeshView*>& meshes) co
       return std::sqrt(h2) + rounding;
     }
     case Leaf::Clusters: {
-      // One lattice whose step is the largest power of two within cluster_error x the diagonal
-      // (rounding moves a vertex by step * sqrt(3) / 2), doubled until the box's largest extent
-      // fits in 2^24 - 1 steps (prim/cluster.cpp, quantize).
+      // The lattice's steps (prim/cluster.cpp, lattice_steps; quantize's coarser steps of exact
+      // axes move no vertex): rounding moves a vertex by at most half a step per axis.
       const double bound = options.cluster_error * std::sqrt(d2);
-      double step =
-          bound > 0 ? std::exp2(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) : 1.0;
-      while (ext / step > double((1u << 24) - 2)) step *= 2;
-      return std::max(bound, step * std::sqrt(3.0) / 2.0) + rounding;
+      double step[3], h2 = 0;
+      cluster::lattice_steps(bound, box, step);
+      for (double s : step) h2 += s * s / 4;
+      return std::max(bound, std::sqrt(h2)) + rounding;
     }
     case Leaf::LossyGrids:
     case Leaf::SharedLossyGrids: {

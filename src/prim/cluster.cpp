@@ -713,17 +713,18 @@ std::string check_lattice(const ClusterLattice& lat, size_t* offset) {
     if (lat.anchor_bits[a] > 24)
       return "lattice anchor width " + std::to_string(lat.anchor_bits[a]) + " of axis " +
              std::to_string(a) + " beyond 24 bits";
-    // A positive normal power of two (mantissa 0); box_extent adds the scales to its exponent
-    // (the multi-leaves' extents are checked finite where they are read in).
-    uint32_t u;
-    std::memcpy(&u, &lat.step[a], 4);
-    const uint32_t exponent = u >> 23;
+    // A power of two in [kMinLatticeStep, kMaxLatticeStep] (mantissa 0), so that box_extent's
+    // largest scale stays finite.
     if (offset) *offset = offsetof(ClusterLattice, step) + 4 * size_t(a);
-    if ((u & 0x807fffffu) != 0 || exponent == 0 || exponent == 255) {
+    const float st = lat.step[a];
+    if (!(st >= float(kMinLatticeStep) && st <= float(kMaxLatticeStep)) ||
+        std::ldexp(1.0f, std::ilogb(st)) != st) {
+      uint32_t u;
+      std::memcpy(&u, &st, 4);
       char bits[16];
       std::snprintf(bits, sizeof bits, "0x%08x", u);
       return "lattice step of axis " + std::to_string(a) + " (float bits " + bits +
-             ") is not a positive normal power of two";
+             ") is not a power of two in [2^-126, 2^102]";
     }
   }
   return {};
@@ -882,12 +883,22 @@ bool lattice_steps(double bound, const Box3f& box, double* step) {
     // Half an ulp (at most) of a decoded coordinate: origin + float(q) x step rounds once.
     slack[a] = empty ? 0.0 : std::max(std::fabs(box.lo[a]), std::fabs(box.hi[a])) * 0x1p-24;
   }
-  // s: the largest power of two with s sqrt(3) / 2 <= bound; per axis the extent must span fewer
-  // than kLatticeMax - 1 steps (else the step doubles: coarsened).
-  const double s = bound > 0 ? std::exp2(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) : 1.0;
-  bool within = true;
+  // s: the largest power of two with s sqrt(3) / 2 <= bound, within the steps a lattice may take
+  // (kMinLatticeStep..kMaxLatticeStep) and no more than the widest extent needs; per axis the
+  // extent must span fewer than kLatticeMax - 1 steps (else the step doubles: coarsened).
+  const double widest = std::max({extent[0], extent[1], extent[2]});
+  const double cap = widest > 0 ? std::exp2(std::ceil(std::log2(widest))) : 1.0;
+  double s = bound > 0 ? std::exp2(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) : 1.0;
+  s = std::min({s, cap, kMaxLatticeStep});
+  bool within = s >= kMinLatticeStep;
+  s = std::max(s, kMinLatticeStep);
   for (int a = 0; a < 3; ++a)
     for (step[a] = s; extent[a] / step[a] > double(kLatticeMax) - 1; step[a] *= 2) within = false;
+  for (int a = 0; a < 3; ++a)
+    if (step[a] > kMaxLatticeStep)
+      throw Error("cluster: the box's extent " + std::to_string(extent[a]) + " on axis " +
+                  std::to_string(a) + " needs a lattice step above 2^102 (coordinates beyond " +
+                  "about 1e37 are out of the lossy clusters' range)");
   // Then 2s on an axis, the widest first, while the largest error (half a step and the decode's
   // rounding per axis) stays within the bound: at most two axes (2s on all three would be a
   // larger s).
@@ -899,7 +910,8 @@ bool lattice_steps(double bound, const Box3f& box, double* step) {
       const double e = (b == a ? step[b] : step[b] / 2) + slack[b];
       e2 += e * e;
     }
-    if (bound > 0 && std::sqrt(e2) <= bound) step[a] *= 2;
+    if (bound > 0 && std::sqrt(e2) <= bound && 2 * step[a] <= std::min(cap, kMaxLatticeStep))
+      step[a] *= 2;
   }
   return within;
 }
@@ -993,24 +1005,38 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
   // An axis whose codes all end in k zero bits (every vertex on a 2^k times coarser lattice, as
   // the rows of a terrain's grid) takes the step 2^k step and the codes q >> k: float(q >> k) x
   // (2^k step) is the product float(q) x step (exact: q < 2^24, powers of two), so every vertex
-  // decodes to the same bits, in k bits less. Only on the vertices' own box: pieces quantized on a
-  // given box keep the box's steps, which every piece derives alike.
+  // decodes to the same bits, in k bits less. Only on the vertices' own box: with a given box the
+  // steps depend on the box alone (BuildOptions::lattice_box), so that pieces quantized on it
+  // (the chunks of a chunked build) have one lattice.
+  uint32_t shift[3] = {0, 0, 0};
   if (!lossless && !given)
     for (int a = 0; a < 3; ++a) {
-      uint32_t u;
-      std::memcpy(&u, &z.lattice.step[a], 4);
-      const uint32_t k = any[a] ? std::min(uint32_t(__builtin_ctz(any[a])), 254 - (u >> 23)) : 0;
-      if (!k) continue;  // (an axis of codes 0 alone, a flat one, keeps its step)
-      z.lattice.step[a] = std::ldexp(z.lattice.step[a], int(k));
-      for (size_t i = 0; i < nv; ++i) {
-        z.codes[3 * i + a] >>= k;
-        if (used[i] && lattice_coord(z.lattice, a, z.codes[3 * i + a]) != z.decoded[i][a])
-          throw std::logic_error("cluster: a coarser exact axis moved a vertex");
+      // (an axis of codes 0 alone, a flat one, keeps its step)
+      while (any[a] && ((any[a] >> shift[a]) & 1) == 0 &&
+             2.0 * z.lattice.step[a] <= kMaxLatticeStep) {
+        z.lattice.step[a] *= 2.0f;
+        ++shift[a];
       }
-      top[a] >>= k;
+      top[a] >>= shift[a];
     }
-  if (!lossless)
+  if (shift[0] | shift[1] | shift[2]) {
+    std::atomic<bool> moved{false};
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, nv, kGrain), [&](const tbb::blocked_range<size_t>& r) {
+          for (size_t i = r.begin(); i < r.end(); ++i)
+            for (int a = 0; a < 3; ++a) {
+              z.codes[3 * i + a] >>= shift[a];
+              if (used[i] && lattice_coord(z.lattice, a, z.codes[3 * i + a]) != z.decoded[i][a])
+                moved = true;
+            }
+        });
+    if (moved) throw std::logic_error("cluster: a coarser exact axis moved a vertex");
+  }
+  if (!lossless) {
     for (int a = 0; a < 3; ++a) z.lattice.anchor_bits[a] = uint8_t(bit_width(top[a]));
+    if (const std::string bad = check_lattice(z.lattice); !bad.empty())
+      throw std::logic_error("cluster: " + bad);
+  }
   z.rms_error = n ? std::sqrt(sum_sq / double(n)) : 0.0;
   z.mean_error = n ? sum / double(n) : 0.0;
   return z;

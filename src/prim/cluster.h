@@ -1,8 +1,8 @@
 // Compressed triangle clusters (configurations `cluster` and `cluster-lossless`), after AMD's Dense
 // Geometry Format (DGF, HPG 2024): positions on one scene-wide integer lattice with a power-of-two
-// step, each cluster an anchor plus per-axis bit widths and bit-packed offsets, topology as
-// generalized triangle strips (DGF's control bits and implicit new-vertex indices), and primIDs as
-// runs (Elias-Fano coded run starts, a run index and an offset per triangle).
+// step per axis, each cluster an anchor plus per-axis bit widths and bit-packed offsets, topology
+// as generalized triangle strips (DGF's control bits and implicit new-vertex indices), and primIDs
+// as runs (Elias-Fano coded run starts, a run index and an offset per triangle).
 //
 // A cluster is one multi-leaf of the compressed-leaf BVH (bvh8.h; QBVH8 inner nodes above the
 // multi-leaves, NodeKind::QCompressedLeaf): its header holds the quantized boxes of up to 8
@@ -80,9 +80,10 @@
 // when the bits save more than their ntris bits cost.
 //
 // Lossy (`cluster`): a vertex's code is its lattice integer q = round((x - origin) / step) per
-// axis, decoded as origin + float(q) * step (a power of two per axis: the largest that meet the
-// error bound, lattice_steps). Every cluster decodes a vertex with the same float
-// operations from the same integer (the product is exact: q < 2^24, step a power of two), so a
+// axis, decoded as origin + float(q) * step (a power of two per axis: lattice_steps' for the error
+// bound, or coarser where every vertex lies on the coarser lattice, quantize). Every cluster
+// decodes a vertex with the same float operations from the same integer (the product is exact:
+// q < 2^24, step a power of two), so a
 // vertex shared by clusters decodes bit-identically in all of them and the watertight test
 // (core/watertight.h) sees one closed surface.
 // Lossless (`cluster-lossless`): per cluster one of two codes (the mode in the top 4 bits of the
@@ -303,6 +304,9 @@ struct LatticeBoxes8 {
 };
 static_assert(sizeof(LatticeBoxes8) == 51, "lossy cluster multi-leaf boxes are 51 bytes");
 constexpr uint32_t kMaxBoxScaleExp = 24;  // 255 x 2^24 steps span any cluster (< 2^24 steps)
+// The lattice steps a lossy scene may have (check_lattice): normal floats whose box extents
+// (box_extent: up to 2^(kMaxBoxScaleExp + 1) steps) stay finite.
+constexpr double kMinLatticeStep = 0x1p-126, kMaxLatticeStep = 0x1p102;
 
 // ---- the lossless clusters' multi-leaf boxes (ClusterLeaf<true>) ----
 // The start is the cluster's lowest coordinate per axis, exactly a vertex coordinate: the
@@ -1388,7 +1392,8 @@ uint64_t next_cache_tag();
 bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterLattice& lat,
            bool lossless, std::string* why, const uint8_t* boxes = nullptr);
 // The lattice fields the decoders take as given (lossy: anchor widths of at most 24 bits, steps
-// positive normal powers of two), else what is wrong (and its byte in `offset`).
+// powers of two in [kMinLatticeStep, kMaxLatticeStep]), else what is wrong (and its byte in
+// `offset`).
 std::string check_lattice(const ClusterLattice& lat, size_t* offset = nullptr);
 
 // Per-scene encoding figures (info --clusters). The four parts add up to the clusters' bytes
@@ -1453,9 +1458,10 @@ bool lattice_steps(double bound, const Box3f& box, double* step);
 // unchanged). Lossy: origin = the box minimum, the steps lattice_steps'. The box is `lattice_box`
 // when it is not empty (BuildOptions::lattice_box, which must contain the vertices: meshes
 // quantized with the same box share one lattice, so a vertex they share gets the same code and
-// decodes to the same bits in each), else the used vertices' box. The lattice's anchor_bits: per
-// axis the bit width of the largest code of the box (or of a used vertex, if larger). Lossless: the
-// order keys of the exact floats.
+// decodes to the same bits in each), else the used vertices' box; then an axis whose codes all
+// end in k zero bits takes 2^k times the step and the codes k bits less (the same decoded bits).
+// The lattice's anchor_bits: per axis the bit width of the largest code of the box (or of a used
+// vertex, if larger). Lossless: the order keys of the exact floats.
 struct Quantized {
   ClusterLattice lattice;
   bool coarsened = false;
@@ -1498,16 +1504,10 @@ struct ClusterLeaf {
   static std::string check_multileaf(const Context& ctx, const uint8_t* data, uint32_t k,
                                      uint64_t avail) {
     if constexpr (!kLossless) {  // the box scales right before the data (the walk checked them in)
-      for (int a = 0; a < 3; ++a) {
-        const uint8_t sc = data[a - 3];
-        if (uint32_t(sc >> 3) > cluster::kMaxBoxScaleExp)
-          return "multi-leaf box scale exponent " + std::to_string(sc >> 3) + " beyond " +
+      for (const uint8_t* sc = data - 3; sc < data; ++sc)
+        if (uint32_t(*sc >> 3) > cluster::kMaxBoxScaleExp)
+          return "multi-leaf box scale exponent " + std::to_string(*sc >> 3) + " beyond " +
                  std::to_string(cluster::kMaxBoxScaleExp);
-        const float e = cluster::box_extent(ctx.lattice, a, sc);  // the axis's step and scale
-        if (!(e > 0.0f) || !std::isfinite(e))
-          return "multi-leaf box scale " + std::to_string(sc) + " of axis " + std::to_string(a) +
-                 " gives no positive finite extent on the lattice";
-      }
     } else {  // the box extents right before the data
       uint16_t e[3];
       std::memcpy(e, data - sizeof(e), sizeof(e));

@@ -1449,9 +1449,12 @@ bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const
 // diagonal) over `box` (empty: steps 1): s, the largest power of two with s sqrt(3) / 2 <= bound
 // (rounding to the nearest lattice point moves a vertex by at most half a step per axis), or 2s on
 // one or two axes (the widest first) where the bound still holds with the decode's rounding (half
-// an ulp of the box's largest coordinate per axis); an axis is coarsened (its step doubled) until
-// the box's extent spans fewer than 2^24 - 1 steps (so that every offset fits a block's 24 bits
-// and float(q) is exact). Returns false if an axis was coarsened (the bound may not hold).
+// an ulp of the box's largest coordinate per axis). s is kept within [kMinLatticeStep,
+// kMaxLatticeStep] and at most the power of two at or above the widest extent; an axis is
+// coarsened (its step doubled) until the box's extent spans fewer than 2^24 - 1 steps (so that
+// every offset fits a block's 24 bits and float(q) is exact). Returns false if a step had to be
+// coarser than the bound's (the bound may not hold); throws Error if an axis would need a step
+// above kMaxLatticeStep.
 bool lattice_steps(double bound, const Box3f& box, double* step);
 
 // Codes and decoded positions of the vertices that the triangles use (others: code 0, position

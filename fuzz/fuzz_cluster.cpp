@@ -14,10 +14,11 @@
 //      encoder's strip order), the codes' positions and the ids bit for bit;
 //   3. lossy: the frame of the multi-leaf boxes on the lattice (cluster::LatticeBoxes8) made for
 //      that cluster decodes as the builder made it and encloses every child's decoded triangles;
-//   4. lossy: the input's first 51 bytes as a multi-leaf's boxes and the rest as the cluster behind
-//      them (per-child vertex ranges come from the boxes): as 1., the decoders reading only inside
-//      the boxes and the block plus the read slack (in 1. and 4. the vector vertex decode equals
-//      the scalar one bit for bit); the round trip of 2. encodes a multi-leaf's
+//   4. lossy: the input's first 39 bytes as a multi-leaf's boxes and the rest as the cluster behind
+//      them (per-child vertex ranges come from the boxes' 6-bit planes and, with the fine-planes
+//      bit, their low bits in the cluster): as 1., the decoders reading only inside the boxes and
+//      the block plus the read slack (in 1. and 4. the vector vertex decode and planes equal the
+//      scalar ones bit for bit); the round trip of 2. encodes a multi-leaf's
 //      cluster (with ranges where they are smaller) and decodes it behind the boxes the builder
 //      makes (cluster::multileaf_boxes).
 #include <algorithm>
@@ -166,13 +167,17 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
   std::vector<uint8_t> ml;
   const uint8_t* block_ptr = nullptr;
   if (!lossless) {
-    cluster::LatticeBoxes8 lb{};
+    cluster::MultiLeafPlanes mp;
     uint32_t anchor[3];
     ClusterHeader h0;
     std::memcpy(&h0, enc.data(), sizeof(h0));
-    cluster::lossy_anchors(enc.data() + sizeof(ClusterHeader),
+    cluster::lossy_anchors(cluster::stream_of(enc.data()),
                            cluster::layout(h0, uint32_t(k), lat, false), anchor);
-    SLIM_FUZZ_CHECK(cluster::multileaf_boxes(src, prims, counts, k, anchor, lb), "no box frame");
+    SLIM_FUZZ_CHECK(cluster::multileaf_boxes(src, prims, counts, k, anchor, mp), "no box frame");
+    SLIM_FUZZ_CHECK(cluster::has_fine_planes(h0) == mp.fine, "fine-planes bit differs");
+    cluster::LatticeBoxes8 lb{};
+    cluster::pack_planes(mp.q, lb, nullptr);
+    std::memcpy(lb.scale, mp.scale, 3);
     ml.resize(sizeof(lb) + enc.size());
     std::memcpy(ml.data(), &lb, sizeof(lb));
     std::memcpy(ml.data() + sizeof(lb), enc.data(), enc.size());
@@ -244,15 +249,29 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     else
       decode_all<false>(lat, block.data(), children);
   }
-  // 4. Lossy: the first 51 bytes as the multi-leaf's boxes, the rest as the cluster behind them,
+  // 4. Lossy: the first 39 bytes as the multi-leaf's boxes, the rest as the cluster behind them,
   // in a buffer of exactly their size plus the read slack.
   constexpr size_t kBoxes = sizeof(cluster::LatticeBoxes8);
   if (!lossless && n > kBoxes) {
     std::vector<uint8_t> ml(data + 1, data + size);
     ml.resize(n + kClusterReadSlack, 0);
     ml.shrink_to_fit();
-    if (cluster::check(ml.data() + kBoxes, n - kBoxes, children, lat, false, nullptr, ml.data()))
+    if (cluster::check(ml.data() + kBoxes, n - kBoxes, children, lat, false, nullptr, ml.data())) {
       decode_all<false>(lat, ml.data() + kBoxes, children);
+      uint8_t q[6][8];
+      const uint8_t* lows = cluster::plane_lows(ml.data() + kBoxes);
+      cluster::lattice_planes(ml.data(), lows, q);
+#if defined(SLIM_SIMD_AVX2)
+      __m256i planes[6];
+      cluster::lattice_planes_avx2(ml.data(), lows, planes);
+      for (uint32_t p = 0; p < 6; ++p) {
+        alignas(32) uint32_t v[8];
+        _mm256_store_si256(reinterpret_cast<__m256i*>(v), planes[p]);
+        for (int i = 0; i < 8; ++i)
+          SLIM_FUZZ_CHECK(v[i] == q[p][i], "the vector planes differ from the scalar ones");
+      }
+#endif
+    }
   }
   // 2. Round trip.
   Reader in{data + 1, size - 1};

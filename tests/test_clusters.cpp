@@ -96,12 +96,21 @@ struct SphereSource {
   }
 };
 
+// The stored form of a lossy multi-leaf's boxes (the coarse plane values and the scale bytes).
+cluster::LatticeBoxes8 packed(const cluster::MultiLeafPlanes& mp) {
+  cluster::LatticeBoxes8 lb{};
+  cluster::pack_planes(mp.q, lb, nullptr);
+  std::memcpy(lb.scale, mp.scale, 3);
+  return lb;
+}
+
 // The multi-leaf boxes of the cluster `data` (k children with the given boxes) as the builder
-// writes them right ahead of it: Boxes is cluster::LatticeBoxes8 (lossy) or cluster::ExactBoxes8
-// (lossless), write(boxes, start, extent) the builder's frame, frame(p, start, extent) the
-// traversal's. The two frames are equal, bound(axis, start, extent) checks each axis, and every
-// child's box decoded as the traversal decodes it contains the child's decoded triangles (all 8
-// lanes, the padding included).
+// writes them right ahead of it (cluster::write_multileaf_boxes): Boxes is cluster::LatticeBoxes8
+// (lossy) or cluster::ExactBoxes8 (lossless), write(boxes, start, extent) the builder's frame,
+// frame(p, start, extent) the traversal's. The two frames are equal, bound(axis, start, extent)
+// checks each axis, the traversal's planes (AVX2 where built) are the structure check's, and
+// every child's box decoded as the traversal decodes it contains the child's decoded triangles
+// (all 8 lanes, the padding included).
 // `ml` receives the boxes and the cluster behind them (a multi-leaf: the lossy clusters' per-child
 // vertex ranges come from these boxes).
 template <class Boxes, bool kLossless, class Write, class Frame, class Bound>
@@ -113,13 +122,46 @@ void check_multileaf_boxes(const std::vector<uint8_t>& data, const ClusterLattic
   auto& hb = *reinterpret_cast<Boxes*>(ml.data());
   float start[4], extent[4], s2[4], e2[4];
   ASSERT_TRUE(write(hb, start, extent));
-  quantize_planes(start, extent, boxes, k, hb.q);
+  ASSERT_TRUE(cluster::write_multileaf_boxes(lat, kLossless, ml.data() + sizeof(Boxes), k, boxes,
+                                             ml.data()));
   frame(ml.data(), s2, e2);
   ASSERT_EQ(std::memcmp(start, s2, 3 * sizeof(float)), 0);
   ASSERT_EQ(std::memcmp(extent, e2, 3 * sizeof(float)), 0);
   for (int a = 0; a < 3; ++a) bound(a, start[a], extent[a]);
+  using Leaf = ClusterLeaf<kLossless>;
+  uint8_t q[6][8];
+  Leaf::multileaf_planes8(ml.data(), q);
+  simd::vint8 v[6];
+  Leaf::multileaf_planes(ml.data(), v);
+  for (uint32_t i = 0; i < 6; ++i)
+    for (int c = 0; c < 8; ++c) ASSERT_EQ(v[i][c], int(q[i][c])) << "plane " << i << " child " << c;
+  if constexpr (!kLossless) {
+    // Fine planes are the builder's 8-bit planes in its frame; coarse ones those rounded outward
+    // to multiples of 4, taken where they grow the children's boxes by at most
+    // kCoarsePlaneGrowth in surface area (the rule derived here again).
+    uint8_t p8[6][8];
+    quantize_planes(start, extent, boxes, k, p8);
+    ClusterHeader h;
+    std::memcpy(&h, data.data(), sizeof(h));
+    const bool fine = cluster::has_fine_planes(h);
+    double area = 0, coarse_area = 0;
+    for (int c = 0; c < k; ++c) {
+      double d[3], dc[3];
+      for (int a = 0; a < 3; ++a) {
+        const int lo = p8[2 * a][c], hi = p8[2 * a + 1][c];
+        const int clo = lo - lo % 4, chi = hi - hi % 4 + 3;
+        ASSERT_EQ(q[2 * a][c], fine ? lo : clo) << "child " << c << " axis " << a;
+        ASSERT_EQ(q[2 * a + 1][c], fine ? hi : chi) << "child " << c << " axis " << a;
+        d[a] = double(hi - lo) * extent[a];
+        dc[a] = double(chi - clo) * extent[a];
+      }
+      area += d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
+      coarse_area += dc[0] * dc[1] + dc[1] * dc[2] + dc[2] * dc[0];
+    }
+    EXPECT_EQ(fine, coarse_area > (1.0 + cluster::kCoarsePlaneGrowth) * area);
+  }
   for (int c = 0; c < k; ++c) {
-    const Box3f b = dequantize_planes(hb.q, s2, e2, c);
+    const Box3f b = dequantize_planes(q, s2, e2, c);
     cluster::Decoded8 d;
     cluster::decode_child<kLossless>(lat, ml.data() + sizeof(Boxes), uint32_t(k), c, d);
     for (int l = 0; l < 8; ++l)
@@ -240,10 +282,12 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
       // The AVX2 ranges (the traversal's view) equal the scalar ones (check()'s).
       cluster::LatticeBoxes8 lb;
       std::memcpy(&lb, ml.data(), sizeof(lb));
+      uint8_t q[6][8];
+      cluster::lattice_planes(ml.data(), cluster::plane_lows(cd), q);
       const cluster::Layout L0 = cluster::layout(hdr, uint32_t(kk), z.lattice, false);
       cluster::ChildRanges rs;
-      cluster::child_ranges(hdr, L0, cd + sizeof(ClusterHeader), view.anchor, lb.q, lb.scale,
-                            uint32_t(kk), rs);
+      cluster::child_ranges(hdr, L0, cluster::stream_of(cd), view.anchor, q, lb.scale, uint32_t(kk),
+                            rs);
       const cluster::ChildRanges& rv = view.r;
       ASSERT_EQ(rs.total, rv.total);
       ASSERT_EQ(rs.wmax, rv.wmax);
@@ -355,19 +399,29 @@ TEST(ClusterCodec, DecodeEqualsEncodeIdRuns) {
       std::vector<ClusterHeader> headers;
       check_codec(tm, lossless, 1e-5, 5 + k.run, k.shuffle, nullptr, nullptr, &headers);
       ASSERT_FALSE(::testing::Test::HasFatalFailure());
-      size_t wide = 0, highs = 0, repeats = 0;
+      size_t wide = 0, highs = 0, repeats = 0, steps = 0;
       for (const ClusterHeader& h : headers) {
-        wide += h.nruns > 1 && cluster::offset_bits(h) > 0;
-        highs += h.nruns > 2;
-        repeats += cluster::has_repeats(h);
+        wide += cluster::run_count(h) > 1 && cluster::offset_bits(h) > 0;
+        highs += cluster::run_count(h) > 2;
+        repeats += cluster::has_repeats(h) && !cluster::has_steps(h);
+        steps += cluster::has_steps(h);
       }
-      // In order: runs of ids; shuffled (dense ids): one run (base + offset) in most clusters.
+      // Faces numbered in order one apart (stride 1): strip neighbours often differ by one, and
+      // the step bits take them; shuffled, almost never.
+      if (!k.shuffle && k.stride == 1 && k.share == 1 && k.run > 4) {
+        EXPECT_GT(steps, 0u) << k.run;
+      }
+      if (k.shuffle) {
+        EXPECT_LE(steps, headers.size() / 10) << k.run;
+      }
+      // In order: runs of ids (their offsets, or step bits within them); shuffled (dense ids):
+      // one run (base + offset) in most clusters.
       if (!k.shuffle && k.run > 1) {
-        EXPECT_GT(wide, headers.size() / 2) << k.run << " " << k.gap;
+        EXPECT_GT(wide + steps, headers.size() / 2) << k.run << " " << k.gap;
         EXPECT_GT(highs, headers.size() / 2) << k.run << " " << k.gap;
       }
-      if (k.share > 1 && !k.shuffle) {
-        EXPECT_GT(repeats, headers.size() / 2) << k.share;
+      if (k.share > 1 && !k.shuffle) {  // shared ids: repeat bits (alone or with step bits)
+        EXPECT_GT(repeats + steps, headers.size() / 2) << k.share;
       }
       if (k.share == 1 || k.shuffle) {
         EXPECT_EQ(repeats, 0u);
@@ -569,8 +623,9 @@ TEST(ClusterCodec, RangesKeepEveryChildWithin24Bits) {
   const uint32_t* prims[3] = {&p[0], &p[1], &p[2]};
   const std::vector<uint8_t> enc = cluster::encode(src, prims, counts, 3, true, true);
   const uint32_t anchor[3] = {0, 0, 0};
-  cluster::LatticeBoxes8 lb;
-  ASSERT_TRUE(cluster::multileaf_boxes(src, prims, counts, 3, anchor, lb));
+  cluster::MultiLeafPlanes mp;
+  ASSERT_TRUE(cluster::multileaf_boxes(src, prims, counts, 3, anchor, mp));
+  const cluster::LatticeBoxes8 lb = packed(mp);
   std::vector<uint8_t> ml(sizeof(lb) + enc.size());
   std::memcpy(ml.data(), &lb, sizeof(lb));
   std::memcpy(ml.data() + sizeof(lb), enc.data(), enc.size());
@@ -603,9 +658,10 @@ TEST(ClusterCodec, CheckRejectsMalformedRanges) {
   ASSERT_TRUE(cluster::has_ranges(h));
   uint32_t anchor[3];
   const cluster::Layout L = cluster::layout(h, 8, z.lattice, false);
-  cluster::lossy_anchors(enc.data() + sizeof(ClusterHeader), L, anchor);
-  cluster::LatticeBoxes8 lb;
-  ASSERT_TRUE(cluster::multileaf_boxes(src, prims, counts, 8, anchor, lb));
+  cluster::lossy_anchors(cluster::stream_of(enc.data()), L, anchor);
+  cluster::MultiLeafPlanes mp;
+  ASSERT_TRUE(cluster::multileaf_boxes(src, prims, counts, 8, anchor, mp));
+  const cluster::LatticeBoxes8 lb = packed(mp);
   auto checks = [&](const cluster::LatticeBoxes8& b, const std::vector<uint8_t>& data,
                     std::string* why) {
     std::vector<uint8_t> ml(sizeof(b) + data.size());
@@ -623,10 +679,11 @@ TEST(ClusterCodec, CheckRejectsMalformedRanges) {
   b.scale[1] = uint8_t((cluster::kMaxRangeScaleExp + 1) << 3);  // products could wrap
   EXPECT_FALSE(checks(b, enc, &why));
   EXPECT_NE(why.find("scale exponent"), std::string::npos) << why;
-  b = lb;
-  b.scale[0] = uint8_t(cluster::kMaxRangeScaleExp << 3 | 7);  // 255 planes of 2^20 steps
-  b.q[0][3] = 0;
-  b.q[1][3] = 255;
+  cluster::MultiLeafPlanes wide = mp;
+  wide.scale[0] = uint8_t(cluster::kMaxRangeScaleExp << 3 | 7);  // 255 planes of 2^20 steps
+  wide.q[0][3] = 0;
+  wide.q[1][3] = 255;
+  b = packed(wide);
   EXPECT_FALSE(checks(b, enc, &why));
   EXPECT_NE(why.find("beyond 24 bits"), std::string::npos) << why;
   // Child 5's first new vertex past the vertices: the plain table code (vo = 3) and its field
@@ -667,10 +724,23 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
     b[off] = value;
     return cluster::check(b.data(), b.size(), 2, z.lattice, false, &why);
   };
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nverts), 1));     // indices beyond the vertices
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, bits), 25));      // lossy axis wider than 24 bits
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ib), 9));         // index wider than 8 bits
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 33));        // run offset wider than 32 bits
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nverts), 1));  // indices beyond the vertices
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, bits), 25));   // lossy axis wider than 24 bits
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ib), 9));      // index wider than 8 bits
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 33));     // run offset wider than 32 bits
+  {                                                           // Step bits without repeat bits.
+    ClusterHeader hs;
+    std::memcpy(&hs, good.data(), sizeof(hs));
+    hs.ob &= 0x7f;
+    hs.nruns |= 0x80;
+    std::vector<uint8_t> b = good;
+    std::memcpy(b.data(), &hs, sizeof(hs));
+    EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, z.lattice, false, &why));
+    EXPECT_NE(why.find("step bits without repeat bits"), std::string::npos) << why;
+  }
+  // The fine-planes bit outside a multi-leaf (an isolated leaf's cluster: no boxes).
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), good[offsetof(ClusterHeader, ob)] | 0x40));
+  EXPECT_NE(why.find("fine-planes bit outside a lossy multi-leaf"), std::string::npos) << why;
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nruns), 0));      // no primID run
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, nruns), 17));     // more runs than triangles
   ASSERT_EQ(good[offsetof(ClusterHeader, sizes)], 0x3f);         // children of 8 + 8
@@ -778,7 +848,7 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   const std::vector<uint8_t> rgood = cluster::encode(src, prims, counts, 2, false);
   ClusterHeader rh;
   std::memcpy(&rh, rgood.data(), sizeof(rh));
-  ASSERT_EQ(rh.nruns, 8);
+  ASSERT_EQ(cluster::run_count(rh), 8u);
   ASSERT_TRUE(cluster::check(rgood.data(), rgood.size(), 2, z.lattice, false, &why)) << why;
   std::vector<uint8_t> b = rgood;
   b.back() = 0;  // the last run's one bit gone
@@ -803,8 +873,8 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   b = qgood;
   b[sizeof(ClusterHeader) + (ql.ids >> 3)] |= uint8_t(1u << (ql.ids & 7));
   EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, z.lattice, false, &why));
-  EXPECT_NE(why.find("repeat bit on triangle 0"), std::string::npos) << why;
-  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 0x40));  // bit 6 of ob: no field
+  EXPECT_NE(why.find("repeat or step bit on triangle 0"), std::string::npos) << why;
+  EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 0x40));  // fine planes, no boxes
 }
 
 // A cluster whose stream takes fewer bits than the multi-leaf frame reads (one triangle on one
@@ -1288,6 +1358,25 @@ TEST(ClusterScene, CoarserAxesWhereTheBoundAllows) {
 // step (their codes k bits shorter), z keeps the bound's. The vertices decode to the same bits as
 // on the lattice of a given box (which keeps the box's steps, as every piece of a chunked build
 // derives them): the same hits bit for bit, in fewer position bits.
+// The lossy multi-leaf boxes' planes: coarse (6 bits, 39 bytes a multi-leaf) on a scan-like
+// surface, whose children's boxes grow little with them; fine (8 bits, 12 bytes more) on most of a
+// grid terrain's clusters, whose abutting square children would overlap. The scene's bytes count
+// both; the hits equal those of a double-precision brute force (LossyHitsEqualBruteForce) either
+// way, and the boxes pass validate().
+TEST(ClusterScene, CoarsePlanesWhereTheBoxesGrowLittle) {
+  const PolyMesh torus = load("torus:256"), grid = load("terrain:128");
+  const Scene st = Scene::build(torus, BuildOptions::from_config("cluster"));
+  const Scene sg = Scene::build(grid, BuildOptions::from_config("cluster"));
+  std::string why;
+  ASSERT_TRUE(st.validate(&why)) << why;
+  ASSERT_TRUE(sg.validate(&why)) << why;
+  EXPECT_LT(detail(st, "fine_plane_fraction"), 0.2);
+  EXPECT_GT(detail(sg, "fine_plane_fraction"), 0.5);
+  // A lossless scene has no such figure.
+  const Scene sl = Scene::build(torus, BuildOptions::from_config("cluster-lossless"));
+  for (const auto& [k, v] : stat_details(sl)) EXPECT_NE(k, "fine_plane_fraction");
+}
+
 TEST(ClusterScene, ExactAxesTakeTheirCoarserLattice) {
   const PolyMesh grid = load("terrain:64");
   BuildOptions own = BuildOptions::from_config("cluster"), boxed = own;

@@ -647,15 +647,18 @@ uint64_t cq_root(const std::string& b, const std::string& prefix) {
 }
 
 // The clusters' multi-leaf boxes (cluster::LatticeBoxes8, cluster::ExactBoxes8: the planes come
-// first in both): a child box shrunk to a point is caught. Lossless: any 8-bit plane is safe to
-// read, so it passes the structure check but not validate(), which decodes every child box as the
-// traversal does and checks that it contains the child's triangles. Lossy clusters with per-child
-// vertex ranges take the ranges from the planes: the vertex section's length changes with them, so
-// the structure check (here: the strips no longer parse) or else validate() rejects the file.
+// first in both, 6 or 8 bytes a plane, child 0's value in the first byte's low bits): a child box
+// shrunk to a point (lossy: to its 3 lowest fine planes) is caught. Lossless: any 8-bit plane is
+// safe to read, so it passes the structure check but not validate(), which decodes every child box
+// as the traversal does and checks that it contains the child's triangles. Lossy clusters with
+// per-child vertex ranges take the ranges from the planes: the vertex section's length changes with
+// them, so the structure check (here: the strips no longer parse) or else validate() rejects the
+// file.
 class ClusterBoxShrunk : public ::testing::TestWithParam<const char*> {};
 TEST_P(ClusterBoxShrunk, IsCaughtByValidate) {
-  static_assert(offsetof(cluster::LatticeBoxes8, q) == 0 && offsetof(cluster::ExactBoxes8, q) == 0,
+  static_assert(offsetof(cluster::LatticeBoxes8, c) == 0 && offsetof(cluster::ExactBoxes8, q) == 0,
                 "the planes come first");
+  const int plane_bytes = std::string(GetParam()) == "cluster" ? cluster::kCoarsePlaneBits : 8;
   const std::string path = temp_path("clbox"), bad = temp_path("clbox_bad");
   const Scene built = Scene::build(load("torus:64"), BuildOptions::from_config(GetParam()));
   std::string why;
@@ -665,7 +668,7 @@ TEST_P(ClusterBoxShrunk, IsCaughtByValidate) {
   const uint64_t ref = first_leaf(b, "");
   ASSERT_EQ(NodeRef::tag(ref), kRefMulti);
   const uint64_t at = section(b, "bvh.leaves").offset + NodeRef::offset(ref);
-  for (int p = 0; p < 6; ++p) b[at + 8 * p] = 0;
+  for (int p = 0; p < 6; ++p) b[at + plane_bytes * p] = 0;
   write_all(bad, b);
   OpenOptions oo;
   oo.verify_checksums = false;

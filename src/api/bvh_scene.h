@@ -149,6 +149,7 @@ class BvhScene : public Scene::Impl {
       d.frame = [this](const uint8_t* p, float* start, float* extent) {
         Leaf::multileaf_frame(ctx, p, start, extent);
       };
+      d.planes = [](const uint8_t* p, uint8_t(*q)[8]) { Leaf::multileaf_planes8(p, q); };
     }
     return d;
   }
@@ -297,11 +298,7 @@ class BvhScene : public Scene::Impl {
     if constexpr (HasMultiLeafBoxes<Leaf>) {
       enc.multileaf_header_bytes = Leaf::kMultiLeafHeaderBytes;
       enc.multileaf_boxes = [&](const uint8_t* data, int k, const Box3f* boxes, uint8_t* header) {
-        Box3f all;
-        for (int c = 0; c < k; ++c) all.extend(boxes[c]);
-        float start[4], extent[4];
-        Leaf::write_multileaf_frame(src, data, all, header, start, extent);
-        quantize_planes(start, extent, boxes, k, reinterpret_cast<uint8_t(*)[8]>(header));
+        Leaf::write_multileaf_boxes(src, data, k, boxes, header);
       };
     }
     if constexpr (HasMultiLeafParts<Leaf>) {

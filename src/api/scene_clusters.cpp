@@ -486,6 +486,10 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   if (kLossless)  // clusters whose coordinates are decimals q x 10^-k (cluster.h, coordinate mode)
     d.emplace_back("decimal_cluster_fraction",
                    est.clusters ? double(est.decimal_clusters) / double(est.clusters) : 0.0);
+  if (!kLossless)  // multi-leaves whose boxes take 8-bit planes (cluster.h, LatticeBoxes8)
+    d.emplace_back(
+        "fine_plane_fraction",
+        est.plane_clusters ? double(est.fine_plane_clusters) / double(est.plane_clusters) : 0.0);
   for (int a = 0; a < 3; ++a)
     d.emplace_back(std::string("lattice_step_") + "xyz"[a], kLossless ? 0.0 : double(lat.step[a]));
   d.emplace_back("lattice_coarsened", z->coarsened ? 1.0 : 0.0);

@@ -46,10 +46,12 @@ constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
 // cluster's stream starts with its box start (3 floats), the anchors derived from them. Version 9:
 // lossy clusters may store their vertices in per-child ranges from the multi-leaf boxes. Version
 // 10: the clusters' inner nodes are CQNode8 (32-bit child refs) where they fit. Version 11: the
-// cluster lattice has a step per axis (ClusterLattice::step[3]). Any change
+// cluster lattice has a step per axis (ClusterLattice::step[3]). Version 12: the lossy multi-leaf
+// boxes take 6-bit planes (39 bytes), their low bits in the cluster where it has the fine-planes
+// bit. Any change
 // of a section's layout (a node, block or context struct), of what its bytes decode to, or of the
 // header needs a new version: the sections are the in-memory structs byte for byte.
-constexpr uint32_t kVersion = 11;
+constexpr uint32_t kVersion = 12;
 constexpr uint32_t kByteOrder = 0x01020304;
 constexpr uint64_t kAlign = 64;
 // Bounds the table before it is read (the header size check then bounds it by the file size): a

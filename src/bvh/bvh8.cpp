@@ -663,15 +663,17 @@ struct Validator {
           const uint8_t* data = p + hb;
           Box3f g;
           if (multi) {
+            if (!multi(data, k, c, g, why)) return false;
             Box3f cb;
             if (boxes.frame) {
               float start[4], extent[4];
+              uint8_t q[6][8];
               boxes.frame(p, start, extent);
-              cb = dequantize_planes(reinterpret_cast<const uint8_t(*)[8]>(p), start, extent, c);
+              boxes.planes(p, q);
+              cb = dequantize_planes(q, start, extent, c);
             } else {
               cb = dequantize_box(*ml, c);
             }
-            if (!multi(data, k, c, g, why)) return false;
             if (!cb.contains(g)) return fail("primitive outside the box of its leaf");
           } else if (!check_leaf_block(data + c * bvh.block_bytes, dequantize_box(*ml, c), g)) {
             return false;

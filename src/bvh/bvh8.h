@@ -13,7 +13,7 @@
 //   MultiLeaf8   72 B  start/extent + 8 quantized boxes, no refs: the leaf blocks of its (up to)
 //                      8 children follow it in memory (section 4.2 "Introducing Compressed
 //                      Multi-Leaf Nodes"). A leaf layout may store its multi-leaf boxes its own
-//                      way instead (LeafEncoder::multileaf_boxes: the lossy clusters' 51 B).
+//                      way instead (LeafEncoder::multileaf_boxes: the lossy clusters' 39 B).
 #pragma once
 
 #include <cstddef>
@@ -223,7 +223,7 @@ struct LeafEncoder {
   std::function<void(uint32_t prim, Box3f* boxes)> part_bounds;
   // Optional (with encode_multileaf): the layout stores a multi-leaf's child boxes itself, in
   // multileaf_header_bytes bytes ahead of its data, instead of a MultiLeaf8 (the lossy clusters:
-  // 8-bit boxes on the scene's lattice, prim/cluster.h). multileaf_boxes(data, k, boxes, header)
+  // 6-bit boxes on the scene's lattice, prim/cluster.h). multileaf_boxes(data, k, boxes, header)
   // writes them from the encoded data and the k child boxes; each decoded box must contain its
   // child's box.
   uint32_t multileaf_header_bytes = sizeof(MultiLeaf8);
@@ -306,12 +306,14 @@ using MultiLeafValidator = std::function<bool(const uint8_t* data, uint32_t k, u
 // parent box, offsets stay inside the arenas, and every leaf block passes `leaf`. Returns false
 // and sets `why` on the first violation.
 // The multi-leaf boxes of a layout that stores them itself (LeafEncoder::multileaf_boxes): the
-// header's size, and frame(multileaf, start, extent) (4 floats each, the 4th unused), the frame
-// its planes q[6][8] (the header's first 48 bytes) are decoded in (traverse.h, HasMultiLeafBoxes).
-// Default: a MultiLeaf8.
+// header's size, frame(multileaf, start, extent) (4 floats each, the 4th unused), the frame its
+// 8-bit planes are decoded in, and planes(multileaf, q) those planes q[6][8] (traverse.h,
+// HasMultiLeafBoxes). Both run after the multi-leaf's validator accepted its data. Default: a
+// MultiLeaf8.
 struct MultiLeafBoxDecoder {
   uint32_t header_bytes = sizeof(MultiLeaf8);
   std::function<void(const uint8_t* multileaf, float* start, float* extent)> frame;
+  std::function<void(const uint8_t* multileaf, uint8_t (*q)[8])> planes;
 };
 
 bool validate_bvh8(const Bvh8& bvh, const LeafValidator& leaf, std::string* why,

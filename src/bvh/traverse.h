@@ -53,14 +53,14 @@ SLIM_INLINE uint32_t intersect_node8(const Node8* n, const TravRay& r, simd::vfl
   return (tn <= tf).mask();
 }
 
-// 8 quantized boxes: planes q[6][8] (as QuantBoxes8::q) decoded as start + q * extent, then the
-// same slab test.
-SLIM_INLINE uint32_t intersect_quant_planes(const uint8_t (*q)[8], const float* start,
-                                            const float* extent, const TravRay& r,
-                                            simd::vfloat8& dist) {
+// 8 quantized boxes: planes (plane_q(p): plane p's 8 values as ints, p = 0..5 as the rows of
+// QuantBoxes8::q) decoded as start + q * extent, then the same slab test.
+template <class PlaneQ>
+SLIM_INLINE uint32_t intersect_planes(const PlaneQ& plane_q, const float* start,
+                                      const float* extent, const TravRay& r, simd::vfloat8& dist) {
   using namespace simd;
   auto plane = [&](uint32_t p, int a) {
-    return fmadd(to_float(vint8::load_u8(q[p])), vfloat8(extent[a]), vfloat8(start[a]));
+    return fmadd(to_float(plane_q(p)), vfloat8(extent[a]), vfloat8(start[a]));
   };
   const uint32_t nx = r.near_plane[0], ny = r.near_plane[1], nz = r.near_plane[2];
   vfloat8 tnx = fmsub(plane(nx, 0), vfloat8(r.rdir.x), vfloat8(r.c_near[0]));
@@ -73,6 +73,13 @@ SLIM_INLINE uint32_t intersect_quant_planes(const uint8_t (*q)[8], const float* 
   vfloat8 tf = min(min(tfx, tfy), min(tfz, vfloat8(r.tfar)));
   dist = tn;
   return (tn <= tf).mask();
+}
+// ... planes q[6][8] (as QuantBoxes8::q).
+SLIM_INLINE uint32_t intersect_quant_planes(const uint8_t (*q)[8], const float* start,
+                                            const float* extent, const TravRay& r,
+                                            simd::vfloat8& dist) {
+  return intersect_planes([q](uint32_t p) { return simd::vint8::load_u8(q[p]); }, start, extent, r,
+                          dist);
 }
 
 // 8 quantized boxes (QNode8, MultiLeaf8).
@@ -132,10 +139,14 @@ concept HasMultiLeafView = HasMultiLeafLayout<L> && requires {
 // then it provides
 //   L::kMultiLeafBoxes = true, L::kMultiLeafHeaderBytes  the boxes' bytes (the data follows);
 //   static void multileaf_frame(const Context&, const uint8_t* p, float start[4],
-//       float extent[4]);   the multi-leaf at p starts with 8-bit planes q[6][8] (as
-//                            QuantBoxes8::q), decoded as start + q * extent (one fma, as QNode8);
-// and, for the builder (bvh_scene.h), write_multileaf_frame(source, data, box, header, start,
-// extent): the frame of a multi-leaf whose children lie in `box`, written into its header.
+//       float extent[4]);   the frame of the multi-leaf at p, whose 8-bit planes q[6][8] (as
+//                            QuantBoxes8::q) decode as start + q * extent (one fma, as QNode8);
+//   static void multileaf_planes(const uint8_t* p, vint8 q[6]): the planes of the 8 children
+//       (the layout stores them its own way: the lossy clusters' 6-bit planes);
+//   static void multileaf_planes8(const uint8_t* p, uint8_t (*q)[8]): all six (the structure
+//       check's);
+// and, for the builder (bvh_scene.h), write_multileaf_boxes(source, data, k, boxes, header): the
+// frame and planes of a multi-leaf of k children in boxes[0..k), written into its header.
 template <class L>
 concept HasMultiLeafBoxes = HasMultiLeafView<L> && requires {
   requires L::kMultiLeafBoxes;
@@ -187,8 +198,9 @@ SLIM_INLINE bool intersect_multileaf(const typename Leaf::Context& ctx, const ui
   if constexpr (HasMultiLeafBoxes<Leaf>) {
     alignas(16) float start[4], extent[4];
     Leaf::multileaf_frame(ctx, p, start, extent);
-    mask = detail::intersect_quant_planes(reinterpret_cast<const uint8_t(*)[8]>(p), start, extent,
-                                          ray, dist);
+    simd::vint8 q[6];
+    Leaf::multileaf_planes(p, q);
+    mask = detail::intersect_planes([&](uint32_t i) { return q[i]; }, start, extent, ray, dist);
   } else {
     mask = detail::intersect_quant8(reinterpret_cast<const MultiLeaf8*>(p), ray, dist);
   }

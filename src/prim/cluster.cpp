@@ -111,7 +111,7 @@ uint64_t next_cache_tag() {
 }
 
 bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const uint32_t* counts,
-                     int k, const uint32_t* anchor, LatticeBoxes8& out) {
+                     int k, const uint32_t* anchor, MultiLeafPlanes& out) {
   Box3f boxes[8], all;
   for (int c = 0; c < k; ++c) {
     for (uint32_t j = 0; j < counts[c]; ++j)
@@ -125,8 +125,58 @@ bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const
   BitWriter aw{head, sizeof(ClusterHeader)};
   for (int a = 0; a < 3; ++a) aw.put(anchor[a], s.lattice.anchor_bits[a]);
   float start[4], extent[4];
-  if (!write_box_frame(s.lattice, head.data(), all, out, start, extent)) return false;
+  LatticeBoxes8 lb{};
+  if (!write_box_frame(s.lattice, head.data(), all, lb, start, extent)) return false;
+  std::memcpy(out.scale, lb.scale, 3);
   quantize_planes(start, extent, boxes, k, out.q);
+  // Coarse planes where the children's boxes grow by at most kCoarsePlaneGrowth in surface area.
+  uint8_t coarse[6][8];
+  double area = 0.0, coarse_area = 0.0;
+  for (int c = 0; c < 8; ++c) {
+    double d[3], dc[3];
+    for (int a = 0; a < 3; ++a) {
+      const uint8_t lo = out.q[2 * a][c], hi = out.q[2 * a + 1][c];
+      coarse[2 * a][c] = uint8_t(lo & ~3);
+      coarse[2 * a + 1][c] = uint8_t(hi | 3);
+      d[a] = double(hi - lo) * extent[a];
+      dc[a] = double((hi | 3) - (lo & ~3)) * extent[a];
+    }
+    if (c >= k) continue;
+    area += d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
+    coarse_area += dc[0] * dc[1] + dc[1] * dc[2] + dc[2] * dc[0];
+  }
+  out.fine = coarse_area > (1.0 + kCoarsePlaneGrowth) * area;
+  if (!out.fine) std::memcpy(out.q, coarse, sizeof(coarse));
+  return true;
+}
+
+bool write_multileaf_boxes(const ClusterLattice& lat, bool lossless, const uint8_t* data, int k,
+                           const Box3f* boxes, uint8_t* header) {
+  Box3f all;
+  for (int c = 0; c < k; ++c) all.extend(boxes[c]);
+  float start[4], extent[4];
+  uint8_t q[6][8];
+  if (lossless) {
+    ExactBoxes8 b;
+    std::memcpy(&b, header, sizeof(b));
+    if (!write_exact_box_frame(data, all, b, start, extent)) return false;
+    quantize_planes(start, extent, boxes, k, b.q);
+    std::memcpy(header, &b, sizeof(b));
+    return true;
+  }
+  LatticeBoxes8 b;
+  std::memcpy(&b, header, sizeof(b));
+  if (!write_box_frame(lat, data, all, b, start, extent)) return false;
+  quantize_planes(start, extent, boxes, k, q);
+  uint8_t lows[kPlaneLowBytes];
+  pack_planes(q, b, lows);
+  ClusterHeader h;
+  std::memcpy(&h, data, sizeof(h));
+  // The encoder's planes: fine ones are these (their low bits in the cluster), coarse ones these
+  // rounded outward, which the coarse values are.
+  if (has_fine_planes(h) && std::memcmp(lows, data + sizeof(ClusterHeader), sizeof(lows)) != 0)
+    throw std::logic_error("cluster: multi-leaf planes differ from the encoder's");
+  std::memcpy(header, &b, sizeof(b));
   return true;
 }
 
@@ -379,9 +429,12 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // the union of their triangles' decoded boxes), so the decoder derives the same ranges.
   uint32_t range_lo[8][3] = {}, range_w[8][3] = {};
   uint64_t vertex_bits = kPlainVertexBits;
-  if (!s.lossless && k >= 2 && ranges) {
-    LatticeBoxes8 lb{};
-    bool ok = multileaf_boxes(s, prims, counts, k, anchor, lb);
+  // A lossy multi-leaf's planes: fine or coarse (its boxes, LatticeBoxes8).
+  MultiLeafPlanes lb{};
+  lb.fine = false;
+  const bool planes = !s.lossless && ranges && multileaf_boxes(s, prims, counts, k, anchor, lb);
+  if (planes && k >= 2) {
+    bool ok = true;
     for (int a = 0; a < 3 && ok; ++a) ok = uint32_t(lb.scale[a] >> 3) <= kMaxRangeScaleExp;
     if (ok) {
       uint64_t bits = 0;
@@ -448,16 +501,16 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     ghi = std::max(ghi, s.geom_ids[t]);
   }
   std::sort(ids.begin(), ids.end());
-  const uint32_t prim_base = ids[0];
-  const uint32_t gb = bit_width(ghi - glo), bb = bit_width(prim_base), hb = bit_width(glo);
+  uint32_t prim_base = ids[0];  // with step bits: the smallest id with an entry (below)
+  const uint32_t gb = bit_width(ghi - glo), hb = bit_width(glo);
   // PrimID runs: a run starts at the first sorted id that is 2^ob or more past the current start;
   // run i >= 1 stores e_i = start_i - prim_base - i x 2^ob (Elias-Fano: pb low bits, the high
   // part in unary). ob and pb are the widths with the fewest bits (run lows and highs + per
   // triangle run index and offset). The widest ob gives one run: the plain base + offset, for
   // meshes whose ids are in random order.
-  auto runs_of = [&](uint32_t ob, std::vector<uint32_t>& starts) {
+  auto runs_of = [&](const std::vector<uint32_t>& set, uint32_t ob, std::vector<uint32_t>& starts) {
     starts.clear();
-    for (uint32_t id : ids)
+    for (uint32_t id : set)
       if (starts.empty() || uint64_t(id - starts.back()) >= (uint64_t(1) << ob))
         starts.push_back(id);
   };
@@ -472,13 +525,27 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // entries needed: ntris less them). (Local pointers: the thread_local vectors cost a TLS
   // look-up at each use.)
   const uint32_t* ord = order.data();
-  uint64_t rep_mask = 0;
-  for (uint32_t i = 1; i < ntris; ++i)
-    rep_mask |= uint64_t(s.prim_ids[ord[i]] == s.prim_ids[ord[i - 1]] &&
-                         s.geom_ids[ord[i]] == s.geom_ids[ord[i - 1]])
-                << i;
+  // Step bits (cluster.h): triangle i with triangle i - 1's geomID and a primID one above or one
+  // below it takes no entry either.
+  uint64_t rep_mask = 0, up_mask = 0, down_mask = 0;
+  for (uint32_t i = 1; i < ntris; ++i) {
+    const uint32_t id = s.prim_ids[ord[i]], prev = s.prim_ids[ord[i - 1]];
+    const bool geom = s.geom_ids[ord[i]] == s.geom_ids[ord[i - 1]];
+    rep_mask |= uint64_t(geom && id == prev) << i;
+    up_mask |= uint64_t(geom && id == prev + 1) << i;
+    down_mask |= uint64_t(geom && id == prev - 1) << i;
+  }
   const uint32_t nrep = uint32_t(__builtin_popcountll(rep_mask));
-  // Bits of the ids' entries at `entry` bits each, and whether the repeat bits make them fewer.
+  const uint64_t step_mask = rep_mask | up_mask | down_mask;
+  const uint32_t nstep = uint32_t(__builtin_popcountll(step_mask));
+  // The entries' ids with step bits (the triangles without a step), sorted.
+  thread_local std::vector<uint32_t> step_ids;
+  step_ids.clear();
+  for (uint32_t i = 0; i < ntris; ++i)
+    if (!((step_mask >> i) & 1)) step_ids.push_back(s.prim_ids[ord[i]]);
+  std::sort(step_ids.begin(), step_ids.end());
+  // Bits of the ids' entries at `entry` bits each, and whether the repeat bits make them fewer
+  // (all ids; the step bits' runs are those of step_ids, below).
   auto entry_bits = [&](uint64_t entry, bool& repeats) {
     const uint64_t plain = ntris * entry, with = ntris + (ntris - nrep) * entry;
     repeats = with < plain;
@@ -488,65 +555,80 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // takes every id, a wider ob costs more bits each entry and cannot win: the search stops there.
   uint64_t best_bits = ~uint64_t(0);
   uint32_t best_ob = 0, best_pb = 0;
-  bool repeats = false;
-  for (uint32_t ob = 0; ob <= 32; ++ob) {
-    // Every entry takes at least ob + gb bits (entry_bits, with or without the repeat bits): once
-    // that alone reaches the best, no wider ob can take fewer bits.
-    if (uint64_t(ntris - nrep) * (ob + gb) >= best_bits) break;
-    uint64_t nstarts = 0;
-    uint32_t last = 0;
-    for (uint32_t id : ids) {
-      const bool start = nstarts == 0 || uint64_t(id - last) >= (uint64_t(1) << ob);
-      last = start ? id : last;
-      nstarts += start;
+  bool repeats = false, id_steps = false;
+  for (int with_steps = 0; with_steps < 2; ++with_steps) {
+    const std::vector<uint32_t>& set = with_steps ? step_ids : ids;
+    const uint64_t nmin = with_steps ? ntris - nstep : ntris - nrep;  // entries at least
+    for (uint32_t ob = 0; ob <= 32; ++ob) {
+      // Every entry takes at least ob + gb bits (entry_bits, with or without the repeat bits): once
+      // that alone reaches the best, no wider ob can take fewer bits.
+      if (nmin * (ob + gb) >= best_bits) break;
+      uint64_t nstarts = 0;
+      uint32_t last = 0;
+      for (uint32_t id : set) {
+        const bool start = nstarts == 0 || uint64_t(id - last) >= (uint64_t(1) << ob);
+        last = start ? id : last;
+        nstarts += start;
+      }
+      const uint64_t m = nstarts - 1;
+      const uint64_t e_max = uint64_t(last - set[0]) - (m << ob);
+      // ef_bits falls with pb while a wider pb takes more than m bits off the highs: that gain,
+      // (e_max >> pb) - (e_max >> (pb + 1)), falls with pb, so the fewest bits are at the first pb
+      // (from where the highs fit) that gains no more. At pb <= bit_width(e_max) - bit_width(m) -
+      // 2, e_max >> pb >= 2^(bit_width(m) + 1) > 2m, so the gain is more than m: the search starts
+      // there.
+      uint32_t pb = 0;
+      if (m) {
+        pb = uint32_t(
+            std::max(0, int(bit_width(uint32_t(e_max))) - int(bit_width(uint32_t(m))) - 2));
+        while (pb < 32 &&
+               (m + (e_max >> pb) > kMaxRunHighBits || (e_max >> pb) - (e_max >> (pb + 1)) > m))
+          ++pb;
+      }
+      const uint64_t ef = ef_bits(m, e_max, pb);
+      bool with_repeats = true;
+      const uint64_t entry = bit_width(uint32_t(m)) + ob + gb;
+      const uint64_t bits =
+          bit_width(set[0]) + ef +
+          (with_steps ? 2 * ntris + nmin * entry : entry_bits(entry, with_repeats));
+      if (bits < best_bits) {
+        best_bits = bits;
+        best_ob = ob;
+        best_pb = pb;
+        repeats = with_repeats;
+        id_steps = with_steps;
+      }
+      if (nstarts == 1) break;
     }
-    const uint64_t m = nstarts - 1;
-    const uint64_t e_max = uint64_t(last - prim_base) - (m << ob);
-    // ef_bits falls with pb while a wider pb takes more than m bits off the highs: that gain,
-    // (e_max >> pb) - (e_max >> (pb + 1)), falls with pb, so the fewest bits are at the first pb
-    // (from where the highs fit) that gains no more. At pb <= bit_width(e_max) - bit_width(m) - 2,
-    // e_max >> pb >= 2^(bit_width(m) + 1) > 2m, so the gain is more than m: the search starts
-    // there.
-    uint32_t pb = 0;
-    if (m) {
-      pb = uint32_t(std::max(0, int(bit_width(uint32_t(e_max))) - int(bit_width(uint32_t(m))) - 2));
-      while (pb < 32 &&
-             (m + (e_max >> pb) > kMaxRunHighBits || (e_max >> pb) - (e_max >> (pb + 1)) > m))
-        ++pb;
-    }
-    const uint64_t ef = ef_bits(m, e_max, pb);
-    bool with_repeats;
-    const uint64_t bits = ef + entry_bits(bit_width(uint32_t(m)) + ob + gb, with_repeats);
-    if (bits < best_bits) {
-      best_bits = bits;
-      best_ob = ob;
-      best_pb = pb;
-      repeats = with_repeats;
-    }
-    if (nstarts == 1) break;
   }
   thread_local std::vector<uint32_t> starts;
   starts.reserve(ntris);
-  runs_of(best_ob, starts);
-  h.nruns = uint8_t(starts.size());
-  h.ob = uint8_t(best_ob | (repeats ? 0x80 : 0));
+  runs_of(id_steps ? step_ids : ids, best_ob, starts);
+  prim_base = starts[0];
+  const uint32_t bb = bit_width(prim_base);
+  h.nruns = uint8_t(starts.size() | (id_steps ? 0x80 : 0));
+  h.ob = uint8_t(best_ob | (planes && lb.fine ? 0x40 : 0) | (repeats ? 0x80 : 0));
   set_id_widths(h, best_pb, gb, bb, hb);
   // e_i of run i (i >= 1) and the run highs' length.
   const uint32_t* st = starts.data();
   const size_t nst = starts.size();
   auto run_e = [&](size_t i) { return uint64_t(st[i] - prim_base) - (uint64_t(i) << best_ob); };
   const uint64_t highs = nst > 1 ? (nst - 1) + (run_e(nst - 1) >> best_pb) : 0;
-  const uint32_t nentries = repeats ? ntris - nrep : ntris;
+  const uint32_t nentries = id_steps ? ntris - nstep : repeats ? ntris - nrep : ntris;
 
   const Layout L = layout(h, uint32_t(k), s.lattice, s.lossless, vertex_bits);
   if (L.ntris != ntris) throw std::logic_error("cluster: child sizes do not give the triangles");
   const uint64_t entries = uint64_t(nentries) * L.idbits;  // bits
   const uint64_t bytes = std::max<uint64_t>(
       data_bytes(h, uint32_t(k), s.lattice, s.lossless, entries + highs, vertex_bits),
-      sizeof(ClusterHeader) + kMinStreamBytes);
+      stream_offset(h) + kMinStreamBytes);
   std::vector<uint8_t> out(bytes + 8, 0);  // 8: 64-bit stores
   std::memcpy(out.data(), &h, sizeof(h));
-  BitWriter w{out, sizeof(ClusterHeader)};
+  if (has_fine_planes(h)) {
+    LatticeBoxes8 unused;
+    pack_planes(lb.q, unused, out.data() + sizeof(ClusterHeader));
+  }
+  BitWriter w{out, stream_offset(h)};
   for (int a = 0; a < 3; ++a) {
     if (s.lossless) {
       // The smallest coordinate's float, from which the decoder derives the anchor: decimal codes
@@ -579,9 +661,16 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], axis_bits(h, a));
   if (w.pos != L.runs) throw std::logic_error("cluster: vertex section size mismatch");
   for (size_t i = 1; i < nst; ++i) w.put(uint32_t(run_e(i)), best_pb);
-  auto repeated = [&](uint32_t i) { return repeats && ((rep_mask >> i) & 1); };
+  // The repeat bits, then with step bits the second plane: (repeat, step) = (1, 0) repeat, (0, 1)
+  // one above, (1, 1) one below (cluster.h).
+  auto repeated = [&](uint32_t i) {
+    return id_steps ? ((step_mask >> i) & 1) : repeats && ((rep_mask >> i) & 1);
+  };
   if (repeats)
-    for (uint32_t i = 0; i < ntris; ++i) w.put(repeated(i), 1);
+    for (uint32_t i = 0; i < ntris; ++i)
+      w.put(id_steps ? uint32_t(((rep_mask | down_mask) >> i) & 1) : repeated(i), 1);
+  if (id_steps)
+    for (uint32_t i = 0; i < ntris; ++i) w.put(uint32_t(((up_mask | down_mask) >> i) & 1), 1);
   size_t r = 0;
   auto put_ref = [&] {
     const int32_t d = refs[r++];
@@ -612,7 +701,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   if (w.pos != L.end + entries) throw std::logic_error("cluster: id entries size mismatch");
   // Run highs: run i's one bit at (e_i >> pb) + i - 1.
   for (size_t i = 1; i < nst; ++i) {
-    const uint64_t pos = 8 * sizeof(ClusterHeader) + w.pos + (run_e(i) >> best_pb) + i - 1;
+    const uint64_t pos = 8 * uint64_t(stream_offset(h)) + w.pos + (run_e(i) >> best_pb) + i - 1;
     out[pos >> 3] |= uint8_t(1u << (pos & 7));
   }
   out.resize(bytes + (slack ? kClusterReadSlack : 0));
@@ -628,9 +717,12 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     // Run lows, repeat bits, entries, run highs, the bases, and idw (pb, gb, bb, hb), nruns, ob.
     st.id_bits += (L.topo - L.runs) + entries + highs + bb + hb +
                   8 * (sizeof(h.idw) + sizeof(h.nruns) + sizeof(h.ob));
-    // nverts, bits, ib; the anchors (lossless: the start floats).
-    st.header_bits += 8 * (sizeof(h.nverts) + sizeof(h.bits) + sizeof(h.ib)) + L.bases;
+    // nverts, bits, ib; the fine planes' low bits; the anchors (lossless: the start floats).
+    st.header_bits += 8 * (sizeof(h.nverts) + sizeof(h.bits) + sizeof(h.ib)) + L.bases +
+                      8 * (stream_offset(h) - sizeof(ClusterHeader));
     st.decimal_clusters += coord_mode(h) != 0;
+    st.plane_clusters += planes;
+    st.fine_plane_clusters += has_fine_planes(h);
   }
   return out;
 }
@@ -658,7 +750,7 @@ bool write_box_frame(const ClusterLattice& lat, const uint8_t* data, const Box3f
   // The anchors in a padded copy: box_start reads 16 bytes (the traversal has the read slack).
   const LatticeFrame f = lattice_frame(lat);
   uint8_t anchors[16] = {};
-  std::memcpy(anchors, data + sizeof(ClusterHeader), (f.first[2] + f.width[2] + 7) / 8);
+  std::memcpy(anchors, stream_of(data), (f.first[2] + f.width[2] + 7) / 8);
   box_start(f, anchors, start);
   // Scale bytes e << 3 | m, e <= kMaxBoxScaleExp. The search per axis starts at e = ilogb(need /
   // step) - 1, need = the span / 255: that extent, at most need / 2, cannot reach the top.
@@ -738,11 +830,13 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
   };
   if (size < sizeof(ClusterHeader))
     return fail("shorter than its " + std::to_string(sizeof(ClusterHeader)) + "-byte header");
-  if (size < sizeof(ClusterHeader) + kMinStreamBytes)
-    return fail("stream shorter than " + std::to_string(kMinStreamBytes) + " bytes");
   if (children < 1 || children > 8) return fail("children must be 1..8");
   ClusterHeader h;
   std::memcpy(&h, data, sizeof(h));
+  if (has_fine_planes(h) && (lossless || !boxes))
+    return fail("fine-planes bit outside a lossy multi-leaf");
+  if (size < stream_offset(h) + kMinStreamBytes)
+    return fail("stream shorter than " + std::to_string(kMinStreamBytes) + " bytes");
   if (h.nverts < 1) return fail("no vertex");
   if (!lossless) {
     const std::string bad = check_lattice(lat);
@@ -754,7 +848,7 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
     if (axis_bits(h, a) > max_bits || (!lossless && (h.bits[a] & (a ? 0xff : 0x7f)) > max_bits))
       return fail("axis width beyond " + std::to_string(max_bits) + " bits");
   if (index_bits(h) > 8 || run_low_bits(h) > 32 || geom_bits(h) > 32 || offset_bits(h) > 32 ||
-      (h.ob & 0x40) || prim_base_bits(h) > 32 || geom_base_bits(h) > 32)
+      prim_base_bits(h) > 32 || geom_base_bits(h) > 32)
     return fail("index or id width beyond its limit");
   if (const uint32_t mode = coord_mode(h)) {
     if (!lossless) return fail("coordinate mode " + std::to_string(mode) + " in a lossy cluster");
@@ -772,15 +866,17 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
   }
   // The triangles are the children's sizes (1..64 for 1..8 children): no count to disagree with.
   const uint32_t sizes = child_sizes(h), ntris = tri_count(h, children);
-  if (h.nruns < 1 || h.nruns > ntris) return fail("run count must be 1..the triangle count");
+  if (run_count(h) < 1 || run_count(h) > ntris)
+    return fail("run count must be 1..the triangle count");
+  if (has_steps(h) && !has_repeats(h)) return fail("step bits without repeat bits");
   if (children < 8 && (sizes >> (3 * children)) != 0)
     return fail("sizes given for children beyond the child count");
   Layout L = layout(h, children, lat, lossless);  // the plain vertex section, moved below
-  if (sizeof(ClusterHeader) + (L.verts + 7) / 8 > size)
+  if (stream_offset(h) + (L.verts + 7) / 8 > size)
     return fail("stream runs past the data (child table)");
   if (!ranges && data_bytes(h, children, lat, lossless, 0) > size)
     return fail("stream runs past the data");
-  const uint8_t* bits = data + sizeof(ClusterHeader);
+  const uint8_t* bits = data + stream_offset(h);
   // Per-child vertex ranges: a multi-leaf's cluster of 2..8 children (its boxes right before it),
   // scales that keep the ranges' products in 32 bits, ascending firsts up to nverts, fields of at
   // most 24 bits.
@@ -796,8 +892,10 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
                     " beyond the vertex ranges' " + std::to_string(kMaxRangeScaleExp));
     uint32_t anchor[3];
     lossy_anchors(bits, L, anchor);
+    uint8_t q[6][8];
+    lattice_planes(boxes, plane_lows(data), q);
     ChildRanges r;
-    child_ranges(h, L, bits, anchor, b.q, b.scale, children, r);
+    child_ranges(h, L, bits, anchor, q, b.scale, children, r);
     for (uint32_t c = 0; c < children; ++c) {
       const uint32_t next = c + 1 < children ? r.first[c + 1] : h.nverts;
       if (r.first[c] > next || next > h.nverts)
@@ -850,21 +948,23 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
   // The repeat bits (none on triangle 0), the ids' entries inside the data, their run indices.
   uint32_t entries = ntris;
   if (has_repeats(h)) {
-    if (get(L.ids, 1)) return fail("repeat bit on triangle 0");
-    for (uint32_t t = 1; t < ntris; ++t) entries -= get(L.ids + t, 1);
+    const uint64_t steps = has_steps(h) ? L.ids + ntris : 0;  // the step bits, if any
+    if (get(L.ids, 1) || (steps && get(steps, 1))) return fail("repeat or step bit on triangle 0");
+    for (uint32_t t = 1; t < ntris; ++t)
+      entries -= get(L.ids + t, 1) | (steps ? get(steps + t, 1) : 0);
   }
   if (data_bytes(h, children, lat, lossless, uint64_t(entries) * L.idbits, vertex_bits) > size)
     return fail("stream runs past the data (id entries)");
-  const uint64_t avail = 8 * (size - sizeof(ClusterHeader));
+  const uint64_t avail = 8 * (size - stream_offset(h));
   const auto get_data = reader(avail);
   for (uint32_t e = 0; e < entries; ++e) {
     const uint32_t run = get_data(L.end + uint64_t(e) * L.idbits, L.rb);
-    if (run >= h.nruns) return fail("run index " + std::to_string(run) + " >= run count");
+    if (run >= run_count(h)) return fail("run index " + std::to_string(run) + " >= run count");
   }
   // The run highs: nruns - 1 one bits within kMaxRunHighBits bits and `size` (the stream's end).
   const uint64_t highs = L.end + uint64_t(entries) * L.idbits;
   uint64_t pos = highs;
-  for (uint32_t ones = 0; ones + 1 < h.nruns; ++pos) {
+  for (uint32_t ones = 0; ones + 1 < run_count(h); ++pos) {
     if (pos >= avail) return fail("stream runs past the data (run highs)");
     if (pos - highs >= kMaxRunHighBits)
       return fail("run highs beyond " + std::to_string(kMaxRunHighBits) + " bits");

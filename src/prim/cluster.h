@@ -6,12 +6,14 @@
 //
 // A cluster is one multi-leaf of the compressed-leaf BVH (bvh8.h; QBVH8 inner nodes above the
 // multi-leaves, NodeKind::QCompressedLeaf): its header holds the quantized boxes of up to 8
-// children of up to 8 triangles each (one 8-wide watertight test per child): 51 bytes lossy (a
-// LatticeBoxes8, below: the boxes' frame comes from the cluster's anchors), 54 bytes lossless (an
-// ExactBoxes8: the frame from the stream's start floats and three bfloat16 extents). The cluster
-// data follows it:
+// children of up to 8 triangles each (one 8-wide watertight test per child): 39 bytes lossy (a
+// LatticeBoxes8, below: 6-bit planes, the boxes' frame from the cluster's anchors), 54 bytes
+// lossless (an ExactBoxes8: 8-bit planes, the frame from the stream's start floats and three
+// bfloat16 extents). The cluster data follows it:
 //   ClusterHeader (15 B, packed)
-//   bit stream, LSB first from the byte after the header:
+//   lossy, with the fine-planes bit (bit 6 of the header's ob): kPlaneLowBytes bytes, the low
+//     bits of the boxes' 8-bit planes (below, "the lossy clusters' multi-leaf boxes")
+//   bit stream, LSB first from the byte after these:
 //     anchors:  aw0 + aw1 + aw2 bits, the per-axis minimum codes (lossy: aw the scene's
 //               ClusterLattice::anchor_bits, the bits of the largest lattice code on the axis:
 //               16 on canyon:1024, at most 24); lossless: aw = 32, the per-axis minimum
@@ -24,12 +26,13 @@
 //               (offsets in ranges the multi-leaf's child boxes give: "per-child vertex ranges")
 //     run lows: for runs 1..nruns-1, the low pb bits of the run's e (below)
 //     repeats:  if the header's repeat bit (top bit of ob) is set, ntris bits: bit t set if
-//               triangle t has triangle t - 1's ids (never triangle 0's)
+//               triangle t has triangle t - 1's ids (never triangle 0's); with the step bit
+//               too (top bit of nruns), ntris more bits, the step bits (below)
 //     topology: topology_bits(h) bits, each child a generalized strip (below)
-//     ids:      in triangle order, an entry per triangle whose repeat bit is clear (every
-//               triangle without repeat bits): rb = bit_width(nruns - 1) bits run index, ob (the
-//               header's ob but its top bit, the repeat bit; bit 6 is 0) bits offset in the run
-//               (primID = prim_base + start + offset), gb bits geomID - geom_base
+//     ids:      in triangle order, an entry per triangle whose repeat (and step) bit is clear
+//               (every triangle without repeat bits): rb = bit_width(nruns - 1) bits run index, ob
+//               (the header's ob but its top bit, the repeat bit; bit 6 is 0) bits offset in the
+//               run (primID = prim_base + start + offset), gb bits geomID - geom_base
 //     run highs: for runs 1..nruns-1 in order, e >> pb in unary (that many 0 bits, then a 1);
 //               the stream ends after their nruns-1 one bits (at most kMaxRunHighBits bits)
 // Child c holds 1 + sizes[c] triangles (3 bits each); k, the child count, is the multi-leaf's, and
@@ -78,6 +81,14 @@
 // often neighbours in the strip; with the repeat bits, triangle t's ids are those of the entry
 // t - (repeat bits 1..t set), one popcount away. The encoder sets the repeat bit in the header
 // when the bits save more than their ntris bits cost.
+// The step bits: scans and strip-ordered meshes number neighbouring faces one apart, so in strip
+// order a triangle's primID is often its predecessor's plus or minus one. With the step bit
+// (nruns' top bit) the pair (repeat bit, step bit) of triangle t says (0, 0) an entry, (1, 0)
+// triangle t - 1's ids, (0, 1) its primID + 1, (1, 1) its primID - 1 (the same geomID); triangle
+// t's ids are those of the last triangle p <= t with an entry (entry p less the triangles with no
+// entry before it: popcounts) plus the +1 and -1 steps of triangles p + 1..t (popcounts), and the
+// runs are those of the entries' ids alone (prim_base their smallest). The encoder takes them
+// where they save more than their 2 ntris bits cost (igea: about 2 bits a triangle).
 //
 // Lossy (`cluster`): a vertex's code is its lattice integer q = round((x - origin) / step) per
 // axis, decoded as origin + float(q) * step (a power of two per axis: lattice_steps' for the error
@@ -156,8 +167,9 @@ struct ClusterHeader {
                      // part (Elias-Fano); gb, per geomID offset; bb and hb, of prim_base and
                      // geom_base in the stream (run_low_bits(), geom_bits(), prim_base_bits(),
                      // geom_base_bits() below)
-  uint8_t nruns;     // primID runs, 1..the cluster's triangles
-  uint8_t ob;        // low 6 bits: bits per primID offset in its run (<= 32); top bit: repeats
+  uint8_t nruns;     // low 7 bits: primID runs, 1..the cluster's triangles; top bit: step bits
+  uint8_t ob;        // low 6 bits: bits per primID offset in its run (<= 32); bit 6: fine planes
+                     // (lossy multi-leaves, has_fine_planes); top bit: repeats
   uint8_t sizes[3];  // child c holds 1 + (the 3 bits at 3c) triangles
   uint16_t tbits;    // low 11 bits: bits of the topology stream (<= 1854: 27 + 63 x 29); top 5
                      // bits: the child table's widths (3 bits to, 2 bits vo; see above)
@@ -232,6 +244,12 @@ SLIM_INLINE void set_id_widths(ClusterHeader& h, uint32_t pb, uint32_t gb, uint3
 // Bits of a primID's offset in its run; whether the cluster has repeat bits.
 SLIM_INLINE uint32_t offset_bits(const ClusterHeader& h) { return h.ob & 63u; }
 SLIM_INLINE bool has_repeats(const ClusterHeader& h) { return h.ob >> 7; }
+// The primID runs; whether the cluster has step bits (with its repeat bits).
+SLIM_INLINE uint32_t run_count(const ClusterHeader& h) { return h.nruns & 127u; }
+SLIM_INLINE bool has_steps(const ClusterHeader& h) { return h.nruns >> 7; }
+// A lossy multi-leaf's cluster whose boxes take 8-bit planes (their low bits right after the
+// header; below, "the lossy clusters' multi-leaf boxes").
+SLIM_INLINE bool has_fine_planes(const ClusterHeader& h) { return (h.ob >> 6) & 1; }
 // Bits of axis a's vertex offsets.
 SLIM_INLINE uint32_t axis_bits(const ClusterHeader& h, int a) { return h.bits[a] & 63u; }
 // Decimal mode: the digits of axis a, the cluster's k less the axis's top 2 bits of bits[a]
@@ -298,11 +316,102 @@ SLIM_INLINE float lattice_coord(const ClusterLattice& lat, int axis, uint32_t q)
 // them with the same instructions; the builder takes the smallest scale whose q = 255 decodes at or
 // above the cluster's box and quantizes the child boxes conservatively in that frame (validate()
 // checks every child box against its decoded triangles).
+//
+// The planes are stored in 6 bits: plane p (lo_x, hi_x, lo_y, hi_y, lo_z, hi_z) of child i is the
+// 8-bit plane q = c << 2 | l, c the 6-bit value i of the plane's 6 bytes (from bit 6i), l its low
+// bits: in a cluster with the fine-planes bit, the 2-bit value i of the plane's 2 bytes in the
+// kPlaneLowBytes after the cluster's header; otherwise 0 on low planes and 3 on high ones (the
+// 8-bit box rounded outward to the 64 coarse planes: at most 3/255 of the cluster wider per side).
+// The encoder (cluster::multileaf_boxes) takes the coarse planes where the children's boxes grow
+// in surface area by at most kCoarsePlaneGrowth (scans: nearly every cluster), the fine ones
+// elsewhere (grid terrains' abutting children: the coarse boxes' overlaps would send a ray into
+// more children), so a multi-leaf takes 39 bytes or 51 (39 + the 12 low bytes in the cluster);
+// a coarse cluster's boxes cost 12 bytes fewer (docs/results.md, "Coarse multi-leaf planes").
+constexpr uint32_t kCoarsePlaneBits = 6;
+constexpr uint32_t kPlaneLowBytes = 6 * (8 - kCoarsePlaneBits);  // 6 planes x 8 values x 2 bits
+constexpr double kCoarsePlaneGrowth = 0.10;
 struct LatticeBoxes8 {
-  uint8_t q[6][8];   // 48 B: lo_x, hi_x, lo_y, hi_y, lo_z, hi_z (as QuantBoxes8::q)
-  uint8_t scale[3];  // 3 B: per axis e << 3 | m, e <= kMaxBoxScaleExp
+  uint8_t c[6 * kCoarsePlaneBits];  // 36 B: plane p's 8 values of 6 bits in bytes 6p..6p+5
+  uint8_t scale[3];                 // 3 B: per axis e << 3 | m, e <= kMaxBoxScaleExp
 };
-static_assert(sizeof(LatticeBoxes8) == 51, "lossy cluster multi-leaf boxes are 51 bytes");
+static_assert(sizeof(LatticeBoxes8) == 39 && offsetof(LatticeBoxes8, scale) == 36,
+              "lossy cluster multi-leaf boxes are 39 bytes, the scale bytes last");
+// The byte after the header of a cluster's data: the fine planes' low bits, if any, then the
+// stream (at data + stream_offset).
+SLIM_INLINE uint32_t stream_offset(const ClusterHeader& h) {
+  return uint32_t(sizeof(ClusterHeader)) + (has_fine_planes(h) ? kPlaneLowBytes : 0);
+}
+SLIM_INLINE const uint8_t* stream_of(const uint8_t* data) {
+  const uint8_t ob = data[offsetof(ClusterHeader, ob)];
+  return data + sizeof(ClusterHeader) + ((ob >> 6) & 1) * kPlaneLowBytes;
+}
+// The fine planes' low bits of the lossy multi-leaf whose cluster is at `data` (nullptr: coarse
+// planes).
+SLIM_INLINE const uint8_t* plane_lows(const uint8_t* data) {
+  const uint8_t ob = data[offsetof(ClusterHeader, ob)];
+  return (ob >> 6) & 1 ? data + sizeof(ClusterHeader) : nullptr;
+}
+// The 8-bit planes q[6][8] of the LatticeBoxes8 at `boxes`, their low bits at `lows`
+// (plane_lows; nullptr: 0 on low planes, 3 on high ones). Empty slots (children >= k: 6-bit lo
+// 63, hi 0) give lo 252 > hi 3 (coarse) or lo 255 > hi 0 (fine).
+SLIM_INLINE void lattice_planes(const uint8_t* boxes, const uint8_t* lows, uint8_t (*q)[8]) {
+  for (uint32_t p = 0; p < 6; ++p) {
+    uint64_t c = 0;
+    std::memcpy(&c, boxes + kCoarsePlaneBits * p, kCoarsePlaneBits);
+    const uint32_t l =
+        lows ? uint32_t(lows[2 * p]) | uint32_t(lows[2 * p + 1]) << 8 : (p & 1 ? 0xffffu : 0u);
+    for (uint32_t i = 0; i < 8; ++i)
+      q[p][i] = uint8_t(((c >> (kCoarsePlaneBits * i)) & 63) << 2 | ((l >> (2 * i)) & 3));
+  }
+}
+// The builder's side: the coarse values of 8-bit planes q into `boxes` and, for fine planes,
+// their low bits into `lows` (kPlaneLowBytes).
+SLIM_INLINE void pack_planes(const uint8_t (*q)[8], LatticeBoxes8& boxes, uint8_t* lows) {
+  for (uint32_t p = 0; p < 6; ++p) {
+    uint64_t c = 0;
+    uint32_t l = 0;
+    for (uint32_t i = 0; i < 8; ++i) {
+      c |= uint64_t(q[p][i] >> 2) << (kCoarsePlaneBits * i);
+      l |= uint32_t(q[p][i] & 3) << (2 * i);
+    }
+    std::memcpy(boxes.c + kCoarsePlaneBits * p, &c, kCoarsePlaneBits);
+    if (lows) {
+      lows[2 * p] = uint8_t(l);
+      lows[2 * p + 1] = uint8_t(l >> 8);
+    }
+  }
+}
+#if defined(SLIM_SIMD_AVX2)
+// The six planes of the LatticeBoxes8 at `boxes` as 8 ints each (lattice_planes' values), q[p]
+// for plane p: per plane the 6 bytes in both 128-bit halves (an 8-byte load: `boxes` has 39
+// bytes), lane i's two bytes (from byte 6i / 8) as the lane's bytes 1 and 2 by a byte shuffle, a
+// shift by 6i mod 8 + 6 that puts its 6 bits at bits 2..7 (c << 2) and a mask; then the low bits:
+// 3 on the high planes (lows nullptr), or fine planes' 2 bits a value (2 bytes a plane at `lows`)
+// the same way.
+SLIM_INLINE void lattice_planes_avx2(const uint8_t* boxes, const uint8_t* lows, __m256i* q) {
+  const __m256i bytes = _mm256_setr_epi8(-1, 0, 1, -1, -1, 0, 1, -1, -1, 1, 2, -1, -1, 2, 3, -1,  //
+                                         -1, 3, 4, -1, -1, 3, 4, -1, -1, 4, 5, -1, -1, 5, 6, -1);
+  const __m256i shift = _mm256_setr_epi32(6, 12, 10, 8, 6, 12, 10, 8);
+  const __m256i mask = _mm256_set1_epi32(0xfc), three = _mm256_set1_epi32(3);
+  for (uint32_t p = 0; p < 6; ++p) {
+    int64_t c;
+    std::memcpy(&c, boxes + kCoarsePlaneBits * p, 8);
+    q[p] = _mm256_and_si256(
+        _mm256_srlv_epi32(_mm256_shuffle_epi8(_mm256_set1_epi64x(c), bytes), shift), mask);
+  }
+  if (!lows) {
+    for (uint32_t p = 1; p < 6; p += 2) q[p] = _mm256_or_si256(q[p], three);
+    return;
+  }
+  const __m256i lshift = _mm256_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14);
+  for (uint32_t p = 0; p < 6; ++p) {
+    uint16_t l;
+    std::memcpy(&l, lows + 2 * p, 2);
+    q[p] = _mm256_or_si256(
+        q[p], _mm256_and_si256(_mm256_srlv_epi32(_mm256_set1_epi32(l), lshift), three));
+  }
+}
+#endif
 constexpr uint32_t kMaxBoxScaleExp = 24;  // 255 x 2^24 steps span any cluster (< 2^24 steps)
 // The lattice steps a lossy scene may have (check_lattice): normal floats whose box extents
 // (box_extent: up to 2^(kMaxBoxScaleExp + 1) steps) stay finite.
@@ -427,13 +536,13 @@ SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, const ClusterLatti
   l.vbw = vplain ? bit_width(h.nverts) : vo + 3;
   l.vs = vplain ? 0 : (uint32_t(h.nverts) * inv) >> 4;
   l.vbias = vplain ? 0 : 1u << (l.vbw - 1);
-  l.rb = h.nruns ? bit_width(uint32_t(h.nruns) - 1) : 0;
+  l.rb = run_count(h) ? bit_width(run_count(h) - 1) : 0;
   l.idbits = l.rb + offset_bits(h) + geom_bits(h);
   l.table = l.bases + prim_base_bits(h) + geom_base_bits(h);
   l.verts = l.table + uint64_t(k ? k - 1 : 0) * (l.tb + l.vbw);
   l.runs = l.verts + uint64_t(h.nverts) * l.vbits;
-  l.ids = l.runs + uint64_t(h.nruns ? h.nruns - 1 : 0) * run_low_bits(h);
-  l.topo = l.ids + (has_repeats(h) ? l.ntris : 0);
+  l.ids = l.runs + uint64_t(run_count(h) ? run_count(h) - 1 : 0) * run_low_bits(h);
+  l.topo = l.ids + (has_repeats(h) ? l.ntris : 0) * (has_steps(h) ? 2 : 1);
   l.end = l.topo + tbits;
   if (vertex_bits != kPlainVertexBits) with_vertex_bits(l, h, vertex_bits);
   return l;
@@ -458,7 +567,7 @@ SLIM_INLINE uint32_t predicted_vertex(const Layout& L, uint32_t first) {
 SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, const ClusterLattice& lat,
                                 bool lossless, uint64_t tail,
                                 uint64_t vertex_bits = kPlainVertexBits) {
-  return sizeof(ClusterHeader) + (layout(h, k, lat, lossless, vertex_bits).end + tail + 7) / 8;
+  return stream_offset(h) + (layout(h, k, lat, lossless, vertex_bits).end + tail + 7) / 8;
 }
 
 // ---- per-child vertex ranges (lossy clusters of 2..8 children) ----
@@ -548,9 +657,11 @@ SLIM_INLINE void child_ranges(const ClusterHeader& h, const Layout& L, const uin
 // at every multi-leaf visit that decodes a child): the same fields bit for bit for a cluster
 // check() accepted (ranges of fewer than 2^24 steps: the float conversion that gives the fields'
 // widths is exact).
+// The planes come from the LatticeBoxes8 at `boxes` and their low bits at `lows` (plane_lows).
 SLIM_INLINE void child_ranges_avx2(const ClusterHeader& h, const Layout& L, const uint8_t* bits,
-                                   const uint32_t* anchor, const uint8_t (*q)[8],
-                                   const uint8_t* scale, uint32_t k, ChildRanges& r) {
+                                   const uint32_t* anchor, const uint8_t* boxes,
+                                   const uint8_t* lows, const uint8_t* scale, uint32_t k,
+                                   ChildRanges& r) {
   auto store = [](uint32_t* p, __m256i x) { _mm256_store_si256(reinterpret_cast<__m256i*>(p), x); };
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   const __m256i zero = _mm256_setzero_si256(), one = _mm256_set1_epi32(1);
@@ -587,13 +698,13 @@ SLIM_INLINE void child_ranges_avx2(const ClusterHeader& h, const Layout& L, cons
   __m256i first = _mm256_blend_epi32(_mm256_add_epi32(field, predicted), zero, 1);  // child 0: 0
   first = _mm256_blendv_epi8(_mm256_set1_epi32(int(kNoChildVertex)), first, used);
   // The ranges per axis.
+  __m256i q[6];
+  lattice_planes_avx2(boxes, lows, q);
   __m256i wsum = zero, shift[3], width[3], base[3];
   for (int a = 0; a < 3; ++a) {
     const __m128i e = _mm_cvtsi32_si128(int(scale[a] >> 3));
     const __m256i m = _mm256_set1_epi32(int(8 + (scale[a] & 7)));
-    auto planes = [&](int i) {
-      return _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(q[i])));
-    };
+    auto planes = [&](int i) { return q[i]; };
     const __m256i lo =
         _mm256_srli_epi32(_mm256_sll_epi32(_mm256_mullo_epi32(planes(2 * a), m), e), 3);
     const __m256i hi = _mm256_srli_epi32(
@@ -1030,7 +1141,7 @@ template <bool kLossless>
 SLIM_INLINE void view_into(View& v, const ClusterLattice& lat, const uint8_t* data,
                            uint32_t children) {
   std::memcpy(&v.h, data, sizeof(v.h));
-  v.bits = data + sizeof(ClusterHeader);
+  v.bits = data + stream_offset(v.h);
   v.L = layout(v.h, children, lat, kLossless);
   v.sizes = child_sizes(v.h);
   if constexpr (kLossless) {
@@ -1048,12 +1159,14 @@ SLIM_INLINE void view_into(View& v, const ClusterLattice& lat, const uint8_t* da
   v.anchor[1] = uint32_t((x >> aw0) & ((uint64_t(1) << aw1) - 1));
   v.anchor[2] = read_bits(v.bits, aw0 + aw1, v.L.aw[2]);
   if (has_ranges(v.h)) {  // a multi-leaf's cluster (check()): its boxes lie right before it
-    LatticeBoxes8 b;
-    std::memcpy(&b, data - sizeof(LatticeBoxes8), sizeof(b));
+    const uint8_t* boxes = data - sizeof(LatticeBoxes8);
+    const uint8_t* scale = boxes + offsetof(LatticeBoxes8, scale);
 #if defined(SLIM_SIMD_AVX2)
-    child_ranges_avx2(v.h, v.L, v.bits, v.anchor, b.q, b.scale, children, v.r);
+    child_ranges_avx2(v.h, v.L, v.bits, v.anchor, boxes, plane_lows(data), scale, children, v.r);
 #else
-    child_ranges(v.h, v.L, v.bits, v.anchor, b.q, b.scale, children, v.r);
+    uint8_t q[6][8];
+    lattice_planes(boxes, plane_lows(data), q);
+    child_ranges(v.h, v.L, v.bits, v.anchor, q, scale, children, v.r);
 #endif
     with_vertex_bits(v.L, v.h, v.r.total);
     v.ranges = true;
@@ -1127,7 +1240,7 @@ struct ChildIds {
   uint32_t prim_base = 0, geom_base = 0;
   uint8_t idbits = 0, rb = 0, ob = 0, gb = 0, pb = 0;
   uint8_t first = 0, ntris = 0;  // the child's first triangle; the cluster's triangles
-  bool has_repeats = false;
+  uint8_t flag_planes = 0;       // 0; 1: repeat bits; 2: repeat and step bits
 };
 // The ids of the triangles from triangle `first` of the cluster `v` on.
 SLIM_INLINE ChildIds child_ids(const View& v, uint32_t first) {
@@ -1139,7 +1252,7 @@ SLIM_INLINE ChildIds child_ids(const View& v, uint32_t first) {
   c.runs = L.runs;
   c.first = uint8_t(first);
   c.ntris = uint8_t(L.ntris);
-  c.has_repeats = has_repeats(h);
+  c.flag_planes = uint8_t(has_repeats(h) ? 1 + has_steps(h) : 0);
   const uint32_t bb = prim_base_bits(h);
   c.prim_base = read_bits(v.bits, L.bases, bb);
   c.geom_base = read_bits(v.bits, L.bases + bb, geom_base_bits(h));
@@ -1178,24 +1291,38 @@ SLIM_INLINE uint32_t run_start(const uint8_t* bits, const ChildIds& c, uint64_t 
   return uint32_t(e + (uint64_t(run) << c.ob));
 }
 // primID and geomID of triangle `first + l` (bits: the cluster's stream; l below the child's
-// triangle count: a padding lane names a triangle of the next child, or none). With repeat bits,
-// triangle t's entry is t less the repeat bits of triangles 1..t (triangle 0's is ignored: an
-// entry index never underflows), and the entries are ntris less all of them.
+// triangle count: a padding lane names a triangle of the next child, or none). With repeat bits
+// (r) and step bits (s; none: 0), the triangles without an entry are those with r or s set
+// (triangle 0's bits are ignored: it always has one); triangle t takes the ids of the last
+// triangle p <= t with an entry, its entry p less the triangles without one before it, plus the
+// +1 steps (s and not r) less the -1 steps (r and s) of triangles p + 1..t; the entries are ntris
+// less all triangles without one.
+SLIM_INLINE uint64_t id_flag_bits(const uint8_t* bits, uint64_t pos, uint32_t ntris) {
+  uint64_t all = read_bits(bits, pos, 32);  // the second read only inside the bits
+  if (ntris > 32) all |= uint64_t(read_bits(bits, pos + 32, 32)) << 32;
+  return all & ((uint64_t(2) << ((ntris - 1) & 63)) - 1) & ~uint64_t(1);
+}
 SLIM_INLINE void decode_ids(const uint8_t* bits, const ChildIds& c, uint32_t l, uint32_t& geom,
                             uint32_t& prim) {
   const uint32_t t = (uint32_t(c.first) + l) & 63;
-  uint32_t entry = t, entries = c.ntris;
-  if (c.has_repeats) {
-    uint64_t all = read_bits(bits, c.repeats, 32);  // the second read only inside the bits
-    if (c.ntris > 32) all |= uint64_t(read_bits(bits, c.repeats + 32, 32)) << 32;
-    const uint64_t r = all & ((uint64_t(2) << ((uint32_t(c.ntris) - 1) & 63)) - 1) & ~uint64_t(1);
-    entry = t - uint32_t(__builtin_popcountll(r & ((uint64_t(2) << t) - 1)));
-    entries -= uint32_t(__builtin_popcountll(r));
+  uint32_t entry = t, entries = c.ntris, p = t;
+  int32_t step = 0;
+  if (c.flag_planes) {
+    const uint64_t r = id_flag_bits(bits, c.repeats, c.ntris);
+    const uint64_t s = c.flag_planes > 1 ? id_flag_bits(bits, c.repeats + c.ntris, c.ntris) : 0;
+    const uint64_t none = r | s, upto = (uint64_t(2) << t) - 1;  // no entry; triangles 0..t
+    p = 63 - uint32_t(__builtin_clzll(~none & upto));            // triangle 0 has an entry
+    entry = p - uint32_t(__builtin_popcountll(none & ((uint64_t(1) << p) - 1)));
+    entries -= uint32_t(__builtin_popcountll(none));
+    const uint64_t after = upto & ~((uint64_t(2) << p) - 1);  // triangles p + 1..t
+    step = int32_t(__builtin_popcountll(s & ~r & after)) -
+           int32_t(__builtin_popcountll(s & r & after));
   }
   const uint64_t highs = c.entries + uint64_t(entries) * c.idbits;
   const uint64_t pos = c.entries + uint64_t(entry) * c.idbits;
   const uint32_t run = read_bits(bits, pos, c.rb);
-  prim = c.prim_base + run_start(bits, c, highs, run) + read_bits(bits, pos + c.rb, c.ob);
+  prim = c.prim_base + run_start(bits, c, highs, run) + read_bits(bits, pos + c.rb, c.ob) +
+         uint32_t(step);
   geom = c.geom_base + read_bits(bits, pos + c.rb + c.ob, c.gb);
 }
 // primID and geomID of triangle t of the cluster `v`.
@@ -1277,7 +1404,7 @@ SLIM_INLINE void box_start(const LatticeFrame& f, const uint8_t* bits, float* st
 // integer operations lane by lane.
 SLIM_INLINE void box_frame(const LatticeFrame& f, const uint8_t* p, float* start, float* extent) {
   const uint8_t* scale = p + offsetof(LatticeBoxes8, scale);
-  box_start(f, p + sizeof(LatticeBoxes8) + sizeof(ClusterHeader), start);
+  box_start(f, stream_of(p + sizeof(LatticeBoxes8)), start);
 #if defined(SLIM_SIMD_AVX2)
   uint32_t sc;
   std::memcpy(&sc, scale, 4);  // the 3 scale bytes and the cluster header's first
@@ -1328,6 +1455,14 @@ SLIM_INLINE void exact_box_frame(const uint8_t* p, float* start, float* extent) 
 // bfloat16 reaches the box (coordinates near the float range).
 bool write_exact_box_frame(const uint8_t* data, const Box3f& box, ExactBoxes8& boxes, float* start,
                            float* extent);
+// The multi-leaf boxes (a LatticeBoxes8 or an ExactBoxes8) of the k children (boxes[c]: the BVH2
+// leaves') of the cluster at `data` into `header`: the frame of their union and the children's
+// planes in it (quantize_planes). Lossy, the cluster's encoder has taken the planes already
+// (multileaf_boxes below: the same frame and planes) and stored their low bits if fine; this
+// writes their coarse values and throws std::logic_error if the planes are not the encoder's.
+// False if no frame reaches the union (coordinates near the float range).
+bool write_multileaf_boxes(const ClusterLattice& lat, bool lossless, const uint8_t* data, int k,
+                           const Box3f* boxes, uint8_t* header);
 
 // The children a thread decoded last, so that the rays after it that enter the same child (the
 // neighbouring pixels of a tile, a bounce leaving the surface it hit) skip the strip and vertex
@@ -1388,7 +1523,7 @@ uint64_t next_cache_tag();
 // kMaxRunHighBits bits, the stream inside `size`). The decoders read only what this accepts (plus
 // kClusterReadSlack bytes). `boxes`: the LatticeBoxes8 right before a lossy multi-leaf's cluster,
 // from which its per-child vertex ranges come (nullptr elsewhere: a cluster with the ranges bit
-// fails).
+// or the fine-planes bit fails).
 bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterLattice& lat,
            bool lossless, std::string* why, const uint8_t* boxes = nullptr);
 // The lattice fields the decoders take as given (lossy: anchor widths of at most 24 bits, steps
@@ -1406,6 +1541,8 @@ struct EncodeStats {
   uint64_t id_bits = 0;           // run starts, run indices, offsets, geomIDs, the bases and widths
   uint64_t header_bits = 0;       // the rest of the header, the anchors (lossless: start floats)
   uint64_t decimal_clusters = 0;  // lossless clusters in decimal mode
+  uint64_t plane_clusters = 0;    // lossy multi-leaves' clusters (their boxes' planes) ...
+  uint64_t fine_plane_clusters = 0;  // ... with the fine-planes bit
 };
 
 }  // namespace cluster
@@ -1441,9 +1578,16 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
 // The multi-leaf boxes of a lossy cluster of these children with these anchors (the per-axis
 // smallest codes), as the build writes them: write_box_frame of the union of the children's boxes,
 // quantize_planes of each child's (the union of its triangles' decoded boxes: the BVH2 leaf's
-// box). False if no frame reaches the box (write_box_frame).
+// box), the 8-bit planes the traversal decodes: fine (these) where the coarse ones would grow the
+// children's boxes by more than kCoarsePlaneGrowth in surface area, else coarse (these rounded
+// outward, LatticeBoxes8). False if no frame reaches the box (write_box_frame).
+struct MultiLeafPlanes {
+  uint8_t q[6][8];   // the 8-bit planes (as QuantBoxes8::q; lanes >= k empty)
+  uint8_t scale[3];  // the scale bytes
+  bool fine;         // q are fine planes (the cluster keeps their low bits)
+};
 bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const uint32_t* counts,
-                     int k, const uint32_t* anchor, LatticeBoxes8& out);
+                     int k, const uint32_t* anchor, MultiLeafPlanes& out);
 
 // The lossy lattice's steps (per axis a power of two) for an error bound (rel_error x the box
 // diagonal) over `box` (empty: steps 1): s, the largest power of two with s sqrt(3) / 2 <= bound
@@ -1598,28 +1742,22 @@ struct ClusterLeaf {
     std::memcpy(out, &off, 8);
   }
 
-  // The multi-leaf boxes are a cluster::LatticeBoxes8 (51 B, lossy) or cluster::ExactBoxes8
-  // (54 B, lossless) instead of a 72-byte MultiLeaf8 (traverse.h, HasMultiLeafBoxes).
+  // The multi-leaf boxes are a cluster::LatticeBoxes8 (39 B, lossy: 6-bit planes, 8-bit ones
+  // with the low bits in the cluster) or cluster::ExactBoxes8 (54 B, lossless) instead of a
+  // 72-byte MultiLeaf8 (traverse.h, HasMultiLeafBoxes).
   static constexpr bool kMultiLeafBoxes = true;
   static constexpr uint32_t kMultiLeafHeaderBytes =
       kLossless ? sizeof(cluster::ExactBoxes8) : sizeof(cluster::LatticeBoxes8);
-  // Multi-leaves lie at any byte (kLeafAlign): the boxes are written through a copy (an
-  // ExactBoxes8's extents are 2-byte fields).
-  static void write_multileaf_frame(const ClusterSource& s, const uint8_t* data, const Box3f& box,
-                                    uint8_t* header, float* start, float* extent) {
-    bool ok;
-    if constexpr (kLossless) {
-      cluster::ExactBoxes8 b;
-      std::memcpy(&b, header, sizeof(b));
-      ok = cluster::write_exact_box_frame(data, box, b, start, extent);
-      std::memcpy(header, &b, sizeof(b));
-    } else {
-      cluster::LatticeBoxes8 b;
-      std::memcpy(&b, header, sizeof(b));
-      ok = cluster::write_box_frame(s.lattice, data, box, b, start, extent);
-      std::memcpy(header, &b, sizeof(b));
-    }
-    if (!ok)
+  // The builder's side (bvh_scene.h): the boxes of the k children (boxes[c]: the BVH2 leaves')
+  // of the cluster at `data` into `header`: the frame of their union and the child boxes'
+  // planes in it (quantize_planes). Lossy, the cluster's encoder has taken the planes already
+  // (cluster::multileaf_boxes: the same frame and planes) and stored their low bits if fine;
+  // this writes their coarse values and checks that the planes are the encoder's. Multi-leaves
+  // lie at any byte (kLeafAlign): the boxes are written through a copy (an ExactBoxes8's extents
+  // are 2-byte fields).
+  static void write_multileaf_boxes(const ClusterSource& s, const uint8_t* data, int k,
+                                    const Box3f* boxes, uint8_t* header) {
+    if (!cluster::write_multileaf_boxes(s.lattice, kLossless, data, k, boxes, header))
       throw Error(
           "cluster: a cluster's box does not fit its multi-leaf frame (coordinates near the "
           "float range)");
@@ -1630,6 +1768,30 @@ struct ClusterLeaf {
       cluster::exact_box_frame(p, start, extent);
     else
       cluster::box_frame(ctx.frame, p, start, extent);
+  }
+  // The six planes of the multi-leaf at p, 8 ints each (traverse.h: the 8-bit planes q[6][8]).
+  static SLIM_INLINE void multileaf_planes(const uint8_t* p, simd::vint8* q) {
+    if constexpr (kLossless) {
+      for (uint32_t i = 0; i < 6; ++i) q[i] = simd::vint8::load_u8(p + 8 * i);
+    } else {
+      const uint8_t* lows = cluster::plane_lows(p + sizeof(cluster::LatticeBoxes8));
+#if defined(SLIM_SIMD_AVX2)
+      __m256i v[6];
+      cluster::lattice_planes_avx2(p, lows, v);
+      for (uint32_t i = 0; i < 6; ++i) q[i] = v[i];
+#else
+      uint8_t b[6][8];
+      cluster::lattice_planes(p, lows, b);
+      for (uint32_t i = 0; i < 6; ++i) q[i] = simd::vint8::load_u8(b[i]);
+#endif
+    }
+  }
+  // The 8-bit planes of the multi-leaf at p (the structure check's).
+  static void multileaf_planes8(const uint8_t* p, uint8_t (*q)[8]) {
+    if constexpr (kLossless)
+      std::memcpy(q, p, 48);
+    else
+      cluster::lattice_planes(p, cluster::plane_lows(p + sizeof(cluster::LatticeBoxes8)), q);
   }
 
   // ---- traversal side ----
@@ -1699,7 +1861,7 @@ struct ClusterLeaf {
       if (tt[j] < tt[l]) l = j;
     }
     uint32_t geom, prim;
-    cluster::decode_ids(view.data + sizeof(ClusterHeader), en.ids, uint32_t(l), geom, prim);
+    cluster::decode_ids(cluster::stream_of(view.data), en.ids, uint32_t(l), geom, prim);
     auto p = [&](int k) { return Vec3f(d.v[k][0][l], d.v[k][1][l], d.v[k][2][l]); };
     detail::record_hit(tt[l], u[l], v[l], p(0), p(1), p(2), geom, prim, ray, hit);
     return true;

@@ -669,7 +669,10 @@ struct Validator {
               float start[4], extent[4];
               uint8_t q[6][8];
               boxes.frame(p, start, extent);
-              boxes.planes(p, q);
+              if (boxes.planes)
+                boxes.planes(p, q);
+              else
+                std::memcpy(q, p, sizeof(q));
               cb = dequantize_planes(q, start, extent, c);
             } else {
               cb = dequantize_box(*ml, c);

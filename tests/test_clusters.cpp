@@ -694,8 +694,8 @@ TEST(ClusterCodec, CheckRejectsMalformedRanges) {
   std::memcpy(bad.data(), &hb, sizeof(hb));
   const cluster::Layout Lb = cluster::layout(hb, 8, z.lattice, false);
   for (uint32_t i = 0; i < Lb.vbw; ++i) {
-    const uint64_t bit =
-        8 * sizeof(ClusterHeader) + Lb.table + 4 * uint64_t(Lb.tb + Lb.vbw) + Lb.tb + i;
+    const uint64_t bit = 8 * uint64_t(cluster::stream_offset(hb)) + Lb.table +
+                         4 * uint64_t(Lb.tb + Lb.vbw) + Lb.tb + i;
     bad[bit >> 3] |= uint8_t(1u << (bit & 7));
   }
   EXPECT_FALSE(checks(lb, bad, &why));

@@ -48,7 +48,7 @@ constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
 // 10: the clusters' inner nodes are CQNode8 (32-bit child refs) where they fit. Version 11: the
 // cluster lattice has a step per axis (ClusterLattice::step[3]). Version 12: the lossy multi-leaf
 // boxes take 6-bit planes (39 bytes), their low bits in the cluster where it has the fine-planes
-// bit. Any change
+// bit, and the clusters' primIDs may take step bits (the top bit of nruns). Any change
 // of a section's layout (a node, block or context struct), of what its bytes decode to, or of the
 // header needs a new version: the sections are the in-memory structs byte for byte.
 constexpr uint32_t kVersion = 12;

@@ -671,8 +671,10 @@ struct Validator {
               boxes.frame(p, start, extent);
               if (boxes.planes)
                 boxes.planes(p, q);
+              else if (hb >= sizeof(q))
+                std::memcpy(q, p, sizeof(q));  // 8-bit planes first (as QuantBoxes8::q)
               else
-                std::memcpy(q, p, sizeof(q));
+                throw std::logic_error("validate_bvh8: multi-leaf boxes without their planes");
               cb = dequantize_planes(q, start, extent, c);
             } else {
               cb = dequantize_box(*ml, c);

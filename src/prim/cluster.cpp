@@ -110,6 +110,24 @@ uint64_t next_cache_tag() {
   return next.fetch_add(1, std::memory_order_relaxed);
 }
 
+// Whether the k children's 8-bit planes q (in a frame of these extents) stay fine: their coarse
+// planes (LatticeBoxes8: rounded outward to multiples of 4) would grow the children's boxes by
+// more than kCoarsePlaneGrowth in surface area.
+static bool fine_planes(const uint8_t (*q)[8], const float* extent, int k) {
+  double area = 0.0, coarse_area = 0.0;
+  for (int c = 0; c < k; ++c) {
+    double d[3], dc[3];
+    for (int a = 0; a < 3; ++a) {
+      const int lo = q[2 * a][c], hi = q[2 * a + 1][c];
+      d[a] = double(hi - lo) * extent[a];
+      dc[a] = double((hi | 3) - (lo & ~3)) * extent[a];
+    }
+    area += d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
+    coarse_area += dc[0] * dc[1] + dc[1] * dc[2] + dc[2] * dc[0];
+  }
+  return coarse_area > (1.0 + kCoarsePlaneGrowth) * area;
+}
+
 bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const uint32_t* counts,
                      int k, const uint32_t* anchor, MultiLeafPlanes& out) {
   Box3f boxes[8], all;
@@ -129,24 +147,10 @@ bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const
   if (!write_box_frame(s.lattice, head.data(), all, lb, start, extent)) return false;
   std::memcpy(out.scale, lb.scale, 3);
   quantize_planes(start, extent, boxes, k, out.q);
-  // Coarse planes where the children's boxes grow by at most kCoarsePlaneGrowth in surface area.
-  uint8_t coarse[6][8];
-  double area = 0.0, coarse_area = 0.0;
-  for (int c = 0; c < 8; ++c) {
-    double d[3], dc[3];
-    for (int a = 0; a < 3; ++a) {
-      const uint8_t lo = out.q[2 * a][c], hi = out.q[2 * a + 1][c];
-      coarse[2 * a][c] = uint8_t(lo & ~3);
-      coarse[2 * a + 1][c] = uint8_t(hi | 3);
-      d[a] = double(hi - lo) * extent[a];
-      dc[a] = double((hi | 3) - (lo & ~3)) * extent[a];
-    }
-    if (c >= k) continue;
-    area += d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
-    coarse_area += dc[0] * dc[1] + dc[1] * dc[2] + dc[2] * dc[0];
-  }
-  out.fine = coarse_area > (1.0 + kCoarsePlaneGrowth) * area;
-  if (!out.fine) std::memcpy(out.q, coarse, sizeof(coarse));
+  out.fine = fine_planes(out.q, extent, k);
+  if (!out.fine)
+    for (int p = 0; p < 6; ++p)
+      for (int c = 0; c < 8; ++c) out.q[p][c] = uint8_t(p & 1 ? out.q[p][c] | 3 : out.q[p][c] & ~3);
   return true;
 }
 
@@ -174,7 +178,8 @@ bool write_multileaf_boxes(const ClusterLattice& lat, bool lossless, const uint8
   std::memcpy(&h, data, sizeof(h));
   // The encoder's planes: fine ones are these (their low bits in the cluster), coarse ones these
   // rounded outward, which the coarse values are.
-  if (has_fine_planes(h) && std::memcmp(lows, data + sizeof(ClusterHeader), sizeof(lows)) != 0)
+  if (has_fine_planes(h) != fine_planes(q, extent, k) ||
+      (has_fine_planes(h) && std::memcmp(lows, data + sizeof(ClusterHeader), sizeof(lows)) != 0))
     throw std::logic_error("cluster: multi-leaf planes differ from the encoder's");
   std::memcpy(header, &b, sizeof(b));
   return true;
@@ -714,7 +719,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     st.position_bits += L.runs - L.verts;
     st.topology_bits +=
         topology_bits(h) + (L.verts - L.table) + 8 * (sizeof(h.sizes) + sizeof(h.tbits));
-    // Run lows, repeat bits, entries, run highs, the bases, and idw (pb, gb, bb, hb), nruns, ob.
+    // Run lows, repeat and step bits, entries, run highs, the bases, and idw (pb, gb, bb, hb),
+    // nruns, ob.
     st.id_bits += (L.topo - L.runs) + entries + highs + bb + hb +
                   8 * (sizeof(h.idw) + sizeof(h.nruns) + sizeof(h.ob));
     // nverts, bits, ib; the fine planes' low bits; the anchors (lossless: the start floats).

@@ -24,15 +24,15 @@
 //     vertices: per vertex bx + by + bz bits (offsets from the anchor); lossy clusters of 2..8
 //               children with the ranges bit: per vertex its first child's three range fields
 //               (offsets in ranges the multi-leaf's child boxes give: "per-child vertex ranges")
-//     run lows: for runs 1..nruns-1, the low pb bits of the run's e (below)
+//     run lows: for runs 1..nruns-1 (nruns = run_count(h)), the low pb bits of the run's e
 //     repeats:  if the header's repeat bit (top bit of ob) is set, ntris bits: bit t set if
-//               triangle t has triangle t - 1's ids (never triangle 0's); with the step bit
-//               too (top bit of nruns), ntris more bits, the step bits (below)
+//               triangle t has triangle t - 1's ids (never triangle 0's; without step bits);
+//               with the step bit too (top bit of nruns), ntris more bits, the step bits (below)
 //     topology: topology_bits(h) bits, each child a generalized strip (below)
 //     ids:      in triangle order, an entry per triangle whose repeat (and step) bit is clear
 //               (every triangle without repeat bits): rb = bit_width(nruns - 1) bits run index, ob
-//               (the header's ob but its top bit, the repeat bit; bit 6 is 0) bits offset in the
-//               run (primID = prim_base + start + offset), gb bits geomID - geom_base
+//               (the low 6 bits of the header's ob) bits offset in the run (primID = prim_base +
+//               start + offset), gb bits geomID - geom_base
 //     run highs: for runs 1..nruns-1 in order, e >> pb in unary (that many 0 bits, then a 1);
 //               the stream ends after their nruns-1 one bits (at most kMaxRunHighBits bits)
 // Child c holds 1 + sizes[c] triangles (3 bits each); k, the child count, is the multi-leaf's, and
@@ -389,6 +389,7 @@ SLIM_INLINE void pack_planes(const uint8_t (*q)[8], LatticeBoxes8& boxes, uint8_
 // 3 on the high planes (lows nullptr), or fine planes' 2 bits a value (2 bytes a plane at `lows`)
 // the same way.
 SLIM_INLINE void lattice_planes_avx2(const uint8_t* boxes, const uint8_t* lows, __m256i* q) {
+  static_assert(kCoarsePlaneBits == 6, "the byte shuffle and shifts below are for 6-bit planes");
   const __m256i bytes = _mm256_setr_epi8(-1, 0, 1, -1, -1, 0, 1, -1, -1, 1, 2, -1, -1, 2, 3, -1,  //
                                          -1, 3, 4, -1, -1, 3, 4, -1, -1, 4, 5, -1, -1, 5, 6, -1);
   const __m256i shift = _mm256_setr_epi32(6, 12, 10, 8, 6, 12, 10, 8);
@@ -614,7 +615,7 @@ struct ChildRanges {
 };
 // The ranges of the k children of the cluster with header h (L: its layout, from vertex_bits
 // anything: the child table lies before the vertices), its stream `bits`, its anchors and the
-// multi-leaf boxes' planes q (LatticeBoxes8::q) and scale bytes.
+// multi-leaf boxes' 8-bit planes q (lattice_planes) and scale bytes.
 SLIM_INLINE void child_ranges(const ClusterHeader& h, const Layout& L, const uint8_t* bits,
                               const uint32_t* anchor, const uint8_t (*q)[8], const uint8_t* scale,
                               uint32_t k, ChildRanges& r) {
@@ -1458,8 +1459,9 @@ bool write_exact_box_frame(const uint8_t* data, const Box3f& box, ExactBoxes8& b
 // The multi-leaf boxes (a LatticeBoxes8 or an ExactBoxes8) of the k children (boxes[c]: the BVH2
 // leaves') of the cluster at `data` into `header`: the frame of their union and the children's
 // planes in it (quantize_planes). Lossy, the cluster's encoder has taken the planes already
-// (multileaf_boxes below: the same frame and planes) and stored their low bits if fine; this
-// writes their coarse values and throws std::logic_error if the planes are not the encoder's.
+// (multileaf_boxes below: the same frame, planes and choice of fine or coarse ones) and stored
+// their low bits if fine; this writes their coarse values and throws std::logic_error if its
+// choice or the low bits differ from the encoder's.
 // False if no frame reaches the union (coordinates near the float range).
 bool write_multileaf_boxes(const ClusterLattice& lat, bool lossless, const uint8_t* data, int k,
                            const Box3f* boxes, uint8_t* header);

@@ -561,7 +561,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   uint64_t best_bits = ~uint64_t(0);
   uint32_t best_ob = 0, best_pb = 0;
   bool repeats = false, id_steps = false;
-  for (int with_steps = 0; with_steps < 2; ++with_steps) {
+  // With no step but the repeats, the step bits only add their plane: not tried.
+  for (int with_steps = 0; with_steps < (nstep > nrep ? 2 : 1); ++with_steps) {
     const std::vector<uint32_t>& set = with_steps ? step_ids : ids;
     const uint64_t nmin = with_steps ? ntris - nstep : ntris - nrep;  // entries at least
     for (uint32_t ob = 0; ob <= 32; ++ob) {

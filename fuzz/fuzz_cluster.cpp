@@ -176,7 +176,7 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
     SLIM_FUZZ_CHECK(cluster::multileaf_boxes(src, prims, counts, k, anchor, mp), "no box frame");
     SLIM_FUZZ_CHECK(cluster::has_fine_planes(h0) == mp.fine, "fine-planes bit differs");
     cluster::LatticeBoxes8 lb{};
-    cluster::pack_planes(mp.q, lb, nullptr);
+    cluster::pack_planes(mp.q, &lb, nullptr);
     std::memcpy(lb.scale, mp.scale, 3);
     ml.resize(sizeof(lb) + enc.size());
     std::memcpy(ml.data(), &lb, sizeof(lb));

@@ -99,7 +99,7 @@ struct SphereSource {
 // The stored form of a lossy multi-leaf's boxes (the coarse plane values and the scale bytes).
 cluster::LatticeBoxes8 packed(const cluster::MultiLeafPlanes& mp) {
   cluster::LatticeBoxes8 lb{};
-  cluster::pack_planes(mp.q, lb, nullptr);
+  cluster::pack_planes(mp.q, &lb, nullptr);
   std::memcpy(lb.scale, mp.scale, 3);
   return lb;
 }

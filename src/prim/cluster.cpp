@@ -120,7 +120,8 @@ static bool fine_planes(const uint8_t (*q)[8], const float* extent, int k) {
     for (int a = 0; a < 3; ++a) {
       const int lo = q[2 * a][c], hi = q[2 * a + 1][c];
       d[a] = double(hi - lo) * extent[a];
-      dc[a] = double((hi | 3) - (lo & ~3)) * extent[a];
+      dc[a] = double(coarse_plane(2 * a + 1, uint8_t(hi)) - coarse_plane(2 * a, uint8_t(lo))) *
+              extent[a];
     }
     area += d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
     coarse_area += dc[0] * dc[1] + dc[1] * dc[2] + dc[2] * dc[0];
@@ -150,7 +151,7 @@ bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const
   out.fine = fine_planes(out.q, extent, k);
   if (!out.fine)
     for (int p = 0; p < 6; ++p)
-      for (int c = 0; c < 8; ++c) out.q[p][c] = uint8_t(p & 1 ? out.q[p][c] | 3 : out.q[p][c] & ~3);
+      for (int c = 0; c < 8; ++c) out.q[p][c] = coarse_plane(uint32_t(p), out.q[p][c]);
   return true;
 }
 
@@ -173,7 +174,7 @@ bool write_multileaf_boxes(const ClusterLattice& lat, bool lossless, const uint8
   if (!write_box_frame(lat, data, all, b, start, extent)) return false;
   quantize_planes(start, extent, boxes, k, q);
   uint8_t lows[kPlaneLowBytes];
-  pack_planes(q, b, lows);
+  pack_planes(q, &b, lows);
   ClusterHeader h;
   std::memcpy(&h, data, sizeof(h));
   // The encoder's planes: fine ones are these (their low bits in the cluster), coarse ones these
@@ -436,7 +437,6 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   uint64_t vertex_bits = kPlainVertexBits;
   // A lossy multi-leaf's planes: fine or coarse (its boxes, LatticeBoxes8).
   MultiLeafPlanes lb{};
-  lb.fine = false;
   const bool planes = !s.lossless && ranges && multileaf_boxes(s, prims, counts, k, anchor, lb);
   if (planes && k >= 2) {
     bool ok = true;
@@ -630,10 +630,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       stream_offset(h) + kMinStreamBytes);
   std::vector<uint8_t> out(bytes + 8, 0);  // 8: 64-bit stores
   std::memcpy(out.data(), &h, sizeof(h));
-  if (has_fine_planes(h)) {
-    LatticeBoxes8 unused;
-    pack_planes(lb.q, unused, out.data() + sizeof(ClusterHeader));
-  }
+  if (has_fine_planes(h)) pack_planes(lb.q, nullptr, out.data() + sizeof(ClusterHeader));
   BitWriter w{out, stream_offset(h)};
   for (int a = 0; a < 3; ++a) {
     if (s.lossless) {

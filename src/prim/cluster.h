@@ -364,9 +364,11 @@ SLIM_INLINE void lattice_planes(const uint8_t* boxes, const uint8_t* lows, uint8
       q[p][i] = uint8_t(((c >> (kCoarsePlaneBits * i)) & 63) << 2 | ((l >> (2 * i)) & 3));
   }
 }
+// The coarse plane of 8-bit plane q, plane p's (low planes even, high ones odd): rounded outward.
+SLIM_INLINE uint8_t coarse_plane(uint32_t p, uint8_t q) { return uint8_t(p & 1 ? q | 3 : q & ~3); }
 // The builder's side: the coarse values of 8-bit planes q into `boxes` and, for fine planes,
-// their low bits into `lows` (kPlaneLowBytes).
-SLIM_INLINE void pack_planes(const uint8_t (*q)[8], LatticeBoxes8& boxes, uint8_t* lows) {
+// their low bits into `lows` (kPlaneLowBytes); either may be nullptr.
+SLIM_INLINE void pack_planes(const uint8_t (*q)[8], LatticeBoxes8* boxes, uint8_t* lows) {
   for (uint32_t p = 0; p < 6; ++p) {
     uint64_t c = 0;
     uint32_t l = 0;
@@ -374,7 +376,7 @@ SLIM_INLINE void pack_planes(const uint8_t (*q)[8], LatticeBoxes8& boxes, uint8_
       c |= uint64_t(q[p][i] >> 2) << (kCoarsePlaneBits * i);
       l |= uint32_t(q[p][i] & 3) << (2 * i);
     }
-    std::memcpy(boxes.c + kCoarsePlaneBits * p, &c, kCoarsePlaneBits);
+    if (boxes) std::memcpy(boxes->c + kCoarsePlaneBits * p, &c, kCoarsePlaneBits);
     if (lows) {
       lows[2 * p] = uint8_t(l);
       lows[2 * p + 1] = uint8_t(l >> 8);

@@ -175,10 +175,12 @@ void check_multileaf_boxes(const std::vector<uint8_t>& data, const ClusterLattic
 // `full`: 8 children of 8, 64 triangles, as the builder makes most clusters; in the order of
 // `order`) and checks that every child decodes to the source's positions and ids bit
 // for bit. *decimal (if given) receives the count of clusters in the lossless decimal mode,
-// *clusters the count of clusters.
+// *clusters the count of clusters, *wide the count of children with per-child vertex ranges whose
+// vertices take more than 32 bits.
 void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32_t seed,
                  bool shuffle, size_t* decimal = nullptr, size_t* clusters_out = nullptr,
-                 std::vector<ClusterHeader>* headers = nullptr, bool full = false) {
+                 std::vector<ClusterHeader>* headers = nullptr, bool full = false,
+                 size_t* wide = nullptr) {
   const cluster::Quantized z = cluster::quantize(
       tm.vertices.data(), tm.vertices.size(), tm.tris.data(), tm.tri_count(), rel_error, lossless);
   ClusterSource src = source_of(tm, z, lossless);
@@ -268,6 +270,8 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
     // One view of the cluster serves all its children (as in the traversal).
     const cluster::View view = lossless ? cluster::view<true>(z.lattice, cd, uint32_t(kk))
                                         : cluster::view<false>(z.lattice, cd, uint32_t(kk));
+    if (wide && view.ranges)
+      for (int c = 0; c < kk; ++c) *wide += view.r.w[c] > 32;
     if (!lossless) {
       // The traversal's vertex decode (AVX2 where built) gives the scalar decode's bits.
       for (int c = 0; c < kk; ++c) {
@@ -290,15 +294,12 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
                             rs);
       const cluster::ChildRanges& rv = view.r;
       ASSERT_EQ(rs.total, rv.total);
-      ASSERT_EQ(rs.wmax, rv.wmax);
       for (int c = 0; c < 8; ++c) {
         ASSERT_EQ(rs.first[c], rv.first[c]) << c;
         ASSERT_EQ(rs.pos[c], rv.pos[c]) << c;
         ASSERT_EQ(rs.w[c], rv.w[c]) << c;
         for (int a = 0; a < 3; ++a) {
-          ASSERT_EQ(rs.shift[a][c], rv.shift[a][c]) << c << " " << a;
-          ASSERT_EQ(rs.width[a][c], rv.width[a][c]) << c << " " << a;
-          ASSERT_EQ(rs.mask[a][c], rv.mask[a][c]) << c << " " << a;
+          ASSERT_EQ(rs.radix[a][c], rv.radix[a][c]) << c << " " << a;
           ASSERT_EQ(rs.base[a][c], rv.base[a][c]) << c << " " << a;
         }
       }
@@ -594,8 +595,13 @@ TEST(ClusterCodec, DecodeEqualsEncodeRealMesh) {
   PolyMesh m = load(shared_data_dir() + "/stanford_bunny.obj.xz");  // %f decimals
   TriangleMesh tm = triangulate_fan({&m});
   for (bool lossless : {false, true}) {
-    size_t decimal = 0, clusters = 0;
-    check_codec(tm, lossless, 1e-5, 4, false, &decimal, &clusters);
+    size_t decimal = 0, clusters = 0, wide = 0;
+    check_codec(tm, lossless, 1e-5, 4, false, &decimal, &clusters, nullptr, false, &wide);
+    if (!lossless) {
+      // Mixed-radix vertices of more than 32 bits (the encoder's second field) occur.
+      std::printf("  bunny: %zu children with vertices of more than 32 bits\n", wide);
+      EXPECT_GT(wide, 0u);
+    }
     if (lossless) {
       std::printf("  bunny: %zu of %zu clusters decimal\n", decimal, clusters);
       EXPECT_GT(decimal, clusters * 9 / 10);
@@ -636,6 +642,71 @@ TEST(ClusterCodec, RangesKeepEveryChildWithin24Bits) {
   ClusterHeader h;
   std::memcpy(&h, enc.data(), sizeof(h));
   EXPECT_FALSE(cluster::has_ranges(h));
+}
+
+// The AVX2 decoder's mixed-radix digits are the integer quotients and remainders for any vertex
+// of up to kMaxRangeVertexBits bits (the division in doubles), or of up to kFloatRadixBits where
+// every child's vertices are that narrow (in floats), the widest included: three children, the
+// widest with radices whose product is just below 2^52 (2^23), vertices from 0 to 2^w - 1
+// (numbers at or above the product too: a damaged block's digit beyond its radix decodes alike).
+TEST(ClusterCodec, MixedRadixDigitsAtTheWidestVertices) {
+#if defined(SLIM_SIMD_AVX2)
+  auto run = [](const uint32_t(&radix)[3][3], uint32_t widest) {
+    cluster::ChildRanges r{};
+    std::mt19937_64 rng(7);
+    std::vector<uint64_t> m;
+    std::vector<uint8_t> bits(1024, 0);
+    uint64_t pos = 0;
+    for (uint32_t c = 0; c < 8; ++c) {
+      r.first[c] = c < 3 ? 8 * c : cluster::kNoChildVertex;
+      r.w[c] = c < 3 ? cluster::radix_bits(radix[c][0], radix[c][1], radix[c][2]) : 0;
+      r.wmax = std::max(r.wmax, r.w[c]);
+      for (int a = 0; a < 3; ++a) {
+        r.radix[a][c] = c < 3 ? radix[c][a] : 1;
+        r.base[a][c] = 1000 * (c + 1) + uint32_t(a);
+      }
+      if (c >= 3) continue;
+      r.pos[c] = uint32_t(pos - uint64_t(r.first[c]) * r.w[c]);
+      for (int i = 0; i < 8; ++i) {
+        const uint64_t top = (uint64_t(1) << r.w[c]) - 1;
+        const uint64_t v = i == 0 ? 0 : i == 1 ? top : i == 2 ? top >> 1 : rng() & top;
+        m.push_back(v);
+        for (uint32_t b = 0; b < r.w[c]; ++b, ++pos)
+          if ((v >> b) & 1) bits[pos >> 3] |= uint8_t(1u << (pos & 7));
+      }
+    }
+    ASSERT_EQ(r.wmax, widest);
+    ClusterLattice lat;
+    for (int a = 0; a < 3; ++a) lat.step[a] = 0.25f;
+    for (int t0 = 0; t0 < 24; t0 += 8) {
+      alignas(32) uint32_t tri[8];
+      for (int l = 0; l < 8; ++l) {
+        const uint32_t v0 = uint32_t(t0 + l), v1 = uint32_t((t0 + l + 9) % 24),
+                       v2 = uint32_t((t0 + 5 * l + 17) % 24);
+        tri[l] = v0 | v1 << 8 | v2 << 16;
+      }
+      cluster::Decoded8 d;
+      d.n = 8;
+      cluster::decode_vertices_ranges_avx2(lat, bits.data(), r, tri, d);
+      for (int l = 0; l < 8; ++l)
+        for (int k = 0; k < 3; ++k) {
+          const uint32_t v = (tri[l] >> (8 * k)) & 0xff, c = v / 8;
+          const uint64_t x = m[v], t = x / radix[c][0], z = t / radix[c][1];
+          const uint64_t o[3] = {x % radix[c][0], t % radix[c][1], z};
+          for (int a = 0; a < 3; ++a)
+            ASSERT_EQ(bits_of(d.v[k][a][l]),
+                      bits_of(cluster::lattice_coord(lat, a, r.base[a][c] + uint32_t(o[a]))))
+                << "vertex " << v << " axis " << a;
+        }
+    }
+  };
+  const uint32_t wide[3][3] = {{100003, 77777, 500009}, {1, 1, 1}, {4097, 3, 65536}};
+  run(wide, cluster::kMaxRangeVertexBits);
+  const uint32_t narrow[3][3] = {{2047, 4095, 1}, {1, 1, 1}, {3, 5, 7}};
+  run(narrow, cluster::kFloatRadixBits);
+#else
+  GTEST_SKIP() << "AVX2 decoder not built";
+#endif
 }
 
 // check() of a cluster with per-child vertex ranges: its boxes' scales, its children's range
@@ -685,7 +756,18 @@ TEST(ClusterCodec, CheckRejectsMalformedRanges) {
   wide.q[1][3] = 255;
   b = packed(wide);
   EXPECT_FALSE(checks(b, enc, &why));
-  EXPECT_NE(why.find("beyond 24 bits"), std::string::npos) << why;
+  EXPECT_NE(why.find("beyond 2^24 steps"), std::string::npos) << why;
+  // Each axis within 2^24 steps (255 planes of 2^10 steps: some 2^19), child 3's box spanning all
+  // 255 planes on all three: its mixed-radix vertices take some 57 bits.
+  wide = mp;
+  for (int a = 0; a < 3; ++a) {
+    wide.scale[a] = uint8_t(10 << 3 | 7);
+    wide.q[2 * a][3] = 0;
+    wide.q[2 * a + 1][3] = 255;
+  }
+  b = packed(wide);
+  EXPECT_FALSE(checks(b, enc, &why));
+  EXPECT_NE(why.find("bits, beyond 52"), std::string::npos) << why;
   // Child 5's first new vertex past the vertices: the plain table code (vo = 3) and its field
   // all ones.
   std::vector<uint8_t> bad = enc;

@@ -48,10 +48,11 @@ constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
 // 10: the clusters' inner nodes are CQNode8 (32-bit child refs) where they fit. Version 11: the
 // cluster lattice has a step per axis (ClusterLattice::step[3]). Version 12: the lossy multi-leaf
 // boxes take 6-bit planes (39 bytes), their low bits in the cluster where it has the fine-planes
-// bit, and the clusters' primIDs may take step bits (the top bit of nruns). Any change
+// bit, and the clusters' primIDs may take step bits (the top bit of nruns). Version 13: a lossy
+// cluster's per-child vertex ranges hold each vertex as one mixed-radix number. Any change
 // of a section's layout (a node, block or context struct), of what its bytes decode to, or of the
 // header needs a new version: the sections are the in-memory structs byte for byte.
-constexpr uint32_t kVersion = 12;
+constexpr uint32_t kVersion = 13;
 constexpr uint32_t kByteOrder = 0x01020304;
 constexpr uint64_t kAlign = 64;
 // Bounds the table before it is read (the header size check then bounds it by the file size): a

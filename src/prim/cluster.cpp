@@ -433,7 +433,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // child's range and they take fewer bits. The multi-leaf boxes are those the build writes
   // (write_box_frame and quantize_planes of the children's boxes, which are the BVH2 leaves':
   // the union of their triangles' decoded boxes), so the decoder derives the same ranges.
-  uint32_t range_lo[8][3] = {}, range_w[8][3] = {};
+  uint32_t range_lo[8][3] = {}, radix[8][3] = {}, range_w[8] = {};
   uint64_t vertex_bits = kPlainVertexBits;
   // A lossy multi-leaf's planes: fine or coarse (its boxes, LatticeBoxes8).
   MultiLeafPlanes lb{};
@@ -444,19 +444,21 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     if (ok) {
       uint64_t bits = 0;
       for (int c = 0; c < k && ok; ++c) {
-        // Every child's fields at most 24 bits (check()), a child without new vertices too.
+        // Every child's radices at most 2^24 and vertices at most kMaxRangeVertexBits (check()),
+        // a child without new vertices too.
         for (int a = 0; a < 3; ++a) {
-          plane_range(lb.q[2 * a][c], lb.q[2 * a + 1][c], lb.scale[a], range_lo[c][a],
-                      range_w[c][a]);
-          ok &= range_w[c][a] <= 24;
+          plane_range(lb.q[2 * a][c], lb.q[2 * a + 1][c], lb.scale[a], range_lo[c][a], radix[c][a]);
+          ok &= radix[c][a] - 1 < 1u << 24;
         }
+        range_w[c] = radix_bits(radix[c][0], radix[c][1], radix[c][2]);
+        ok &= range_w[c] <= kMaxRangeVertexBits;
         const uint32_t end = c + 1 < k ? child_cnt[c + 1] : nv;
         for (uint32_t i = child_cnt[c]; i < end && ok; ++i)
           for (int a = 0; a < 3; ++a) {
             const uint32_t off = codes[3 * i + a] - anchor[a] - range_lo[c][a];
-            ok &= codes[3 * i + a] >= anchor[a] + range_lo[c][a] && (off >> range_w[c][a]) == 0;
+            ok &= codes[3 * i + a] >= anchor[a] + range_lo[c][a] && off < radix[c][a];
           }
-        bits += uint64_t(end - child_cnt[c]) * (range_w[c][0] + range_w[c][1] + range_w[c][2]);
+        bits += uint64_t(end - child_cnt[c]) * range_w[c];
       }
       if (ok && bits < uint64_t(nv) * (h.bits[0] + h.bits[1] + h.bits[2])) {
         vertex_bits = bits;
@@ -656,9 +658,13 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   }
   if (vertex_bits != kPlainVertexBits)
     for (int c = 0; c < k; ++c)
-      for (uint32_t i = child_cnt[c], end = c + 1 < k ? child_cnt[c + 1] : nv; i < end; ++i)
-        for (int a = 0; a < 3; ++a)
-          w.put(codes[3 * i + a] - anchor[a] - range_lo[c][a], range_w[c][a]);
+      for (uint32_t i = child_cnt[c], end = c + 1 < k ? child_cnt[c + 1] : nv; i < end; ++i) {
+        uint64_t o[3];
+        for (int a = 0; a < 3; ++a) o[a] = codes[3 * i + a] - anchor[a] - range_lo[c][a];
+        const uint64_t m = o[0] + radix[c][0] * (o[1] + radix[c][1] * o[2]);  // < 2^52
+        w.put(uint32_t(m), std::min(range_w[c], 32u));
+        if (range_w[c] > 32) w.put(uint32_t(m >> 32), range_w[c] - 32);
+      }
   else
     for (uint32_t i = 0; i < nv; ++i)
       for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], axis_bits(h, a));
@@ -882,8 +888,8 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
     return fail("stream runs past the data");
   const uint8_t* bits = data + stream_offset(h);
   // Per-child vertex ranges: a multi-leaf's cluster of 2..8 children (its boxes right before it),
-  // scales that keep the ranges' products in 32 bits, ascending firsts up to nverts, fields of at
-  // most 24 bits.
+  // scales that keep the ranges' products in 32 bits, ascending firsts up to nverts, radices of at
+  // most 2^24, vertices of at most kMaxRangeVertexBits.
   uint64_t vertex_bits = kPlainVertexBits;
   if (ranges) {
     if (children < 2 || !boxes)
@@ -905,9 +911,12 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
       if (r.first[c] > next || next > h.nverts)
         return fail("child " + std::to_string(c) + "'s first new vertex out of order");
       for (int a = 0; a < 3; ++a)
-        if (r.width[a][c] > max_bits)
+        if (r.radix[a][c] - 1 >= 1u << max_bits)
           return fail("child " + std::to_string(c) + "'s vertex range on axis " +
-                      std::to_string(a) + " beyond " + std::to_string(max_bits) + " bits");
+                      std::to_string(a) + " beyond 2^" + std::to_string(max_bits) + " steps");
+      if (r.w[c] > kMaxRangeVertexBits)
+        return fail("child " + std::to_string(c) + "'s vertices of " + std::to_string(r.w[c]) +
+                    " bits, beyond " + std::to_string(kMaxRangeVertexBits));
     }
     vertex_bits = r.total;
     if (data_bytes(h, children, lat, lossless, 0, vertex_bits) > size)

@@ -582,36 +582,60 @@ SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, const Cluste
 // before the cluster's data) bound them. In lattice steps from the anchor, with the axis's scale
 // byte e << 3 | m, the planes' real values give the range
 //   lo = floor(q_lo x (8 + m) 2^e / 8),  hi = ceil(q_hi x (8 + m) 2^e / 8),
-// and the child's field on the axis is bit_width(hi - lo) bits, the vertex's code lo + the field
-// (+ the anchor). The vertex section holds child 0's new vertices, then child 1's, and so on,
-// child c's at w_c (its three fields) bits each. A child of a scan's cluster spans about a third
-// of the cluster per axis: some 1.5 bits a coordinate fewer (docs/results.md, "Per-child vertex
-// ranges"). The encoder sets the bit when every vertex lies in its child's range (unless a float
-// plane rounds past a vertex's lattice point, it does) and the ranges take fewer bits; the free
-// box planes cost nothing to store.
+// so the vertex's offsets from lo (+ the anchor) on the three axes are digits o_a < R_a of radix
+// R_a = hi - lo + 1, stored as one mixed-radix number
+//   m = o_x + R_x (o_y + R_y o_z)  in  w = bit_width(R_x R_y R_z - 1) bits,
+// at most 1 bit more than log2 of the box's lattice points instead of up to 3 (three fields of
+// bit_width(hi - lo) bits each): some 1 bit a vertex fewer on every mesh (docs/results.md,
+// "Mixed-radix vertices"). The decoders get the digits with two divisions, o_z = m / (R_x R_y)
+// and t = m / R_x (AVX2: in doubles, exact for m < 2^52), o_x = m - t R_x, o_y = t - o_z R_y.
+// The vertex section holds child 0's new vertices, then child 1's, and so on, child c's at w_c
+// bits each. A child of a scan's cluster spans about a third of the cluster per axis: some 1.5
+// bits a coordinate fewer than the cluster's fields (docs/results.md, "Per-child vertex ranges").
+// The encoder sets the bit when every vertex lies in its child's range (unless a float plane
+// rounds past a vertex's lattice point, it does), every w_c is at most kMaxRangeVertexBits and the
+// ranges take fewer bits; the free box planes cost nothing to store.
 SLIM_INLINE bool has_ranges(const ClusterHeader& h) { return h.bits[0] >> 7; }
 // Scale exponents of a cluster with ranges at most: 255 x 15 x 2^20 < 2^32, so the ranges'
 // 32-bit products do not wrap (a cluster spans fewer than 2^24 steps: e <= 17 reaches it).
 constexpr uint32_t kMaxRangeScaleExp = 20;
+// Bits of a vertex of a child with ranges at most (check() rejects more): the AVX2 decoder
+// converts the mixed-radix number to a double exactly (below 2^52) and divides it.
+constexpr uint32_t kMaxRangeVertexBits = 52;
+// Bits of the vertices of every child of a cluster at most whose AVX2 decoder divides in floats.
+constexpr uint32_t kFloatRadixBits = 23;
 // The range of planes q_lo, q_hi under scale byte `scale` (e <= kMaxRangeScaleExp): its low end
-// and its field's bits (32 when q_hi < q_lo, which check() rejects).
+// and its radix hi - lo + 1 (wrapped when q_hi < q_lo: check() rejects radices beyond 2^24).
 SLIM_INLINE void plane_range(uint32_t qlo, uint32_t qhi, uint32_t scale, uint32_t& lo,
-                             uint32_t& width) {
+                             uint32_t& radix) {
   const uint32_t m = 8 + (scale & 7), e = (scale >> 3) & 31;
   lo = ((qlo * m) << e) >> 3;
-  width = bit_width(((((qhi * m) << e) + 7) >> 3) - lo);
+  radix = ((((qhi * m) << e) + 7) >> 3) - lo + 1;
+}
+// Bits of a mixed-radix vertex: bit_width(R_x R_y R_z - 1), exact for any radices (a radix 0, a
+// wrapped one, gives 128).
+SLIM_INLINE uint32_t radix_bits(uint32_t rx, uint32_t ry, uint32_t rz) {
+  const unsigned __int128 p = (unsigned __int128)(uint64_t(rx) * ry) * rz - 1;
+  const uint64_t high = uint64_t(p >> 64), low = uint64_t(p);
+  return high  ? 128 - uint32_t(__builtin_clzll(high))
+         : low ? 64 - uint32_t(__builtin_clzll(low))
+               : 0;
+}
+// Reads w <= 57 bits at bit pos.
+SLIM_INLINE uint64_t read_bits57(const uint8_t* p, uint64_t pos, uint32_t w) {
+  uint64_t x;
+  std::memcpy(&x, p + (pos >> 3), 8);
+  return (x >> (pos & 7)) & ((uint64_t(1) << w) - 1);
 }
 // What a decoder takes from the ranges, per child (lanes c >= k: first kNoChildVertex, pos and w
-// 0).
+// 0, radices 1).
 constexpr uint32_t kNoChildVertex = 0x100;  // above every vertex number (signed compares work)
 struct ChildRanges {
   alignas(32) uint32_t first[8];     // the child's first new vertex
   alignas(32) uint32_t pos[8];       // vertex v of the child lies at bit pos + v x w (mod 2^32)
-  alignas(32) uint32_t w[8];         // bits a vertex
-  alignas(32) uint32_t shift[3][8];  // axis a's field in the vertex: from its bit shift[a]
-  alignas(32) uint32_t width[3][8];  // ... width[a] bits
-  alignas(32) uint32_t mask[3][8];   // 2^width[a] - 1
-  alignas(32) uint32_t base[3][8];   // the code of field 0: anchor + lo
+  alignas(32) uint32_t w[8];         // bits a vertex (radix_bits)
+  alignas(32) uint32_t radix[3][8];  // per axis hi - lo + 1
+  alignas(32) uint32_t base[3][8];   // the code of digit 0: anchor + lo
   uint64_t total;                    // bits of the vertex section
   uint32_t wmax;                     // the widest child's w
 };
@@ -633,19 +657,16 @@ SLIM_INLINE void child_ranges(const ClusterHeader& h, const Layout& L, const uin
   uint64_t total = 0;
   r.wmax = 0;
   for (uint32_t c = 0; c < 8; ++c) {
-    uint32_t wsum = 0;
     for (int a = 0; a < 3; ++a) {
-      uint32_t lo = 0, wa = 0;
-      if (c < k) plane_range(q[2 * a][c], q[2 * a + 1][c], scale[a], lo, wa);
-      r.shift[a][c] = wsum;
-      r.width[a][c] = wa;
-      r.mask[a][c] = uint32_t((uint64_t(1) << wa) - 1);
+      uint32_t lo = 0, radix = 1;
+      if (c < k) plane_range(q[2 * a][c], q[2 * a + 1][c], scale[a], lo, radix);
+      r.radix[a][c] = radix;
       r.base[a][c] = anchor[a] + lo;
-      wsum += wa;
     }
+    const uint32_t wsum = radix_bits(r.radix[0][c], r.radix[1][c], r.radix[2][c]);
     r.w[c] = wsum;
-    r.pos[c] = 0;
     r.wmax = std::max(r.wmax, wsum);
+    r.pos[c] = 0;
     if (c < k) {
       const uint32_t n = (c + 1 < k ? r.first[c + 1] : uint32_t(h.nverts)) - r.first[c];
       r.pos[c] = p - r.first[c] * wsum;
@@ -703,27 +724,36 @@ SLIM_INLINE void child_ranges_avx2(const ClusterHeader& h, const Layout& L, cons
   // The ranges per axis.
   __m256i q[6];
   lattice_planes_avx2(boxes, lows, q);
-  __m256i wsum = zero, shift[3], width[3], base[3];
+  __m256i radix[3], base[3];
   for (int a = 0; a < 3; ++a) {
     const __m128i e = _mm_cvtsi32_si128(int(scale[a] >> 3));
     const __m256i m = _mm256_set1_epi32(int(8 + (scale[a] & 7)));
-    auto planes = [&](int i) { return q[i]; };
-    const __m256i lo =
-        _mm256_srli_epi32(_mm256_sll_epi32(_mm256_mullo_epi32(planes(2 * a), m), e), 3);
-    const __m256i hi = _mm256_srli_epi32(
-        _mm256_add_epi32(_mm256_sll_epi32(_mm256_mullo_epi32(planes(2 * a + 1), m), e),
-                         _mm256_set1_epi32(7)),
-        3);
-    // bit_width(hi - lo): the exponent of its float (exact below 2^24), 0 for 0.
-    const __m256i span = _mm256_sub_epi32(hi, lo);
-    const __m256i exp = _mm256_srli_epi32(_mm256_castps_si256(_mm256_cvtepi32_ps(span)), 23);
-    width[a] = _mm256_and_si256(
-        _mm256_max_epi32(_mm256_sub_epi32(exp, _mm256_set1_epi32(126)), zero), used);
-    shift[a] = wsum;
+    const __m256i lo = _mm256_srli_epi32(_mm256_sll_epi32(_mm256_mullo_epi32(q[2 * a], m), e), 3);
+    const __m256i hi =
+        _mm256_srli_epi32(_mm256_add_epi32(_mm256_sll_epi32(_mm256_mullo_epi32(q[2 * a + 1], m), e),
+                                           _mm256_set1_epi32(7)),
+                          3);
+    radix[a] = _mm256_blendv_epi8(one, _mm256_add_epi32(_mm256_sub_epi32(hi, lo), one), used);
     base[a] = _mm256_blendv_epi8(_mm256_set1_epi32(int(anchor[a])),
                                  _mm256_add_epi32(_mm256_set1_epi32(int(anchor[a])), lo), used);
-    wsum = _mm256_add_epi32(wsum, width[a]);
   }
+  // radix_bits: the exponent of R_x R_y R_z - 1 as a double (exact: radices of at most 2^24
+  // whose product is at most 2^52), 0 for 0; four children in each half.
+  auto vertex_bits = [&](int half) {
+    auto rd = [&](int a) {
+      return _mm256_cvtepi32_pd(half ? _mm256_extracti128_si256(radix[a], 1)
+                                     : _mm256_castsi256_si128(radix[a]));
+    };
+    const __m256d p =
+        _mm256_sub_pd(_mm256_mul_pd(_mm256_mul_pd(rd(0), rd(1)), rd(2)), _mm256_set1_pd(1.0));
+    return _mm256_sub_epi64(_mm256_srli_epi64(_mm256_castpd_si256(p), 52),
+                            _mm256_set1_epi64x(1022));
+  };
+  const __m256 wpair =
+      _mm256_shuffle_ps(_mm256_castsi256_ps(vertex_bits(0)), _mm256_castsi256_ps(vertex_bits(1)),
+                        _MM_SHUFFLE(2, 0, 2, 0));
+  const __m256i wsum =
+      _mm256_max_epi32(_mm256_permute4x64_epi64(_mm256_castps_si256(wpair), 0xD8), zero);
   // Vertices per child: the next child's first (the last child's: nverts) less the child's.
   const __m256i next = _mm256_blendv_epi8(
       _mm256_permutevar8x32_epi32(
@@ -740,9 +770,7 @@ SLIM_INLINE void child_ranges_avx2(const ClusterHeader& h, const Layout& L, cons
   store(r.pos, pos);
   store(r.w, wsum);
   for (int a = 0; a < 3; ++a) {
-    store(r.shift[a], shift[a]);
-    store(r.width[a], width[a]);
-    store(r.mask[a], _mm256_sub_epi32(_mm256_sllv_epi32(one, width[a]), one));
+    store(r.radix[a], radix[a]);
     store(r.base[a], base[a]);
   }
   alignas(32) uint32_t tot[8];
@@ -1069,9 +1097,14 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
   }
 }
 
-// The same for a lossy cluster with per-child vertex ranges whose vertices take at most 57 bits:
-// per lane the child of the vertex (7 compares with the firsts), its vertex's bit and the fields'
-// shifts, widths and bases from the ChildRanges by that child, one 64-bit window per vertex.
+// The same for a lossy cluster with per-child vertex ranges (a vertex at most kMaxRangeVertexBits):
+// per lane the child of the vertex (7 compares with the firsts), its vertex's bit, width, radices
+// and bases from the ChildRanges by that child, one 64-bit window per vertex, the mixed-radix
+// number's digits from two divisions: in floats, 8 lanes at once, where every child's vertices
+// take at most kFloatRadixBits (the terrains' and small meshes' clusters), else in doubles, 4
+// lanes at once. Both exact: the number m and the divisor R are integers the type holds exactly,
+// and with m + R below 2^p (p the mantissa's bits with the hidden one: 24 or 53) the
+// correctly rounded quotient m / R = q + f, f <= 1 - 1 / R, stays below q + 1, so its floor is q.
 SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const uint8_t* bits,
                                              const ChildRanges& r, const uint32_t (&tri)[8],
                                              Decoded8& d) {
@@ -1093,37 +1126,67 @@ SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const ui
   for (int k = 0; k < 3; ++k) {
     const __m256i vi = _mm256_and_si256(_mm256_srli_epi32(packed, 8 * k), _mm256_set1_epi32(0xff));
     const __m256i c = _mm256_and_si256(_mm256_srli_epi32(children, 8 * k), _mm256_set1_epi32(0xff));
+    const __m256i w = _mm256_permutevar8x32_epi32(rw, c);
     const __m256i pos =
-        _mm256_add_epi32(_mm256_permutevar8x32_epi32(rpos, c),
-                         _mm256_mullo_epi32(vi, _mm256_permutevar8x32_epi32(rw, c)));
+        _mm256_add_epi32(_mm256_permutevar8x32_epi32(rpos, c), _mm256_mullo_epi32(vi, w));
     const __m256i byte = _mm256_srli_epi32(pos, 3);
     const __m256i sh = _mm256_and_si256(pos, _mm256_set1_epi32(7));
-    const __m256i lo =
-        _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_castsi256_si128(byte), 1),
-                          _mm256_cvtepu32_epi64(_mm256_castsi256_si128(sh)));
-    const __m256i hi =
-        _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_extracti128_si256(byte, 1), 1),
-                          _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sh, 1)));
-    for (int a = 0; a < 3; ++a) {
-      // The low 32 bits of each lane's window from the field's bit (axis 0's: bit 0).
-      __m256i l = lo, u = hi;
-      if (a) {
-        const __m256i s = _mm256_permutevar8x32_epi32(load(r.shift[a]), c);
-        l = _mm256_srlv_epi64(lo, _mm256_cvtepu32_epi64(_mm256_castsi256_si128(s)));
-        u = _mm256_srlv_epi64(hi, _mm256_cvtepu32_epi64(_mm256_extracti128_si256(s, 1)));
-      }
-      const __m256 pair = _mm256_shuffle_ps(_mm256_castsi256_ps(l), _mm256_castsi256_ps(u),
-                                            _MM_SHUFFLE(2, 0, 2, 0));
-      const __m256i field = _mm256_permute4x64_epi64(_mm256_castps_si256(pair), 0xD8);
-      const __m256i mask = _mm256_permutevar8x32_epi32(load(r.mask[a]), c);
-      const __m256i code = _mm256_add_epi32(_mm256_and_si256(field, mask),
-                                            _mm256_permutevar8x32_epi32(load(r.base[a]), c));
+    const __m256i rx = _mm256_permutevar8x32_epi32(load(r.radix[0]), c);
+    const __m256i ry = _mm256_permutevar8x32_epi32(load(r.radix[1]), c);
+    auto store = [&](int a, __m256i o) {
+      const __m256i code = _mm256_add_epi32(o, _mm256_permutevar8x32_epi32(load(r.base[a]), c));
       // The code is below 2^31 for any block check() accepts (below 2^24 for one the encoder
       // wrote): the signed conversion is the scalar float(q); the sum rounds as lattice_coord's.
       _mm256_store_ps(d.v[k][a], _mm256_add_ps(_mm256_set1_ps(lat.origin[a]),
                                                _mm256_mul_ps(_mm256_cvtepi32_ps(code),
                                                              _mm256_set1_ps(lat.step[a]))));
+    };
+    if (r.wmax <= kFloatRadixBits) {
+      // The low 32 bits of each lane's window, m < 2^23, R_x R_y <= 2^23.
+      const __m256i lo =
+          _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_castsi256_si128(byte), 1),
+                            _mm256_cvtepu32_epi64(_mm256_castsi256_si128(sh)));
+      const __m256i hi =
+          _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_extracti128_si256(byte, 1), 1),
+                            _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sh, 1)));
+      const __m256 pair = _mm256_shuffle_ps(_mm256_castsi256_ps(lo), _mm256_castsi256_ps(hi),
+                                            _MM_SHUFFLE(2, 0, 2, 0));
+      const __m256i one = _mm256_set1_epi32(1);
+      const __m256i m = _mm256_and_si256(_mm256_permute4x64_epi64(_mm256_castps_si256(pair), 0xD8),
+                                         _mm256_sub_epi32(_mm256_sllv_epi32(one, w), one));
+      const __m256 mf = _mm256_cvtepi32_ps(m), x = _mm256_cvtepi32_ps(rx),
+                   y = _mm256_cvtepi32_ps(ry);
+      const __m256 t = _mm256_floor_ps(_mm256_div_ps(mf, x));
+      const __m256 z = _mm256_floor_ps(_mm256_div_ps(mf, _mm256_mul_ps(x, y)));
+      store(0, _mm256_cvtps_epi32(_mm256_fnmadd_ps(t, x, mf)));
+      store(1, _mm256_cvtps_epi32(_mm256_fnmadd_ps(z, y, t)));
+      store(2, _mm256_cvtps_epi32(z));
+      continue;
     }
+    // The digits of lanes 0-3 (half 0) or 4-7 (half 1), as doubles.
+    __m256d digit[3][2];
+    for (int half = 0; half < 2; ++half) {
+      auto part = [&](__m256i x) {
+        return half ? _mm256_extracti128_si256(x, 1) : _mm256_castsi256_si128(x);
+      };
+      const __m256i window = _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, part(byte), 1),
+                                               _mm256_cvtepu32_epi64(part(sh)));
+      const __m256i ones = _mm256_set1_epi64x(1);
+      const __m256i m = _mm256_and_si256(
+          window, _mm256_sub_epi64(_mm256_sllv_epi64(ones, _mm256_cvtepu32_epi64(part(w))), ones));
+      // m < 2^52: its bits under the exponent of 2^52 are the double 2^52 + m.
+      const __m256d two52 = _mm256_set1_pd(4503599627370496.0);
+      const __m256d md =
+          _mm256_sub_pd(_mm256_castsi256_pd(_mm256_or_si256(m, _mm256_castpd_si256(two52))), two52);
+      const __m256d x = _mm256_cvtepi32_pd(part(rx)), y = _mm256_cvtepi32_pd(part(ry));
+      const __m256d t = _mm256_floor_pd(_mm256_div_pd(md, x));
+      const __m256d z = _mm256_floor_pd(_mm256_div_pd(md, _mm256_mul_pd(x, y)));
+      digit[0][half] = _mm256_fnmadd_pd(t, x, md);
+      digit[1][half] = _mm256_fnmadd_pd(z, y, t);
+      digit[2][half] = z;
+    }
+    for (int a = 0; a < 3; ++a)
+      store(a, _mm256_set_m128i(_mm256_cvtpd_epi32(digit[a][1]), _mm256_cvtpd_epi32(digit[a][0])));
   }
 }
 #endif
@@ -1201,7 +1264,7 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const View& v, int chil
     decode_vertices_avx2<kLossless>(lat, h, v.bits, L, v.anchor, tri, d);
     return;
   }
-  if (!kScalar && v.r.wmax <= 57) {
+  if (!kScalar && v.ranges) {
     decode_vertices_ranges_avx2(lat, v.bits, v.r, tri, d);
     return;
   }
@@ -1213,10 +1276,11 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const View& v, int chil
       if (v.ranges) {
         const ChildRanges& r = v.r;
         const uint32_t c = range_child(r, vi);
-        const uint32_t pos = r.pos[c] + vi * r.w[c];
+        const uint64_t m = read_bits57(v.bits, r.pos[c] + vi * r.w[c], r.w[c]);
+        const uint64_t t = m / r.radix[0][c], z = t / r.radix[1][c];
+        const uint64_t o[3] = {m - t * r.radix[0][c], t - z * r.radix[1][c], z};
         for (int a = 0; a < 3; ++a)
-          d.v[k][a][l] = lattice_coord(
-              lat, a, r.base[a][c] + read_bits(v.bits, pos + r.shift[a][c], r.width[a][c]));
+          d.v[k][a][l] = lattice_coord(lat, a, r.base[a][c] + uint32_t(o[a]));
         continue;
       }
       uint64_t pos = L.verts + uint64_t(vi) * L.vbits;

@@ -50,6 +50,27 @@ void decode_all(const ClusterLattice& lat, const uint8_t* block, uint32_t childr
                       "box start is not the anchor's coordinate");
     }
   }
+  if constexpr (!kLossless) {
+    if (view.ranges) {
+      // The traversal's ranges (AVX2 where built) are the structure check's (scalar) field for
+      // field: the float or double division path and every vertex's bits follow from them.
+      uint8_t q[6][8];
+      const uint8_t* boxes = block - sizeof(cluster::LatticeBoxes8);
+      cluster::lattice_planes(boxes, cluster::plane_lows(block), q);
+      cluster::ChildRanges rs;
+      cluster::child_ranges(view.h, cluster::layout(view.h, children, lat, false), view.bits,
+                            view.anchor, q, boxes + offsetof(cluster::LatticeBoxes8, scale),
+                            children, rs);
+      bool same = rs.total == view.r.total && rs.wmax == view.r.wmax;
+      for (int c = 0; c < 8; ++c) {
+        same &=
+            rs.first[c] == view.r.first[c] && rs.pos[c] == view.r.pos[c] && rs.w[c] == view.r.w[c];
+        for (int a = 0; a < 3; ++a)
+          same &= rs.radix[a][c] == view.r.radix[a][c] && rs.base[a][c] == view.r.base[a][c];
+      }
+      SLIM_FUZZ_CHECK(same, "vector and scalar child ranges differ");
+    }
+  }
   for (uint32_t c = 0; c < children; ++c) {
     cluster::Decoded8 d;
     cluster::decode_child<kLossless>(lat, block, children, int(c), d);

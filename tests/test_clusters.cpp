@@ -294,6 +294,7 @@ void check_codec(const TriangleMesh& tm, bool lossless, double rel_error, uint32
                             rs);
       const cluster::ChildRanges& rv = view.r;
       ASSERT_EQ(rs.total, rv.total);
+      ASSERT_EQ(rs.wmax, rv.wmax);
       for (int c = 0; c < 8; ++c) {
         ASSERT_EQ(rs.first[c], rv.first[c]) << c;
         ASSERT_EQ(rs.pos[c], rv.pos[c]) << c;
@@ -644,6 +645,45 @@ TEST(ClusterCodec, RangesKeepEveryChildWithin24Bits) {
   EXPECT_FALSE(cluster::has_ranges(h));
 }
 
+// The same for the vertex width: a child without new vertices whose box spans some 2^20 steps on
+// every axis (within 2^24 each, but 60 bits a vertex) keeps the cluster out of the ranges.
+TEST(ClusterCodec, RangesKeepEveryChildWithin52Bits) {
+  const uint32_t T = 1u << 20;
+  const std::vector<uint32_t> codes = {0, 0, 0, 1,     0, 0, 0, 1,     0,
+                                       T, T, T, T - 1, T, T, T, T - 1, T};
+  ClusterLattice lat;  // steps 1
+  for (int a = 0; a < 3; ++a) lat.anchor_bits[a] = 21;
+  std::vector<Vec3f> decoded(6);
+  for (int i = 0; i < 6; ++i)
+    for (int a = 0; a < 3; ++a) decoded[i][a] = cluster::lattice_coord(lat, a, codes[3 * i + a]);
+  // Children 0 and 1 are narrow (their ranges win); child 2 spans the cluster with old vertices.
+  const std::vector<uint32_t> tris = {0, 1, 2, 3, 4, 5, 0, 3, 1};
+  const std::vector<uint32_t> geom(3, 0), prim = {0, 1, 2};
+  const ClusterSource src{decoded.data(), codes.data(), tris.data(), geom.data(),
+                          prim.data(),    false,        lat};
+  const uint32_t p[3] = {0, 1, 2}, counts[3] = {1, 1, 1};
+  const uint32_t* prims[3] = {&p[0], &p[1], &p[2]};
+  const std::vector<uint8_t> enc = cluster::encode(src, prims, counts, 3, true, true);
+  const uint32_t anchor[3] = {0, 0, 0};
+  cluster::MultiLeafPlanes mp;
+  ASSERT_TRUE(cluster::multileaf_boxes(src, prims, counts, 3, anchor, mp));
+  const cluster::LatticeBoxes8 lb = packed(mp);
+  std::vector<uint8_t> ml(sizeof(lb) + enc.size());
+  std::memcpy(ml.data(), &lb, sizeof(lb));
+  std::memcpy(ml.data() + sizeof(lb), enc.data(), enc.size());
+  std::string why;
+  EXPECT_TRUE(cluster::check(ml.data() + sizeof(lb), enc.size() - kClusterReadSlack, 3, lat, false,
+                             &why, ml.data()))
+      << why;
+  ClusterHeader h;
+  std::memcpy(&h, enc.data(), sizeof(h));
+  EXPECT_FALSE(cluster::has_ranges(h));
+  // Children 0 and 1 alone take them: child 2's vertex width alone keeps them out above.
+  const std::vector<uint8_t> two = cluster::encode(src, prims, counts, 2, true, true);
+  std::memcpy(&h, two.data(), sizeof(h));
+  EXPECT_TRUE(cluster::has_ranges(h));
+}
+
 // The AVX2 decoder's mixed-radix digits are the integer quotients and remainders for any vertex
 // of up to kMaxRangeVertexBits bits (the division in doubles), or of up to kFloatRadixBits where
 // every child's vertices are that narrow (in floats), the widest included: three children, the
@@ -669,7 +709,15 @@ TEST(ClusterCodec, MixedRadixDigitsAtTheWidestVertices) {
       r.pos[c] = uint32_t(pos - uint64_t(r.first[c]) * r.w[c]);
       for (int i = 0; i < 8; ++i) {
         const uint64_t top = (uint64_t(1) << r.w[c]) - 1;
-        const uint64_t v = i == 0 ? 0 : i == 1 ? top : i == 2 ? top >> 1 : rng() & top;
+        // 0, the largest, numbers one below a multiple of R_x and of R_x R_y (a quotient's
+        // boundary), random ones.
+        const uint64_t px = radix[c][0], pxy = px * radix[c][1], k = rng() & top;
+        const uint64_t below_x = k / px * px, below_xy = k / pxy * pxy;
+        const uint64_t v = i == 0   ? 0
+                           : i == 1 ? top
+                           : i == 2 ? (below_x ? below_x - 1 : top)
+                           : i == 3 ? (below_xy ? below_xy - 1 : top)
+                                    : k;
         m.push_back(v);
         for (uint32_t b = 0; b < r.w[c]; ++b, ++pos)
           if ((v >> b) & 1) bits[pos >> 3] |= uint8_t(1u << (pos & 7));
@@ -702,15 +750,20 @@ TEST(ClusterCodec, MixedRadixDigitsAtTheWidestVertices) {
   };
   const uint32_t wide[3][3] = {{100003, 77777, 500009}, {1, 1, 1}, {4097, 3, 65536}};
   run(wide, cluster::kMaxRangeVertexBits);
+  const uint32_t powers[3][3] = {{1u << 24, 1u << 24, 16}, {2, 3, 1u << 24}, {1, 1, 1}};
+  run(powers, cluster::kMaxRangeVertexBits);
   const uint32_t narrow[3][3] = {{2047, 4095, 1}, {1, 1, 1}, {3, 5, 7}};
   run(narrow, cluster::kFloatRadixBits);
+  const uint32_t narrow_powers[3][3] = {{2048, 4096, 1}, {1, 2, 3}, {1, 1, 1}};
+  run(narrow_powers, cluster::kFloatRadixBits);
 #else
   GTEST_SKIP() << "AVX2 decoder not built";
 #endif
 }
 
-// check() of a cluster with per-child vertex ranges: its boxes' scales, its children's range
-// widths and the order of their first new vertices; without boxes (an isolated leaf) it fails.
+// check() of a cluster with per-child vertex ranges: its boxes' scales, its children's radices
+// (at most 2^24) and vertex widths (at most kMaxRangeVertexBits) and the order of their first new
+// vertices; without boxes (an isolated leaf) it fails.
 TEST(ClusterCodec, CheckRejectsMalformedRanges) {
   const SphereSource sp(4);  // kept in place: src points into z
   const cluster::Quantized& z = sp.z;

@@ -586,9 +586,10 @@ SLIM_INLINE uint64_t data_bytes(const ClusterHeader& h, uint32_t k, const Cluste
 // R_a = hi - lo + 1, stored as one mixed-radix number
 //   m = o_x + R_x (o_y + R_y o_z)  in  w = bit_width(R_x R_y R_z - 1) bits,
 // at most 1 bit more than log2 of the box's lattice points instead of up to 3 (three fields of
-// bit_width(hi - lo) bits each): some 1 bit a vertex fewer on every mesh (docs/results.md,
+// bit_width(hi - lo) bits each): 0.3-0.5 bits a coordinate fewer (docs/results.md,
 // "Mixed-radix vertices"). The decoders get the digits with two divisions, o_z = m / (R_x R_y)
-// and t = m / R_x (AVX2: in doubles, exact for m < 2^52), o_x = m - t R_x, o_y = t - o_z R_y.
+// and t = m / R_x (AVX2: in floats or doubles, exact: decode_vertices_ranges_avx2), o_x =
+// m - t R_x, o_y = t - o_z R_y.
 // The vertex section holds child 0's new vertices, then child 1's, and so on, child c's at w_c
 // bits each. A child of a scan's cluster spans about a third of the cluster per axis: some 1.5
 // bits a coordinate fewer than the cluster's fields (docs/results.md, "Per-child vertex ranges").
@@ -679,8 +680,8 @@ SLIM_INLINE void child_ranges(const ClusterHeader& h, const Layout& L, const uin
 #if defined(SLIM_SIMD_AVX2)
 // child_ranges with the 8 children in the lanes of AVX2 vectors (the traversal's view computes it
 // at every multi-leaf visit that decodes a child): the same fields bit for bit for a cluster
-// check() accepted (ranges of fewer than 2^24 steps: the float conversion that gives the fields'
-// widths is exact).
+// check() accepted (radices of at most 2^24 whose product is at most 2^52: the double product
+// that gives a child's vertex width is exact).
 // The planes come from the LatticeBoxes8 at `boxes` and their low bits at `lows` (plane_lows).
 SLIM_INLINE void child_ranges_avx2(const ClusterHeader& h, const Layout& L, const uint8_t* bits,
                                    const uint32_t* anchor, const uint8_t* boxes,

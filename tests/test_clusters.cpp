@@ -610,18 +610,16 @@ TEST(ClusterCodec, DecodeEqualsEncodeRealMesh) {
   }
 }
 
-// Per-child vertex ranges: a child without new vertices whose range needs more than 24 bits (a
-// cluster spanning the whole 24-bit lattice) keeps the cluster out of the ranges, so that check()
-// accepts every cluster the encoder writes.
-TEST(ClusterCodec, RangesKeepEveryChildWithin24Bits) {
-  const uint32_t T = (1u << 24) - 1;
-  const std::vector<uint32_t> codes = {0, 0, 0, 1, 1, 0, 0, 1, 1, T, 0, 0, T - 1, 1, 0, T, 1, 1};
+// Encodes three one-triangle children of the six vertices `codes` (lattice steps 1, anchor widths
+// `bits`): children 0 and 1 narrow (their ranges win), child 2 spanning the cluster with old
+// vertices. Expects check() to accept the cluster behind its multi-leaf boxes and returns whether
+// it took per-child vertex ranges; children 0 and 1 alone must take them.
+bool ranges_of_three_children(const std::vector<uint32_t>& codes, const uint8_t (&bits)[3]) {
   ClusterLattice lat;  // steps 1
-  for (int a = 0; a < 3; ++a) lat.anchor_bits[a] = a ? 1 : 24;
+  for (int a = 0; a < 3; ++a) lat.anchor_bits[a] = bits[a];
   std::vector<Vec3f> decoded(6);
   for (int i = 0; i < 6; ++i)
     for (int a = 0; a < 3; ++a) decoded[i][a] = cluster::lattice_coord(lat, a, codes[3 * i + a]);
-  // Children 0 and 1 are narrow (their ranges win); child 2 spans the lattice with old vertices.
   const std::vector<uint32_t> tris = {0, 1, 2, 3, 4, 5, 0, 3, 1};
   const std::vector<uint32_t> geom(3, 0), prim = {0, 1, 2};
   const ClusterSource src{decoded.data(), codes.data(), tris.data(), geom.data(),
@@ -631,7 +629,7 @@ TEST(ClusterCodec, RangesKeepEveryChildWithin24Bits) {
   const std::vector<uint8_t> enc = cluster::encode(src, prims, counts, 3, true, true);
   const uint32_t anchor[3] = {0, 0, 0};
   cluster::MultiLeafPlanes mp;
-  ASSERT_TRUE(cluster::multileaf_boxes(src, prims, counts, 3, anchor, mp));
+  EXPECT_TRUE(cluster::multileaf_boxes(src, prims, counts, 3, anchor, mp));
   const cluster::LatticeBoxes8 lb = packed(mp);
   std::vector<uint8_t> ml(sizeof(lb) + enc.size());
   std::memcpy(ml.data(), &lb, sizeof(lb));
@@ -641,47 +639,27 @@ TEST(ClusterCodec, RangesKeepEveryChildWithin24Bits) {
                              &why, ml.data()))
       << why;
   ClusterHeader h;
+  std::memcpy(&h, cluster::encode(src, prims, counts, 2, true, true).data(), sizeof(h));
+  EXPECT_TRUE(cluster::has_ranges(h));
   std::memcpy(&h, enc.data(), sizeof(h));
-  EXPECT_FALSE(cluster::has_ranges(h));
+  return cluster::has_ranges(h);
+}
+
+// Per-child vertex ranges: a child without new vertices whose range needs more than 24 bits (a
+// cluster spanning the whole 24-bit lattice) keeps the cluster out of the ranges, so that check()
+// accepts every cluster the encoder writes.
+TEST(ClusterCodec, RangesKeepEveryChildWithin24Bits) {
+  const uint32_t T = (1u << 24) - 1;
+  EXPECT_FALSE(ranges_of_three_children({0, 0, 0, 1, 1, 0, 0, 1, 1, T, 0, 0, T - 1, 1, 0, T, 1, 1},
+                                        {24, 1, 1}));
 }
 
 // The same for the vertex width: a child without new vertices whose box spans some 2^20 steps on
 // every axis (within 2^24 each, but 60 bits a vertex) keeps the cluster out of the ranges.
 TEST(ClusterCodec, RangesKeepEveryChildWithin52Bits) {
   const uint32_t T = 1u << 20;
-  const std::vector<uint32_t> codes = {0, 0, 0, 1,     0, 0, 0, 1,     0,
-                                       T, T, T, T - 1, T, T, T, T - 1, T};
-  ClusterLattice lat;  // steps 1
-  for (int a = 0; a < 3; ++a) lat.anchor_bits[a] = 21;
-  std::vector<Vec3f> decoded(6);
-  for (int i = 0; i < 6; ++i)
-    for (int a = 0; a < 3; ++a) decoded[i][a] = cluster::lattice_coord(lat, a, codes[3 * i + a]);
-  // Children 0 and 1 are narrow (their ranges win); child 2 spans the cluster with old vertices.
-  const std::vector<uint32_t> tris = {0, 1, 2, 3, 4, 5, 0, 3, 1};
-  const std::vector<uint32_t> geom(3, 0), prim = {0, 1, 2};
-  const ClusterSource src{decoded.data(), codes.data(), tris.data(), geom.data(),
-                          prim.data(),    false,        lat};
-  const uint32_t p[3] = {0, 1, 2}, counts[3] = {1, 1, 1};
-  const uint32_t* prims[3] = {&p[0], &p[1], &p[2]};
-  const std::vector<uint8_t> enc = cluster::encode(src, prims, counts, 3, true, true);
-  const uint32_t anchor[3] = {0, 0, 0};
-  cluster::MultiLeafPlanes mp;
-  ASSERT_TRUE(cluster::multileaf_boxes(src, prims, counts, 3, anchor, mp));
-  const cluster::LatticeBoxes8 lb = packed(mp);
-  std::vector<uint8_t> ml(sizeof(lb) + enc.size());
-  std::memcpy(ml.data(), &lb, sizeof(lb));
-  std::memcpy(ml.data() + sizeof(lb), enc.data(), enc.size());
-  std::string why;
-  EXPECT_TRUE(cluster::check(ml.data() + sizeof(lb), enc.size() - kClusterReadSlack, 3, lat, false,
-                             &why, ml.data()))
-      << why;
-  ClusterHeader h;
-  std::memcpy(&h, enc.data(), sizeof(h));
-  EXPECT_FALSE(cluster::has_ranges(h));
-  // Children 0 and 1 alone take them: child 2's vertex width alone keeps them out above.
-  const std::vector<uint8_t> two = cluster::encode(src, prims, counts, 2, true, true);
-  std::memcpy(&h, two.data(), sizeof(h));
-  EXPECT_TRUE(cluster::has_ranges(h));
+  EXPECT_FALSE(ranges_of_three_children(
+      {0, 0, 0, 1, 0, 0, 0, 1, 0, T, T, T, T - 1, T, T, T, T - 1, T}, {21, 21, 21}));
 }
 
 // The AVX2 decoder's mixed-radix digits are the integer quotients and remainders for any vertex

@@ -1102,7 +1102,7 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
 // per lane the child of the vertex (7 compares with the firsts), its vertex's bit, width, radices
 // and bases from the ChildRanges by that child, one 64-bit window per vertex, the mixed-radix
 // number's digits from two divisions: in floats, 8 lanes at once, where every child's vertices
-// take at most kFloatRadixBits (the terrains' and small meshes' clusters), else in doubles, 4
+// take at most kFloatRadixBits (a grid terrain's: some 10 bits a vertex), else in doubles, 4
 // lanes at once. Both exact: the number m and the divisor R are integers the type holds exactly,
 // and with m + R below 2^p (p the mantissa's bits with the hidden one: 24 or 53) the
 // correctly rounded quotient m / R = q + f, f <= 1 - 1 / R, stays below q + 1, so its floor is q.

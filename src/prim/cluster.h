@@ -190,10 +190,15 @@ constexpr uint32_t kMaxRunHighBits = 256;
 
 namespace cluster {
 
-SLIM_INLINE uint32_t read_bits(const uint8_t* p, uint64_t pos, uint32_t w) {
+// Reads w <= 57 bits at bit pos (one 64-bit load).
+SLIM_INLINE uint64_t read_bits57(const uint8_t* p, uint64_t pos, uint32_t w) {
   uint64_t x;
   std::memcpy(&x, p + (pos >> 3), 8);
-  return uint32_t((x >> (pos & 7)) & ((uint64_t(1) << w) - 1));
+  return (x >> (pos & 7)) & ((uint64_t(1) << w) - 1);
+}
+// The same for w <= 32 bits.
+SLIM_INLINE uint32_t read_bits(const uint8_t* p, uint64_t pos, uint32_t w) {
+  return uint32_t(read_bits57(p, pos, w));
 }
 
 // Order-preserving map of float bit patterns to unsigned integers (and back).
@@ -622,12 +627,6 @@ SLIM_INLINE uint32_t radix_bits(uint32_t rx, uint32_t ry, uint32_t rz) {
          : low ? 64 - uint32_t(__builtin_clzll(low))
                : 0;
 }
-// Reads w <= 57 bits at bit pos.
-SLIM_INLINE uint64_t read_bits57(const uint8_t* p, uint64_t pos, uint32_t w) {
-  uint64_t x;
-  std::memcpy(&x, p + (pos >> 3), 8);
-  return (x >> (pos & 7)) & ((uint64_t(1) << w) - 1);
-}
 // What a decoder takes from the ranges, per child (lanes c >= k: first kNoChildVertex, pos and w
 // 0, radices 1).
 constexpr uint32_t kNoChildVertex = 0x100;  // above every vertex number (signed compares work)
@@ -678,6 +677,18 @@ SLIM_INLINE void child_ranges(const ClusterHeader& h, const Layout& L, const uin
   r.total = total;
 }
 #if defined(SLIM_SIMD_AVX2)
+// The low 32 bits of each 64-bit lane, lanes 0-3 from lo, 4-7 from hi.
+SLIM_INLINE __m256i low32_lanes(__m256i lo, __m256i hi) {
+  const __m256 pair =
+      _mm256_shuffle_ps(_mm256_castsi256_ps(lo), _mm256_castsi256_ps(hi), _MM_SHUFFLE(2, 0, 2, 0));
+  return _mm256_permute4x64_epi64(_mm256_castps_si256(pair), 0xD8);
+}
+// The 64 bits from bit 8 x byte + sh of `base` for four lanes (a gather, a shift per lane).
+SLIM_INLINE __m256i gather_window(const uint8_t* base, __m128i byte, __m128i sh) {
+  return _mm256_srlv_epi64(
+      _mm256_i32gather_epi64(reinterpret_cast<const long long*>(base), byte, 1),
+      _mm256_cvtepu32_epi64(sh));
+}
 // child_ranges with the 8 children in the lanes of AVX2 vectors (the traversal's view computes it
 // at every multi-leaf visit that decodes a child): the same fields bit for bit for a cluster
 // check() accepted (radices of at most 2^24 whose product is at most 2^52: the double product
@@ -750,11 +761,7 @@ SLIM_INLINE void child_ranges_avx2(const ClusterHeader& h, const Layout& L, cons
     return _mm256_sub_epi64(_mm256_srli_epi64(_mm256_castpd_si256(p), 52),
                             _mm256_set1_epi64x(1022));
   };
-  const __m256 wpair =
-      _mm256_shuffle_ps(_mm256_castsi256_ps(vertex_bits(0)), _mm256_castsi256_ps(vertex_bits(1)),
-                        _MM_SHUFFLE(2, 0, 2, 0));
-  const __m256i wsum =
-      _mm256_max_epi32(_mm256_permute4x64_epi64(_mm256_castps_si256(wpair), 0xD8), zero);
+  const __m256i wsum = _mm256_max_epi32(low32_lanes(vertex_bits(0), vertex_bits(1)), zero);
   // Vertices per child: the next child's first (the last child's: nverts) less the child's.
   const __m256i next = _mm256_blendv_epi8(
       _mm256_permutevar8x32_epi32(
@@ -1027,22 +1034,16 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
                                       const uint8_t* bits, const Layout& L, const uint32_t* anchor,
                                       const uint32_t (&tri)[8], Decoded8& d) {
   // The 64 bits from bit `pos` of each lane (lanes 0-3 in lo, 4-7 in hi): two 64-bit gathers.
-  const auto* base64 = reinterpret_cast<const long long*>(bits);
   auto gather64 = [&](__m256i pos, __m256i& lo, __m256i& hi) {
     const __m256i byte = _mm256_srli_epi32(pos, 3);
     const __m256i sh = _mm256_and_si256(pos, _mm256_set1_epi32(7));
-    lo = _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_castsi256_si128(byte), 1),
-                           _mm256_cvtepu32_epi64(_mm256_castsi256_si128(sh)));
-    hi = _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_extracti128_si256(byte, 1), 1),
-                           _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sh, 1)));
+    lo = gather_window(bits, _mm256_castsi256_si128(byte), _mm256_castsi256_si128(sh));
+    hi = gather_window(bits, _mm256_extracti128_si256(byte, 1), _mm256_extracti128_si256(sh, 1));
   };
   // The low 32 bits of each 64-bit lane after a right shift by s, lanes 0-3 from lo, 4-7 from hi.
   auto low32 = [&](__m256i lo, __m256i hi, uint32_t s) {
     const __m128i s64 = _mm_cvtsi32_si128(int(s));
-    const __m256 pair =
-        _mm256_shuffle_ps(_mm256_castsi256_ps(_mm256_srl_epi64(lo, s64)),
-                          _mm256_castsi256_ps(_mm256_srl_epi64(hi, s64)), _MM_SHUFFLE(2, 0, 2, 0));
-    return _mm256_permute4x64_epi64(_mm256_castps_si256(pair), 0xD8);
+    return low32_lanes(_mm256_srl_epi64(lo, s64), _mm256_srl_epi64(hi, s64));
   };
   auto mask = [](uint32_t w) { return _mm256_set1_epi32(int(uint32_t((uint64_t(1) << w) - 1))); };
   // Per-axis constants, broadcast once for the 3 corners.
@@ -1109,7 +1110,6 @@ SLIM_INLINE void decode_vertices_avx2(const ClusterLattice& lat, const ClusterHe
 SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const uint8_t* bits,
                                              const ChildRanges& r, const uint32_t (&tri)[8],
                                              Decoded8& d) {
-  const auto* base64 = reinterpret_cast<const long long*>(bits);
   auto load = [](const uint32_t* p) {
     return _mm256_load_si256(reinterpret_cast<const __m256i*>(p));
   };
@@ -1124,6 +1124,7 @@ SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const ui
     const __m256i f = _mm256_set1_epi8(char(std::min<uint32_t>(r.first[j], 255)));
     children = _mm256_sub_epi8(children, _mm256_cmpeq_epi8(_mm256_max_epu8(packed, f), packed));
   }
+  const bool in_floats = r.wmax <= kFloatRadixBits;
   for (int k = 0; k < 3; ++k) {
     const __m256i vi = _mm256_and_si256(_mm256_srli_epi32(packed, 8 * k), _mm256_set1_epi32(0xff));
     const __m256i c = _mm256_and_si256(_mm256_srli_epi32(children, 8 * k), _mm256_set1_epi32(0xff));
@@ -1132,6 +1133,11 @@ SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const ui
         _mm256_add_epi32(_mm256_permutevar8x32_epi32(rpos, c), _mm256_mullo_epi32(vi, w));
     const __m256i byte = _mm256_srli_epi32(pos, 3);
     const __m256i sh = _mm256_and_si256(pos, _mm256_set1_epi32(7));
+    // Lanes 0-3 (half 0) or 4-7 (half 1) of x; the vertices' 64-bit windows of a half.
+    auto part = [](__m256i x, int half) {
+      return half ? _mm256_extracti128_si256(x, 1) : _mm256_castsi256_si128(x);
+    };
+    auto window = [&](int half) { return gather_window(bits, part(byte, half), part(sh, half)); };
     const __m256i rx = _mm256_permutevar8x32_epi32(load(r.radix[0]), c);
     const __m256i ry = _mm256_permutevar8x32_epi32(load(r.radix[1]), c);
     auto store = [&](int a, __m256i o) {
@@ -1142,18 +1148,10 @@ SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const ui
                                                _mm256_mul_ps(_mm256_cvtepi32_ps(code),
                                                              _mm256_set1_ps(lat.step[a]))));
     };
-    if (r.wmax <= kFloatRadixBits) {
+    if (in_floats) {
       // The low 32 bits of each lane's window, m < 2^23, R_x R_y <= 2^23.
-      const __m256i lo =
-          _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_castsi256_si128(byte), 1),
-                            _mm256_cvtepu32_epi64(_mm256_castsi256_si128(sh)));
-      const __m256i hi =
-          _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, _mm256_extracti128_si256(byte, 1), 1),
-                            _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sh, 1)));
-      const __m256 pair = _mm256_shuffle_ps(_mm256_castsi256_ps(lo), _mm256_castsi256_ps(hi),
-                                            _MM_SHUFFLE(2, 0, 2, 0));
       const __m256i one = _mm256_set1_epi32(1);
-      const __m256i m = _mm256_and_si256(_mm256_permute4x64_epi64(_mm256_castps_si256(pair), 0xD8),
+      const __m256i m = _mm256_and_si256(low32_lanes(window(0), window(1)),
                                          _mm256_sub_epi32(_mm256_sllv_epi32(one, w), one));
       const __m256 mf = _mm256_cvtepi32_ps(m), x = _mm256_cvtepi32_ps(rx),
                    y = _mm256_cvtepi32_ps(ry);
@@ -1167,19 +1165,15 @@ SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const ui
     // The digits of lanes 0-3 (half 0) or 4-7 (half 1), as doubles.
     __m256d digit[3][2];
     for (int half = 0; half < 2; ++half) {
-      auto part = [&](__m256i x) {
-        return half ? _mm256_extracti128_si256(x, 1) : _mm256_castsi256_si128(x);
-      };
-      const __m256i window = _mm256_srlv_epi64(_mm256_i32gather_epi64(base64, part(byte), 1),
-                                               _mm256_cvtepu32_epi64(part(sh)));
       const __m256i ones = _mm256_set1_epi64x(1);
       const __m256i m = _mm256_and_si256(
-          window, _mm256_sub_epi64(_mm256_sllv_epi64(ones, _mm256_cvtepu32_epi64(part(w))), ones));
+          window(half),
+          _mm256_sub_epi64(_mm256_sllv_epi64(ones, _mm256_cvtepu32_epi64(part(w, half))), ones));
       // m < 2^52: its bits under the exponent of 2^52 are the double 2^52 + m.
       const __m256d two52 = _mm256_set1_pd(4503599627370496.0);
       const __m256d md =
           _mm256_sub_pd(_mm256_castsi256_pd(_mm256_or_si256(m, _mm256_castpd_si256(two52))), two52);
-      const __m256d x = _mm256_cvtepi32_pd(part(rx)), y = _mm256_cvtepi32_pd(part(ry));
+      const __m256d x = _mm256_cvtepi32_pd(part(rx, half)), y = _mm256_cvtepi32_pd(part(ry, half));
       const __m256d t = _mm256_floor_pd(_mm256_div_pd(md, x));
       const __m256d z = _mm256_floor_pd(_mm256_div_pd(md, _mm256_mul_pd(x, y)));
       digit[0][half] = _mm256_fnmadd_pd(t, x, md);

@@ -27,6 +27,7 @@
 #include "api/bvh_scene.h"
 #include "api/registry.h"
 #include "core/simd.h"
+#include "core/simd_ext.h"
 #include "mesh/triangulate.h"
 #include "prim/cluster.h"
 #include "slimrt/clusters.h"
@@ -232,37 +233,44 @@ class ClusterReshaper {
   }
 
   // Sorts `order` (positions in a node of n <= kClusterMax items) stably by `centers` (the node's
-  // centers on one axis, by position): position k goes to its rank, the centers below its own
-  // plus the equal ones before it, counted 8 at a time (one compare of (center, place) pairs: the
-  // lanes' places are kPlace). Equal centers (neighbouring triangles often share one) keep their
-  // order, so the clusters do not depend on the standard library's sort. Padding lanes hold +inf
-  // at places >= n: never below a center nor an equal one before it. Returns false (order
-  // unchanged) if the ranks are not 0..n-1 once each (a NaN center).
+  // centers on one axis, by position): place k goes to its rank, the centers below its own plus
+  // the equal ones at places before it. The ranks of 8 places are counted at once, one place j of
+  // the node at a time: j before the 8 counts a center at or below theirs, j after them one below,
+  // j among them one at or below in the lanes after j's. Equal centers (neighbouring triangles
+  // often share one) keep their order, so the clusters do not depend on the standard library's
+  // sort. Counts up to 64 are exact in floats. Returns false (order unchanged) if the ranks are
+  // not 0..n-1 once each (a NaN center).
   static bool stable_order(const float* centers, uint8_t* order, uint32_t n) {
     constexpr uint32_t kPad = (kClusterMax + 7) / 8 * 8;
     static_assert(kPad <= 64, "ranks are bits of a 64-bit mask");
-    alignas(32) static constexpr auto kPlace = [] {
-      std::array<float, kPad> p{};
-      for (uint32_t k = 0; k < kPad; ++k) p[k] = float(k);
-      return p;
-    }();
     alignas(32) float w[kPad];  // the centers in `order`'s order, padded
     for (uint32_t k = 0; k < n; ++k) w[k] = centers[order[k]];
     const uint32_t groups = (n + 7) / 8;
     std::fill(w + n, w + 8 * groups, kInf);
+    const simd::vfloat8 one(1.0f);
     uint8_t out[kPad];
     uint64_t seen = 0;
-    for (uint32_t k = 0; k < n; ++k) {
-      const simd::vfloat8 c(w[k]), place{float(k)};
-      uint32_t r = 0;
-      for (uint32_t g = 0; g < groups; ++g) {
-        const simd::vfloat8 x = simd::vfloat8::load(w + 8 * g);
-        const simd::vfloat8 p = simd::vfloat8::load(kPlace.data() + 8 * g);
-        r += uint32_t(simd::popcount(((x < c) | ((x == c) & (p < place))).mask()));
+    for (uint32_t g = 0; g < groups; ++g) {
+      const uint32_t b = 8 * g, e = std::min(n, b + 8);
+      const simd::vfloat8 c = simd::vfloat8::load(w + b);
+      simd::vfloat8 rank(0.0f);
+      for (uint32_t j = 0; j < b; ++j)
+        rank = rank + simd::mask_zero(simd::vfloat8(w[j]) <= c, one);
+      for (uint32_t j = b; j < e; ++j) {
+        const simd::vfloat8 x(w[j]);
+        const simd::vbool8 after = simd::lanes_from_bits(0xfeu << (j - b));
+        rank = rank + simd::mask_zero((x < c) | ((x == c) & after), one);
       }
-      if (r >= n) return false;
-      out[r] = order[k];
-      seen |= uint64_t(1) << r;
+      for (uint32_t j = e; j < n; ++j)
+        rank = rank + simd::mask_zero(simd::vfloat8(w[j]) < c, one);
+      alignas(32) float r8[8];
+      rank.store(r8);
+      for (uint32_t k = b; k < e; ++k) {
+        const uint32_t r = uint32_t(r8[k - b]);
+        if (r >= n) return false;
+        out[r] = order[k];
+        seen |= uint64_t(1) << r;
+      }
     }
     if (seen != (n == 64 ? ~uint64_t(0) : (uint64_t(1) << n) - 1)) return false;
     std::copy(out, out + n, order);

@@ -254,15 +254,13 @@ class ClusterReshaper {
       const uint32_t b = 8 * g, e = std::min(n, b + 8);
       const simd::vfloat8 c = simd::vfloat8::load(w + b);
       simd::vfloat8 rank(0.0f);
-      for (uint32_t j = 0; j < b; ++j)
-        rank = rank + simd::mask_zero(simd::vfloat8(w[j]) <= c, one);
+      for (uint32_t j = 0; j < b; ++j) rank = rank + simd::mask_zero(simd::vfloat8(w[j]) <= c, one);
       for (uint32_t j = b; j < e; ++j) {
         const simd::vfloat8 x(w[j]);
         const simd::vbool8 after = simd::lanes_from_bits(0xfeu << (j - b));
         rank = rank + simd::mask_zero((x < c) | ((x == c) & after), one);
       }
-      for (uint32_t j = e; j < n; ++j)
-        rank = rank + simd::mask_zero(simd::vfloat8(w[j]) < c, one);
+      for (uint32_t j = e; j < n; ++j) rank = rank + simd::mask_zero(simd::vfloat8(w[j]) < c, one);
       alignas(32) float r8[8];
       rank.store(r8);
       for (uint32_t k = b; k < e; ++k) {

@@ -232,14 +232,51 @@ class ClusterReshaper {
     upper(n.first + 1, c + 1, depth + 1);
   }
 
+  // The ranks (below) of the places of G groups of 8 from group g0, into ranks[0, 8G): each place
+  // j of the node's n counts once for all of them. The G rows of counts stay in registers.
+  template <int G>
+  static SLIM_INLINE void count_ranks(const float* w, uint32_t n, uint32_t g0, float* ranks) {
+    using simd::vfloat8;
+    const vfloat8 one(1.0f);
+    vfloat8 c[G], r[G];
+    for (int q = 0; q < G; ++q) {
+      c[q] = vfloat8::load(w + 8 * (g0 + q));
+      r[q] = vfloat8(0.0f);
+    }
+    const uint32_t b = 8 * g0, e = std::min(n, b + 8 * G);
+    // Places before the groups count a center at or below theirs, places after them one below.
+    for (uint32_t j = 0; j < b; ++j) {
+      const vfloat8 x(w[j]);
+      for (int q = 0; q < G; ++q) r[q] = r[q] + simd::mask_zero(x <= c[q], one);
+    }
+    for (uint32_t j = e; j < n; ++j) {
+      const vfloat8 x(w[j]);
+      for (int q = 0; q < G; ++q) r[q] = r[q] + simd::mask_zero(x < c[q], one);
+    }
+    // Places among them: so for the groups before and after j's, and in j's group at or below in
+    // the lanes after j's, below in the others.
+    for (uint32_t j = b; j < e; ++j) {
+      const vfloat8 x(w[j]);
+      const int qj = int((j - b) / 8);
+      const simd::vbool8 after = simd::lanes_from_bits(0xfeu << ((j - b) % 8));
+      for (int q = 0; q < G; ++q) {
+        if (q < qj)
+          r[q] = r[q] + simd::mask_zero(x < c[q], one);
+        else if (q > qj)
+          r[q] = r[q] + simd::mask_zero(x <= c[q], one);
+        else
+          r[q] = r[q] + simd::mask_zero((x < c[q]) | ((x == c[q]) & after), one);
+      }
+    }
+    for (int q = 0; q < G; ++q) r[q].storeu(ranks + 8 * q);
+  }
+
   // Sorts `order` (positions in a node of n <= kClusterMax items) stably by `centers` (the node's
   // centers on one axis, by position): place k goes to its rank, the centers below its own plus
-  // the equal ones at places before it. The ranks of 8 places are counted at once, one place j of
-  // the node at a time: j before the 8 counts a center at or below theirs, j after them one below,
-  // j among them one at or below in the lanes after j's. Equal centers (neighbouring triangles
-  // often share one) keep their order, so the clusters do not depend on the standard library's
-  // sort. Counts up to 64 are exact in floats. Returns false (order unchanged) if the ranks are
-  // not 0..n-1 once each (a NaN center).
+  // the equal ones at places before it, counted for up to 32 places at once (count_ranks). Equal
+  // centers (neighbouring triangles often share one) keep their order, so the clusters do not
+  // depend on the standard library's sort. Counts up to 64 are exact in floats. Returns false
+  // (order unchanged) if the ranks are not 0..n-1 once each (a NaN center).
   static bool stable_order(const float* centers, uint8_t* order, uint32_t n) {
     constexpr uint32_t kPad = (kClusterMax + 7) / 8 * 8;
     static_assert(kPad <= 64, "ranks are bits of a 64-bit mask");
@@ -247,28 +284,27 @@ class ClusterReshaper {
     for (uint32_t k = 0; k < n; ++k) w[k] = centers[order[k]];
     const uint32_t groups = (n + 7) / 8;
     std::fill(w + n, w + 8 * groups, kInf);
-    const simd::vfloat8 one(1.0f);
+    float ranks[kPad];
+    for (uint32_t g0 = 0; g0 < groups;) {
+      const uint32_t left = groups - g0;
+      if (left >= 4) {
+        count_ranks<4>(w, n, g0, ranks + 8 * g0);
+        g0 += 4;
+      } else if (left >= 2) {
+        count_ranks<2>(w, n, g0, ranks + 8 * g0);
+        g0 += 2;
+      } else {
+        count_ranks<1>(w, n, g0, ranks + 8 * g0);
+        g0 += 1;
+      }
+    }
     uint8_t out[kPad];
     uint64_t seen = 0;
-    for (uint32_t g = 0; g < groups; ++g) {
-      const uint32_t b = 8 * g, e = std::min(n, b + 8);
-      const simd::vfloat8 c = simd::vfloat8::load(w + b);
-      simd::vfloat8 rank(0.0f);
-      for (uint32_t j = 0; j < b; ++j) rank = rank + simd::mask_zero(simd::vfloat8(w[j]) <= c, one);
-      for (uint32_t j = b; j < e; ++j) {
-        const simd::vfloat8 x(w[j]);
-        const simd::vbool8 after = simd::lanes_from_bits(0xfeu << (j - b));
-        rank = rank + simd::mask_zero((x < c) | ((x == c) & after), one);
-      }
-      for (uint32_t j = e; j < n; ++j) rank = rank + simd::mask_zero(simd::vfloat8(w[j]) < c, one);
-      alignas(32) float r8[8];
-      rank.store(r8);
-      for (uint32_t k = b; k < e; ++k) {
-        const uint32_t r = uint32_t(r8[k - b]);
-        if (r >= n) return false;
-        out[r] = order[k];
-        seen |= uint64_t(1) << r;
-      }
+    for (uint32_t k = 0; k < n; ++k) {
+      const uint32_t r = uint32_t(ranks[k]);
+      if (r >= n) return false;
+      out[r] = order[k];
+      seen |= uint64_t(1) << r;
     }
     if (seen != (n == 64 ? ~uint64_t(0) : (uint64_t(1) << n) - 1)) return false;
     std::copy(out, out + n, order);

@@ -200,23 +200,20 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // Distinct vertex codes in order of first sight (duplicated input vertices with the same code
   // are one vertex), found through a small open-addressing table: the triangles' corners as
   // these provisional numbers, in child order.
-  // Capacities for the whole cluster up front: no vector here grows.
-  // The scratch vectors are a thread's own and kept between calls: no allocation but the first.
-  thread_local std::vector<uint32_t> pcodes;  // 3 per provisional vertex
-  thread_local std::vector<std::array<uint8_t, 3>> corners;
-  thread_local std::vector<uint32_t> tris;  // input triangles in child order
-  pcodes.clear();
-  corners.clear();
-  tris.clear();
-  pcodes.reserve(9 * size_t(ntris));
-  corners.reserve(ntris);
-  tris.reserve(ntris);
+  // Per triangle and per corner, arrays of the cluster's size (ntris <= 64: at most 8 children of
+  // at most 8); the vectors further on are a thread's own, kept between calls: no allocation but
+  // the first.
+  std::array<uint8_t, 3> corners[64];
+  uint32_t tris[64];  // input triangles in child order
+  uint32_t ncorners = 0;
+  uint32_t pcodes[3 * 3 * 64];  // 3 codes per provisional vertex, at most one a corner
+  uint32_t npv = 0;
   uint16_t table[1024];
   std::fill(std::begin(table), std::end(table), uint16_t(0xffff));
   for (int c = 0; c < k; ++c)
     for (uint32_t j = 0; j < counts[c]; ++j) {
       const uint32_t t = prims[c][j];
-      tris.push_back(t);
+      tris[ncorners] = t;
       std::array<uint8_t, 3> tc{};
       for (int q = 0; q < 3; ++q) {
         const uint32_t* code = &s.codes[3 * size_t(s.tris[3 * size_t(t) + q])];
@@ -224,9 +221,9 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
         for (x = (x ^ (x >> 15)) & 1023;; x = (x + 1) & 1023) {
           const uint16_t i = table[x];
           if (i == 0xffff) {
-            table[x] = uint16_t(pcodes.size() / 3);
-            tc[q] = uint8_t(pcodes.size() / 3);
-            pcodes.insert(pcodes.end(), code, code + 3);
+            table[x] = uint16_t(npv);
+            tc[q] = uint8_t(npv);
+            std::copy(code, code + 3, pcodes + 3 * npv++);
             break;
           }
           if (pcodes[3 * i] == code[0] && pcodes[3 * i + 1] == code[1] &&
@@ -236,9 +233,9 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
           }
         }
       }
-      corners.push_back(tc);
+      corners[ncorners++] = tc;
     }
-  const uint32_t nv = uint32_t(pcodes.size() / 3);
+  const uint32_t nv = npv;
   if (nv > 255) throw std::logic_error("cluster: more than 255 vertices");
   h.nverts = uint8_t(nv);
 
@@ -267,9 +264,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
         }
     return edges;
   };
-  thread_local std::vector<Step> steps;
-  steps.clear();
-  steps.reserve(ntris);
+  Step steps[64];  // ntris <= 64
+  uint32_t nsteps = 0;
   uint32_t child_step[9] = {};  // first step of each child (k <= 8)
   for (int c = 0, first = 0; c < k; first += int(counts[c]), ++c) {
     const uint32_t n = counts[c];
@@ -283,18 +279,19 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     // (vertex mod 64) of a mask, a triangle b whose three bits differ shares two corners with a
     // only if its mask and a's have two bits in common: other pairs skip the test.
     uint64_t mask[8];
+    bool three[8];  // the three bits differ
     for (uint32_t a = 0; a < n; ++a) {
       const auto& T = corners[uint32_t(first) + a];
       mask[a] = (uint64_t(1) << (T[0] & 63)) | (uint64_t(1) << (T[1] & 63)) |
                 (uint64_t(1) << (T[2] & 63));
+      three[a] = __builtin_popcountll(mask[a]) == 3;
     }
     uint32_t cont[4][8] = {};
     uint8_t cont_p[8][8][3], cont_e[8][8];
     for (uint32_t a = 0; a < n; ++a)
       for (uint32_t b = 0; b < n; ++b) {
         if (a == b) continue;
-        if (__builtin_popcountll(mask[b]) == 3 && __builtin_popcountll(mask[a] & mask[b]) < 2)
-          continue;
+        if (three[b] && __builtin_popcountll(mask[a] & mask[b]) < 2) continue;
         const uint32_t edges = continues(uint32_t(first) + a, uint32_t(first) + b, cont_p[a][b]);
         cont_e[a][b] = uint8_t(edges);
         for (int x = 0; x < 4; ++x)
@@ -331,36 +328,35 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
         std::copy(cur, cur + n, best);
       }
     }
-    child_step[c] = uint32_t(steps.size());
-    steps.insert(steps.end(), best, best + n);
+    child_step[c] = nsteps;
+    std::copy(best, best + n, steps + nsteps);
+    nsteps += n;
   }
-  child_step[k] = uint32_t(steps.size());
+  child_step[k] = nsteps;
 
   // Vertex numbers in order of first reference; each reference new or a distance back.
   int number[255];  // nv <= 255
   std::fill(number, number + nv, -1);
   thread_local std::vector<uint32_t> codes;  // 3 per vertex, final numbering
-  thread_local std::vector<int32_t> refs;    // per reference: -1 new, else the distance back
-  codes.clear();
-  refs.clear();
-  codes.reserve(3 * size_t(nv));
-  refs.reserve(3 * size_t(ntris));
+  codes.resize(3 * size_t(nv));
+  int32_t refs[3 * 64];  // per reference (at most 3 a triangle): -1 new, else the distance back
+  uint32_t nrefs = 0;
   uint32_t child_cnt[8] = {}, child_refs[9] = {};
   uint32_t cnt = 0, max_back = 0;
   auto reference = [&](uint8_t v) {
     if (number[v] < 0) {
-      number[v] = int(cnt++);
-      codes.insert(codes.end(), &pcodes[3 * size_t(v)], &pcodes[3 * size_t(v)] + 3);
-      refs.push_back(-1);
+      number[v] = int(cnt);
+      std::copy(pcodes + 3 * size_t(v), pcodes + 3 * size_t(v) + 3, codes.data() + 3 * cnt++);
+      refs[nrefs++] = -1;
     } else {
       const uint32_t d = cnt - 1 - uint32_t(number[v]);
       max_back = std::max(max_back, d);
-      refs.push_back(int32_t(d));
+      refs[nrefs++] = int32_t(d);
     }
   };
   for (int c = 0; c < k; ++c) {
     child_cnt[c] = cnt;
-    child_refs[c] = uint32_t(refs.size());
+    child_refs[c] = nrefs;
     for (uint32_t j = child_step[c]; j < child_step[c + 1]; ++j) {
       const Step& st = steps[j];
       if (st.p == 3)
@@ -369,7 +365,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
         reference(corners[st.i][st.p]);
     }
   }
-  child_refs[k] = uint32_t(refs.size());
+  child_refs[k] = nrefs;
+  if (cnt != nv) throw std::logic_error("cluster: a vertex outside the strips");
   const uint32_t ib = bit_width(max_back);
   h.ib = uint8_t(ib);
   // The control bits of step j (not a child's first): 2 a restart, 4 a strip step after a
@@ -497,7 +494,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   thread_local std::vector<uint32_t> order;
   order.clear();
   order.reserve(ntris);
-  for (const Step& st : steps) order.push_back(tris[st.i]);
+  for (uint32_t j = 0; j < nsteps; ++j) order.push_back(tris[steps[j].i]);
   uint32_t glo = ~0u, ghi = 0;
   thread_local std::vector<uint32_t> ids;
   ids.clear();
@@ -571,11 +568,15 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       // Every entry takes at least ob + gb bits (entry_bits, with or without the repeat bits): once
       // that alone reaches the best, no wider ob can take fewer bits.
       if (nmin * (ob + gb) >= best_bits) break;
-      uint64_t nstarts = 0;
-      uint32_t last = 0;
-      for (uint32_t id : set) {
-        const bool start = nstarts == 0 || uint64_t(id - last) >= (uint64_t(1) << ob);
-        last = start ? id : last;
+      // The first id starts the first run (neither set is empty: the first triangle has no step).
+      const uint32_t* ids_of = set.data();
+      const size_t nids = set.size();
+      const uint64_t width = uint64_t(1) << ob;
+      uint64_t nstarts = 1;
+      uint32_t last = ids_of[0];
+      for (size_t i = 1; i < nids; ++i) {
+        const bool start = uint64_t(ids_of[i] - last) >= width;
+        last = start ? ids_of[i] : last;
         nstarts += start;
       }
       const uint64_t m = nstarts - 1;
@@ -698,7 +699,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       }
       for (int q = 0; q < (st.p == 3 ? 3 : 1); ++q) put_ref();
     }
-  if (w.pos != L.end || r != refs.size()) throw std::logic_error("cluster: stream size mismatch");
+  if (w.pos != L.end || r != nrefs) throw std::logic_error("cluster: stream size mismatch");
   for (uint32_t i = 0; i < ntris; ++i) {
     if (repeated(i)) continue;
     const uint32_t id = s.prim_ids[ord[i]];

@@ -18,10 +18,19 @@ inline uint64_t nh_key(const void* data, size_t bytes) {
   const auto* p = static_cast<const uint8_t*>(data);
   auto key = [](size_t i) { return uint32_t(0x9E3779B9u * uint32_t(i + 1) ^ 0x7F4A7C15u); };
   uint64_t h = bytes;
-  for (size_t i = 0; i < bytes; i += 8) {
-    uint32_t w[2] = {0, 0};
-    std::memcpy(w, p + i, std::min<size_t>(8, bytes - i));
+  auto pair = [&](size_t i, const uint32_t (&w)[2]) {
     h += uint64_t(uint32_t(w[0] + key(i / 4))) * uint64_t(uint32_t(w[1] + key(i / 4 + 1)));
+  };
+  size_t i = 0;
+  for (; i + 8 <= bytes; i += 8) {  // whole pairs: loads of a constant size
+    uint32_t w[2];
+    std::memcpy(w, p + i, 8);
+    pair(i, w);
+  }
+  if (i < bytes) {
+    uint32_t w[2] = {0, 0};
+    std::memcpy(w, p + i, bytes - i);
+    pair(i, w);
   }
   h ^= h >> 33;
   h *= 0xFF51AFD7ED558CCDULL;

@@ -18,7 +18,7 @@ inline uint64_t nh_key(const void* data, size_t bytes) {
   const auto* p = static_cast<const uint8_t*>(data);
   auto key = [](size_t i) { return uint32_t(0x9E3779B9u * uint32_t(i + 1) ^ 0x7F4A7C15u); };
   uint64_t h = bytes;
-  auto pair = [&](size_t i, const uint32_t (&w)[2]) {
+  auto pair = [&](size_t i, const uint32_t(&w)[2]) {
     h += uint64_t(uint32_t(w[0] + key(i / 4))) * uint64_t(uint32_t(w[1] + key(i / 4 + 1)));
   };
   size_t i = 0;

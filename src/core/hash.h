@@ -2,7 +2,6 @@
 // for every primitive of every build.
 #pragma once
 
-#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>

@@ -253,8 +253,8 @@ class ClusterReshaper {
       const vfloat8 x(w[j]);
       for (int q = 0; q < G; ++q) r[q] = r[q] + simd::mask_zero(x < c[q], one);
     }
-    // Places among them: so for the groups before and after j's, and in j's group at or below in
-    // the lanes after j's, below in the others.
+    // Places among them: for the groups after j's one at or below, for those before it one below,
+    // and in j's own group at or below in the lanes after j's, below in the others.
     for (uint32_t j = b; j < e; ++j) {
       const vfloat8 x(w[j]);
       const int qj = int((j - b) / 8);

@@ -204,8 +204,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // at most 8); the vectors further on are a thread's own, kept between calls: no allocation but
   // the first.
   std::array<uint8_t, 3> corners[64];
-  uint32_t tris[64];  // input triangles in child order
-  uint32_t ncorners = 0;
+  uint32_t tris[64];            // input triangles in child order
+  uint32_t nt = 0;              // triangles read
   uint32_t pcodes[3 * 3 * 64];  // 3 codes per provisional vertex, at most one a corner
   uint32_t npv = 0;
   uint16_t table[1024];
@@ -213,7 +213,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   for (int c = 0; c < k; ++c)
     for (uint32_t j = 0; j < counts[c]; ++j) {
       const uint32_t t = prims[c][j];
-      tris[ncorners] = t;
+      tris[nt] = t;
       std::array<uint8_t, 3> tc{};
       for (int q = 0; q < 3; ++q) {
         const uint32_t* code = &s.codes[3 * size_t(s.tris[3 * size_t(t) + q])];
@@ -233,7 +233,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
           }
         }
       }
-      corners[ncorners++] = tc;
+      corners[nt++] = tc;
     }
   const uint32_t nv = npv;
   if (nv > 255) throw std::logic_error("cluster: more than 255 vertices");

@@ -233,7 +233,7 @@ class ClusterReshaper {
   }
 
   // The ranks (below) of the places of G groups of 8 from group g0, into ranks[0, 8G): each place
-  // j of the node's n counts once for all of them. The G rows of counts stay in registers.
+  // j of the node's n is compared once with the G rows, whose counts stay in registers.
   template <int G>
   static SLIM_INLINE void count_ranks(const float* w, uint32_t n, uint32_t g0, float* ranks) {
     using simd::vfloat8;
@@ -273,16 +273,18 @@ class ClusterReshaper {
 
   // Sorts `order` (positions in a node of n <= kClusterMax items) stably by `centers` (the node's
   // centers on one axis, by position): place k goes to its rank, the centers below its own plus
-  // the equal ones at places before it, counted for up to 32 places at once (count_ranks). Equal
+  // the equal ones at places before it, counted for up to 32 places a pass (count_ranks). Equal
   // centers (neighbouring triangles often share one) keep their order, so the clusters do not
   // depend on the standard library's sort. Counts up to 64 are exact in floats. Returns false
   // (order unchanged) if the ranks are not 0..n-1 once each (a NaN center).
   static bool stable_order(const float* centers, uint8_t* order, uint32_t n) {
     constexpr uint32_t kPad = (kClusterMax + 7) / 8 * 8;
     static_assert(kPad <= 64, "ranks are bits of a 64-bit mask");
-    alignas(32) float w[kPad];  // the centers in `order`'s order, padded
+    alignas(32) float w[kPad];  // the centers in `order`'s order
     for (uint32_t k = 0; k < n; ++k) w[k] = centers[order[k]];
     const uint32_t groups = (n + 7) / 8;
+    // The last group's lanes past n: loaded as count_ranks' rows (their ranks go unread), never
+    // counted as places (j < n only).
     std::fill(w + n, w + 8 * groups, kInf);
     float ranks[kPad];
     for (uint32_t g0 = 0; g0 < groups;) {

@@ -36,7 +36,7 @@ namespace slim {
 
 namespace {
 
-constexpr uint32_t kClusterMax = 64;  // 8 x kBlockPrims (bvh8.cpp multileaf_candidate)
+constexpr uint32_t kClusterMax = cluster::kMaxTriangles;  // bvh8.cpp multileaf_candidate
 // BVH2 nodes of at most this many triangles split at counts that need no extra cluster
 // (Bvh2BuildConfig::full_blocks_below).
 constexpr uint32_t kFullClustersBelow = 16 * kClusterMax;

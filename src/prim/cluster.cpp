@@ -196,17 +196,17 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     sizes |= (counts[c] - 1) << (3 * c);
     ntris += counts[c];
   }
+  static_assert(kMaxTriangles == 8 * 8, "the checks above keep ntris within kMaxTriangles");
   for (int i = 0; i < 3; ++i) h.sizes[i] = uint8_t(sizes >> (8 * i));
   // Distinct vertex codes in order of first sight (duplicated input vertices with the same code
   // are one vertex), found through a small open-addressing table: the triangles' corners as
   // these provisional numbers, in child order.
-  // Per triangle and per corner, arrays of the cluster's size (ntris <= 64: at most 8 children of
-  // at most 8); the vectors further on are a thread's own, kept between calls: no allocation but
-  // the first.
-  std::array<uint8_t, 3> corners[64];
-  uint32_t tris[64];            // input triangles in child order
-  uint32_t nt = 0;              // triangles read
-  uint32_t pcodes[3 * 3 * 64];  // 3 codes per provisional vertex, at most one a corner
+  // Per triangle and per corner, arrays of the cluster's size (ntris <= kMaxTriangles, above); the
+  // vectors further on are a thread's own, kept between calls: no allocation but the first.
+  std::array<uint8_t, 3> corners[kMaxTriangles];
+  uint32_t tris[kMaxTriangles];            // input triangles in child order
+  uint32_t nt = 0;                         // triangles read
+  uint32_t pcodes[3 * 3 * kMaxTriangles];  // 3 codes per provisional vertex, at most one a corner
   uint32_t npv = 0;
   uint16_t table[1024];
   std::fill(std::begin(table), std::end(table), uint16_t(0xffff));
@@ -264,7 +264,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
         }
     return edges;
   };
-  Step steps[64];  // ntris <= 64
+  Step steps[kMaxTriangles];
   uint32_t nsteps = 0;
   uint32_t child_step[9] = {};  // first step of each child (k <= 8)
   for (int c = 0, first = 0; c < k; first += int(counts[c]), ++c) {
@@ -339,7 +339,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   std::fill(number, number + nv, -1);
   thread_local std::vector<uint32_t> codes;  // 3 per vertex, final numbering
   codes.resize(3 * size_t(nv));
-  int32_t refs[3 * 64];  // per reference (at most 3 a triangle): -1 new, else the distance back
+  // Per reference (at most 3 a triangle): -1 new, else the distance back.
+  int32_t refs[3 * kMaxTriangles];
   uint32_t nrefs = 0;
   uint32_t child_cnt[8] = {}, child_refs[9] = {};
   uint32_t cnt = 0, max_back = 0;

@@ -222,12 +222,14 @@ SLIM_INLINE uint32_t topology_bits(const ClusterHeader& h) { return h.tbits & 0x
 SLIM_INLINE uint32_t table_offset_code(const ClusterHeader& h) { return (h.tbits >> 11) & 7u; }
 SLIM_INLINE uint32_t table_vertex_code(const ClusterHeader& h) { return uint32_t(h.tbits) >> 14; }
 constexpr uint32_t kPlainVertexCode = 3;
+// A cluster's most triangles: 8 children of at most 8 (a multi-leaf's 8 leaves of kBlockPrims).
+constexpr uint32_t kMaxTriangles = 64;
 // 2^16 / n for n = 1..64 (entries 0 and 65..127 0): the child table's slopes without a division,
 // indexed by the cluster's triangle count (tri_count: 1..64 for 1..8 children, 0 for none).
 struct InvTris {
   uint32_t v[128];
   constexpr InvTris() : v{} {
-    for (uint32_t n = 1; n <= 64; ++n) v[n] = 65536u / n;
+    for (uint32_t n = 1; n <= kMaxTriangles; ++n) v[n] = 65536u / n;
   }
 };
 inline constexpr InvTris kInvTris{};

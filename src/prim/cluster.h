@@ -640,6 +640,7 @@ struct ChildRanges {
   alignas(32) uint32_t base[3][8];   // the code of digit 0: anchor + lo
   uint64_t total;                    // bits of the vertex section
   uint32_t wmax;                     // the widest child's w
+  bool operator==(const ChildRanges&) const = default;  // field by field (the fuzz target's check)
 };
 // The ranges of the k children of the cluster with header h (L: its layout, from vertex_bits
 // anything: the child table lies before the vertices), its stream `bits`, its anchors and the

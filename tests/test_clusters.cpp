@@ -466,6 +466,51 @@ TEST(ClusterCodec, DecodeEqualsEncodeFullClusters) {
     }
 }
 
+// The strip search prefers triangles whose ids follow the last one's (prim/cluster.cpp): a closed
+// fan of six triangles numbered 10..15 around its center, given to the encoder as one child in
+// the order 10, 15, 11, 12, 13, 14. From triangle 10 the first neighbour in that order is 15, and
+// a strip that takes it first has a triangle whose id does not follow (15 after 10); the strip
+// 10, 11, ..., 15 has none, and no more restarts.
+TEST(ClusterCodec, StripsFollowTheIds) {
+  PolyMesh fan;
+  fan.positions.push_back({0.0f, 0.0f, 0.0f});
+  for (int i = 0; i < 6; ++i) {
+    const double a = 2.0 * M_PI * i / 6;
+    fan.positions.push_back({float(std::cos(a)), float(std::sin(a)), 0.1f * float(i % 2)});
+  }
+  for (uint32_t i = 0; i < 6; ++i) {
+    fan.face_sizes.push_back(3);
+    for (uint32_t v : {0u, 1 + i, 1 + (i + 1) % 6}) fan.face_indices.push_back(v);
+  }
+  TriangleMesh tm = triangulate_fan({&fan});
+  ASSERT_EQ(tm.tri_count(), 6u);
+  for (uint32_t t = 0; t < 6; ++t) tm.prim_ids[t] = 10 + t;
+  for (bool lossless : {false, true}) {
+    const cluster::Quantized z = cluster::quantize(tm.vertices.data(), tm.vertices.size(),
+                                                   tm.tris.data(), tm.tri_count(), 1e-5, lossless);
+    const ClusterSource src = source_of(tm, z, lossless);
+    const uint32_t order[6] = {0, 5, 1, 2, 3, 4}, count = 6;
+    const uint32_t* prims = order;
+    const std::vector<uint8_t> data = cluster::encode(src, &prims, &count, 1, true);
+    std::string why;
+    ASSERT_TRUE(
+        cluster::check(data.data(), data.size() - kClusterReadSlack, 1, z.lattice, lossless, &why))
+        << why;
+    std::vector<uint32_t> ids;
+    for (uint32_t t = 0; t < 6; ++t) {
+      uint32_t g, p;
+      if (lossless)
+        cluster::decode_ids<true>(z.lattice, data.data(), 1, t, g, p);
+      else
+        cluster::decode_ids<false>(z.lattice, data.data(), 1, t, g, p);
+      ids.push_back(p);
+    }
+    // Ascending or descending: both strips follow the ids.
+    if (ids[0] > ids[5]) std::reverse(ids.begin(), ids.end());
+    EXPECT_EQ(ids, (std::vector<uint32_t>{10, 11, 12, 13, 14, 15})) << lossless;
+  }
+}
+
 // Lossless clusters of decimal coordinates (cluster.h, the decimal mode): meshes whose coordinates
 // were printed with 0 to 6 decimals and parsed back decode bit for bit, mostly in the decimal mode;
 // where one vertex in 40 is one float step off its decimal, the clusters that hold such a vertex

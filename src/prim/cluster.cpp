@@ -239,8 +239,10 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   if (nv > 255) throw std::logic_error("cluster: more than 255 vertices");
   h.nverts = uint8_t(nv);
 
-  // Strips: per child, the greedy strip from each start triangle (the next triangle is the first
-  // left that continues the last one, else a restart); the one with the fewest restarts wins.
+  // Strips: per child, two greedy strips from each start triangle (the next triangle is the first
+  // left that continues the last one, else the first left as a restart; the second strip takes
+  // first a triangle whose ids follow the last one's, `near` below); the one with the fewest
+  // restarts wins, of those the one with the most triangles whose ids follow their predecessor's.
   // steps: (index into `tris`, p, e) in decode order; p = 3 for a strip's first triangle. A step
   // after a step with p = q may not take the previous step's edge q + 1 (the one it came in by:
   // its 1-bit edge names q or q + 2).
@@ -297,36 +299,83 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
         for (int x = 0; x < 4; ++x)
           if (edges & ~(1u << x)) cont[x][a] |= 1u << b;
       }
+    // Bit b of near[a]: triangle b's ids follow a's, its primID a's or one above or below with
+    // the same geomID: after a in decode order, the ids' repeat and step bits (cluster.h) take b
+    // without an entry. near_prev: the same after the previous child's last triangle.
+    // Lanes past n are zeros, cleared from the masks (a fixed 8 lanes: the compiler vectorizes).
+    uint32_t pid[8] = {}, gid[8] = {};
+    for (uint32_t a = 0; a < n; ++a) {
+      pid[a] = s.prim_ids[tris[uint32_t(first) + a]];
+      gid[a] = s.geom_ids[tris[uint32_t(first) + a]];
+    }
     const uint32_t all = (1u << n) - 1;
+    auto near_of = [&](uint32_t p, uint32_t g) {  // primID p - 1, p or p + 1 and geomID g
+      uint32_t m = 0;
+      for (uint32_t b = 0; b < 8; ++b) m |= uint32_t((pid[b] - p + 1 <= 2) & (gid[b] == g)) << b;
+      return m & all;
+    };
+    uint32_t near[8], near_prev = 0;
+    for (uint32_t a = 0; a < n; ++a) near[a] = near_of(pid[a], gid[a]) & ~(1u << a);
+    if (nsteps) {
+      const uint32_t t = tris[steps[nsteps - 1].i];
+      near_prev = near_of(s.prim_ids[t], s.geom_ids[t]);
+    }
     Step best[8], cur[8];
-    uint32_t best_restarts = ~0u;
-    for (uint32_t start = 0; start < n; ++start) {
+    // The strip from `start` into cur, returning its restarts; the first strip sets `differs` if
+    // the second would take another triangle somewhere.
+    auto walk = [&]<bool kPrefer>(uint32_t start, bool& differs) {
       uint32_t used = 1u << start;
       uint32_t restarts = 0;
       uint32_t last = start;  // the child's index of cur[j - 1]
       uint32_t x = 3;         // the edge cur[j - 1] came in by (3: none)
       cur[0] = {uint32_t(first) + start, 3, 0};
       for (uint32_t j = 1; j < n; ++j) {
-        const uint32_t go = cont[x][last] & ~used;
+        // The triangles that continue the strip, else all left (a restart): the first of them,
+        // or the first whose ids follow the last triangle's.
+        const uint32_t go = cont[x][last] & ~used, opts = go ? go : all & ~used;
+        const uint32_t w = opts & near[last];
+        uint32_t b;
+        if constexpr (kPrefer) {
+          b = uint32_t(__builtin_ctz(w ? w : opts));
+        } else {
+          b = uint32_t(__builtin_ctz(opts));
+          differs |= w && !((w >> b) & 1);
+        }
         if (go) {
-          const uint32_t b = uint32_t(__builtin_ctz(go));
           const uint32_t ee = uint32_t(__builtin_ctz(cont_e[last][b] & ~(1u << x)));
           const uint8_t pp = cont_p[last][b][ee];
           cur[j] = {uint32_t(first) + b, pp, uint8_t(ee)};
-          last = b;
           x = pp == 2 ? 0 : pp + 1u;
         } else {
-          last = uint32_t(__builtin_ctz(all & ~used));
-          cur[j] = {uint32_t(first) + last, 3, 0};
+          cur[j] = {uint32_t(first) + b, 3, 0};
           x = 3;
           restarts++;
         }
+        last = b;
         used |= 1u << last;
       }
-      if (restarts < best_restarts) {
-        best_restarts = restarts;
-        std::copy(cur, cur + n, best);
-      }
+      return restarts;
+    };
+    // The triangles of cur whose ids follow their predecessor's.
+    auto near_count = [&] {
+      uint32_t m = (near_prev >> (cur[0].i - uint32_t(first))) & 1;
+      for (uint32_t j = 1; j < n; ++j)
+        m += (near[cur[j - 1].i - uint32_t(first)] >> (cur[j].i - uint32_t(first))) & 1;
+      return m;
+    };
+    uint32_t best_restarts = ~0u, best_near = 0;
+    auto keep = [&](uint32_t restarts) {
+      if (restarts > best_restarts) return;
+      const uint32_t m = near_count();
+      if (restarts == best_restarts && m <= best_near) return;
+      best_restarts = restarts;
+      best_near = m;
+      std::copy(cur, cur + n, best);
+    };
+    for (uint32_t start = 0; start < n; ++start) {
+      bool differs = false;
+      keep(walk.template operator()<false>(start, differs));
+      if (differs) keep(walk.template operator()<true>(start, differs));
     }
     child_step[c] = nsteps;
     std::copy(best, best + n, steps + nsteps);

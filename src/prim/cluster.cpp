@@ -241,8 +241,10 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
 
   // Strips: per child, two greedy strips from each start triangle (the next triangle is the first
   // left that continues the last one, else the first left as a restart; the second strip takes
-  // first a triangle whose ids follow the last one's, `near` below); the one with the fewest
-  // restarts wins, of those the one with the most triangles whose ids follow their predecessor's.
+  // first a triangle whose ids follow the last one's, `near` below, and runs only where it would
+  // take another triangle and the first strip has no more restarts than the best so far); the one
+  // with the fewest restarts wins, of those the one with the most triangles whose ids follow their
+  // predecessor's (the ids' repeat and step bits take those without an entry).
   // steps: (index into `tris`, p, e) in decode order; p = 3 for a strip's first triangle. A step
   // after a step with p = q may not take the previous step's edge q + 1 (the one it came in by:
   // its 1-bit edge names q or q + 2).
@@ -277,9 +279,9 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     // same pairs, so each pair is tested once here (8 x 8 tests, not up to 8 x 8 x 8), and the
     // search takes the lowest unused triangle that continues (else the lowest unused) as a bit
     // scan.
-    // A pair shares an edge only if two corners of b are corners of a. With each corner as bit
-    // (vertex mod 64) of a mask, a triangle b whose three bits differ shares two corners with a
-    // only if its mask and a's have two bits in common: other pairs skip the test.
+    // A pair shares an edge only if two corners of one are corners of the other. With each corner
+    // as bit (vertex mod 64) of a mask, where one of the two has three distinct bits they share
+    // two corners only if their masks have two bits in common: other pairs skip the test.
     uint64_t mask[8];
     bool three[8];  // the three bits differ
     for (uint32_t a = 0; a < n; ++a) {
@@ -290,14 +292,32 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     }
     uint32_t cont[4][8] = {};
     uint8_t cont_p[8][8][3], cont_e[8][8];
+    auto link = [&](uint32_t a, uint32_t b, uint32_t edges) {
+      cont_e[a][b] = uint8_t(edges);
+      for (int x = 0; x < 4; ++x)
+        if (edges & ~(1u << x)) cont[x][a] |= 1u << b;
+    };
+    // Between two triangles of three distinct corners the test runs once: b continues a over a's
+    // edge e with its corner p exactly when a continues b over b's edge p + 1 with its corner
+    // e + 2 (the shared edge reversed; distinct corners match each edge at most once).
     for (uint32_t a = 0; a < n; ++a)
-      for (uint32_t b = 0; b < n; ++b) {
-        if (a == b) continue;
-        if (three[b] && __builtin_popcountll(mask[a] & mask[b]) < 2) continue;
-        const uint32_t edges = continues(uint32_t(first) + a, uint32_t(first) + b, cont_p[a][b]);
-        cont_e[a][b] = uint8_t(edges);
-        for (int x = 0; x < 4; ++x)
-          if (edges & ~(1u << x)) cont[x][a] |= 1u << b;
+      for (uint32_t b = a + 1; b < n; ++b) {
+        const bool both = three[a] && three[b];
+        if ((three[a] || three[b]) && __builtin_popcountll(mask[a] & mask[b]) < 2) continue;
+        const uint32_t ab = continues(uint32_t(first) + a, uint32_t(first) + b, cont_p[a][b]);
+        link(a, b, ab);
+        uint32_t ba = 0;
+        if (both) {
+          for (uint32_t e = 0; e < 3; ++e)
+            if ((ab >> e) & 1) {
+              const uint32_t f = (cont_p[a][b][e] + 1u) % 3;
+              cont_p[b][a][f] = uint8_t((e + 2) % 3);
+              ba |= 1u << f;
+            }
+        } else {
+          ba = continues(uint32_t(first) + b, uint32_t(first) + a, cont_p[b][a]);
+        }
+        link(b, a, ba);
       }
     // Bit b of near[a]: triangle b's ids follow a's, its primID a's or one above or below with
     // the same geomID: after a in decode order, the ids' repeat and step bits (cluster.h) take b
@@ -372,10 +392,17 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       best_near = m;
       std::copy(cur, cur + n, best);
     };
-    for (uint32_t start = 0; start < n; ++start) {
+    // The most such triangles a strip can have (each at most once); a strip without restarts
+    // that has them all cannot be bettered, and the later starts are skipped.
+    uint32_t reach = near_prev;
+    for (uint32_t a = 0; a < n; ++a) reach |= near[a];
+    const uint32_t most = uint32_t(__builtin_popcount(reach));
+    for (uint32_t start = 0; start < n && !(best_restarts == 0 && best_near >= most); ++start) {
       bool differs = false;
-      keep(walk.template operator()<false>(start, differs));
-      if (differs) keep(walk.template operator()<true>(start, differs));
+      const uint32_t restarts = walk.template operator()<false>(start, differs);
+      keep(restarts);
+      if (differs && restarts <= best_restarts)
+        keep(walk.template operator()<true>(start, differs));
     }
     child_step[c] = nsteps;
     std::copy(best, best + n, steps + nsteps);

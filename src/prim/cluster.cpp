@@ -277,8 +277,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     // with p in cont_p[a][b][e]; bit b of cont[x][a] if over an edge other than x (x = 3: any
     // edge), a step entered by edge x then taking the lowest such edge. Every start tries the
     // same pairs, so each pair is tested once here (8 x 8 tests, not up to 8 x 8 x 8), and the
-    // search takes the lowest unused triangle that continues (else the lowest unused) as a bit
-    // scan.
+    // search takes the lowest unused triangle that continues (else the lowest unused; the second
+    // strip first the lowest of them whose ids follow) as a bit scan.
     // A pair shares an edge only if two corners of one are corners of the other. With each corner
     // as bit (vertex mod 64) of a mask, where one of the two has three distinct bits they share
     // two corners only if their masks have two bits in common: other pairs skip the test.
@@ -320,8 +320,8 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
         link(b, a, ba);
       }
     // Bit b of near[a]: triangle b's ids follow a's, its primID a's or one above or below with
-    // the same geomID: after a in decode order, the ids' repeat and step bits (cluster.h) take b
-    // without an entry. near_prev: the same after the previous child's last triangle.
+    // the same geomID: after a in decode order, the ids' repeat and step bits (cluster.h) can take
+    // b without an entry. near_prev: the same after the previous child's last triangle.
     // Lanes past n are zeros, cleared from the masks (a fixed 8 lanes: the compiler vectorizes).
     uint32_t pid[8] = {}, gid[8] = {};
     for (uint32_t a = 0; a < n; ++a) {
@@ -392,11 +392,13 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       best_near = m;
       std::copy(cur, cur + n, best);
     };
-    // The most such triangles a strip can have (each at most once); a strip without restarts
-    // that has them all cannot be bettered, and the later starts are skipped.
+    // At most this many such triangles in a strip (each at most once, its first only after the
+    // previous child); a strip without restarts that has as many cannot be bettered, and the
+    // later starts are skipped.
     uint32_t reach = near_prev;
     for (uint32_t a = 0; a < n; ++a) reach |= near[a];
-    const uint32_t most = uint32_t(__builtin_popcount(reach));
+    const uint32_t most =
+        std::min(uint32_t(__builtin_popcount(reach)), n - 1 + uint32_t(near_prev != 0));
     for (uint32_t start = 0; start < n && !(best_restarts == 0 && best_near >= most); ++start) {
       bool differs = false;
       const uint32_t restarts = walk.template operator()<false>(start, differs);

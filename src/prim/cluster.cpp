@@ -244,7 +244,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // first a triangle whose ids follow the last one's, `near` below, and runs only where it would
   // take another triangle and the first strip has no more restarts than the best so far); the one
   // with the fewest restarts wins, of those the one with the most triangles whose ids follow their
-  // predecessor's (the ids' repeat and step bits take those without an entry).
+  // predecessor's (the ids' repeat and step bits can take those without an entry).
   // steps: (index into `tris`, p, e) in decode order; p = 3 for a strip's first triangle. A step
   // after a step with p = q may not take the previous step's edge q + 1 (the one it came in by:
   // its 1-bit edge names q or q + 2).

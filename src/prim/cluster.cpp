@@ -392,14 +392,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       best_near = m;
       std::copy(cur, cur + n, best);
     };
-    // At most this many such triangles in a strip (each at most once, its first only after the
-    // previous child); a strip without restarts that has as many cannot be bettered, and the
-    // later starts are skipped.
-    uint32_t reach = near_prev;
-    for (uint32_t a = 0; a < n; ++a) reach |= near[a];
-    const uint32_t most =
-        std::min(uint32_t(__builtin_popcount(reach)), n - 1 + uint32_t(near_prev != 0));
-    for (uint32_t start = 0; start < n && !(best_restarts == 0 && best_near >= most); ++start) {
+    for (uint32_t start = 0; start < n; ++start) {
       bool differs = false;
       const uint32_t restarts = walk.template operator()<false>(start, differs);
       keep(restarts);

@@ -50,6 +50,37 @@ void expect_same_hits(const Scene& a, const Scene& b, uint64_t seed) {
   EXPECT_GT(hits, 500);
 }
 
+// Decoded triangles as sorted rows (the 9 coordinates' bits, geomID, face): equal for two scenes
+// that hold the same triangles, whatever their order.
+std::vector<std::array<uint32_t, 11>> rows(const DecodedTriangles& t) {
+  std::vector<std::array<uint32_t, 11>> r(t.size());
+  for (size_t i = 0; i < t.size(); ++i) {
+    std::memcpy(r[i].data(), &t.vertices[3 * i], 36);
+    r[i][9] = t.geom[i];
+    r[i][10] = t.face[i];
+  }
+  std::sort(r.begin(), r.end());
+  return r;
+}
+
+// Two scenes of the same triangles in other leaves hit the same: 20000 random rays, t bit for bit,
+// the face too unless two faces meet at that t.
+void expect_same_t(const Scene& a, const Scene& b, uint64_t seed) {
+  Rng rng(seed);
+  int hits = 0, ties = 0;
+  for (int i = 0; i < 20000; ++i) {
+    const Ray r = random_ray(rng, a.bounds());
+    const Hit ha = a.intersect(r), hb = b.intersect(r);
+    ASSERT_EQ(ha.valid(), hb.valid()) << "ray " << i;
+    if (!ha.valid()) continue;
+    ++hits;
+    ASSERT_EQ(bits_of(ha.t), bits_of(hb.t)) << "ray " << i;
+    ties += ha.primID != hb.primID;
+  }
+  EXPECT_GT(hits, 5000);
+  EXPECT_LE(ties, 1 + hits / 1000);
+}
+
 double detail(const Scene& s, const std::string& key) {
   for (const auto& [k, v] : stat_details(s))
     if (k == key) return v;
@@ -1338,20 +1369,37 @@ TEST(ClusterScene, CollapseSpendsFewerNodesThanSlots) {
       EXPECT_LT(detail(a, "sah_cost"), detail(b, "sah_cost"));
       EXPECT_EQ(detail(a, "leaf_data_bytes"), detail(b, "leaf_data_bytes"));
       EXPECT_EQ(detail(a, "clusters"), detail(b, "clusters"));
-      Rng rng(11);
-      int hits = 0, ties = 0;
-      for (int i = 0; i < 20000; ++i) {
-        const Ray r = random_ray(rng, a.bounds());
-        const Hit ha = a.intersect(r), hb = b.intersect(r);
-        ASSERT_EQ(ha.valid(), hb.valid()) << "ray " << i;
-        if (!ha.valid()) continue;
-        ++hits;
-        ASSERT_EQ(bits_of(ha.t), bits_of(hb.t)) << "ray " << i;
-        ties += ha.primID != hb.primID;
-      }
-      EXPECT_GT(hits, 5000);
-      EXPECT_LE(ties, 1 + hits / 1000);
+      expect_same_t(a, b, 11);
     }
+  }
+}
+
+// Sibling clusters divided anew (BuildOptions::cluster_redivide) store fewer vertices than the
+// SAH's division of the same BVH2 into the same number of clusters, and every triangle once:
+// `cluster` decodes the same triangles from its clusters, and for both the rays' hits are the same
+// (t bit for bit, the face too unless two faces meet at that t).
+TEST(ClusterScene, SiblingsDividedAnewStoreFewerVertices) {
+  const PolyMesh m = load("torus:64");
+  for (const char* config : {"cluster", "cluster-lossless"}) {
+    SCOPED_TRACE(config);
+    BuildOptions opt = BuildOptions::from_config(config);
+    const Scene sah = Scene::build(m, opt);
+    opt.cluster_redivide = true;
+    const Scene s = Scene::build(m, opt);
+    EXPECT_LT(detail(s, "vertices_per_triangle"), detail(sah, "vertices_per_triangle") - 0.003);
+    EXPECT_LT(s.memory().total(), sah.memory().total());
+    EXPECT_EQ(detail(s, "clusters"), detail(sah, "clusters"));
+    const std::string path = ::testing::TempDir() + "slimrt_cluster_redivide.slim";
+    s.save(path);
+    EXPECT_TRUE(Scene::open(path).options().cluster_redivide);  // the scene file keeps it
+    std::remove(path.c_str());
+    if (std::string(config) == "cluster") {
+      const std::optional<DecodedTriangles> a = s.decoded_triangles(), b = sah.decoded_triangles();
+      ASSERT_TRUE(a && b);
+      EXPECT_EQ(a->size(), s.stats().triangles);
+      EXPECT_EQ(rows(*a), rows(*b));
+    }
+    expect_same_t(s, sah, 5);
   }
 }
 
@@ -1595,16 +1643,6 @@ TEST(ClusterScene, BadInput) {
 TEST(ClusterScene, DecodesItsOwnTrianglesRealMesh) {
   SLIM_REQUIRE_SHARED_DATA();
   const PolyMesh m = load(shared_data_dir() + "/stanford_bunny.obj.xz");
-  auto rows = [](const DecodedTriangles& t) {
-    std::vector<std::array<uint32_t, 11>> r(t.size());
-    for (size_t i = 0; i < t.size(); ++i) {
-      std::memcpy(r[i].data(), &t.vertices[3 * i], 36);
-      r[i][9] = t.geom[i];
-      r[i][10] = t.face[i];
-    }
-    std::sort(r.begin(), r.end());
-    return r;
-  };
   const BuildOptions opt = BuildOptions::from_config("cluster");
   const Scene s = Scene::build(m, opt);
   const std::optional<DecodedTriangles> mine = s.decoded_triangles();

@@ -123,6 +123,10 @@ struct BuildOptions {
   // input position (the lattice's steps, one per axis, are powers of two: the largest meeting it,
   // or coarser on an axis whose vertices all lie on a coarser lattice, as a grid's rows).
   double cluster_error = 1e-5;
+  // Leaf::Clusters and Leaf::LosslessClusters: two sibling clusters of the SAH's divide their
+  // triangles anew where that stores fewer vertices (0.3-2.6% smaller on the benchmark scenes,
+  // builds about 8% longer: docs/results.md, "Sibling clusters divided anew").
+  bool cluster_redivide = false;
   // The box the lossy formats derive their scene-wide quantities from (the cluster lattice's origin
   // and steps, the grids' displacement bias); empty = the bounds of the meshes being built. A
   // chunked build gives every chunk the whole input's box, so that chunks quantize onto one
@@ -138,8 +142,8 @@ struct BuildOptions {
   static BuildOptions from_config(const std::string& name);
   // A registry row's format with the tuning of `tuning`: nodes, leaf, grid_encoding, costa and
   // pairing from the row; every other field (pairing_options, collapse, grid_parts,
-  // grid_leftovers, sah_bins, max_leaf_size, threads, cluster_error, lattice_box, progress) from
-  // `tuning`. Throws slim::Error for an unknown name.
+  // grid_leftovers, sah_bins, max_leaf_size, threads, cluster_error, cluster_redivide,
+  // lattice_box, progress) from `tuning`. Throws slim::Error for an unknown name.
   static BuildOptions from_config(const std::string& name, const BuildOptions& tuning);
   // The name of the registry row with these nodes, leaf and encoding, or a descriptive name
   // ("qbvh8-pairs") for a combination that has no row.

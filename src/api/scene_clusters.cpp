@@ -4,16 +4,18 @@
 // Clusters come from the SAH BVH2, built with leaves of up to 64 triangles (the multi-leaf limit
 // of the compressed-leaf BVH, 8 x 8) whose SAH cost counts one block per leaf, so that leaves
 // come out near that size: every maximal subtree of at most 64 triangles (in practice a leaf) is
-// one cluster. The binned SAH splits alone leave clusters of about 50 triangles (a node of 65 to
-// 128 triangles becomes two clusters, whatever its count), so nodes of at most
-// kFullClustersBelow triangles split at the nearest count that needs no extra cluster (the
-// builder's full_blocks_below): 55-64 triangles a cluster on the benchmark scenes (61-64 on 11 of
-// 13), each cluster's header, anchors, boxes and child table shared by more triangles. A cluster's
-// triangles are re-split by SAH into at most 8 leaves of at most 8 triangles (left sizes
-// multiples of 8, so that ceil(n / 8) leaves suffice), and the collapse turns each such subtree
-// into one multi-leaf whose data is the cluster (LeafEncoder::encode_multileaf). The inner nodes
-// above the clusters are QBVH8 nodes with 32-bit child refs (bvh8.h CQNode8, 108 B instead of a
-// Node8's 256 B; wide QNode8 at the top of trees whose leaves exceed a CQNode8's 16 MiB reach).
+// one cluster (with BuildOptions::cluster_redivide, two such sibling clusters divide their
+// triangles anew where that stores fewer vertices: ClusterReshaper::redivide). The binned SAH
+// splits alone leave clusters of about 50 triangles (a node of 65 to 128 triangles becomes two
+// clusters, whatever its count), so nodes of at most kFullClustersBelow triangles split at the
+// nearest count that needs no extra cluster (the builder's full_blocks_below): 55-64 triangles a
+// cluster on the benchmark scenes (61-64 on 11 of 13), each cluster's header, anchors, boxes and
+// child table shared by more triangles. A cluster's triangles are re-split by SAH into at most 8
+// leaves of at most 8 triangles (left sizes multiples of 8, so that ceil(n / 8) leaves suffice),
+// and the collapse turns each such subtree into one multi-leaf whose data is the cluster
+// (LeafEncoder::encode_multileaf). The inner nodes above the clusters are QBVH8 nodes with 32-bit
+// child refs (bvh8.h CQNode8, 108 B instead of a Node8's 256 B; wide QNode8 at the top of trees
+// whose leaves exceed a CQNode8's 16 MiB reach).
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -40,12 +42,18 @@ constexpr uint32_t kClusterMax = cluster::kMaxTriangles;  // bvh8.cpp multileaf_
 // BVH2 nodes of at most this many triangles split at counts that need no extra cluster
 // (Bvh2BuildConfig::full_blocks_below).
 constexpr uint32_t kFullClustersBelow = 16 * kClusterMax;
+// Sibling clusters are divided anew (ClusterReshaper::redivide) only where their boxes grow by at
+// most kRedivideGrowth in surface area, into clusters of at least kRedivideMinPart triangles (a
+// full leaf: no cluster of a few triangles under a multi-leaf header of its own).
+constexpr float kRedivideGrowth = 0.25f;
+constexpr uint32_t kRedivideMinPart = 8;
 
 // Re-cuts the BVH2 into clusters (see the file comment). The clusters are split and encoded in
 // parallel; encode_multileaf then takes each cluster's block from ClusterSource::encoded.
 class ClusterReshaper {
  public:
-  ClusterReshaper(const Bvh2& in, ClusterSource& src) : in_(in), src_(src) {}
+  ClusterReshaper(const Bvh2& in, ClusterSource& src, bool redivide)
+      : in_(in), src_(src), redivide_(redivide) {}
 
   Bvh2 run() {
     Bvh2 out;
@@ -54,6 +62,9 @@ class ClusterReshaper {
     count(0);
     nodes_.push_back({});
     upper(0, 0, 0);
+    given_.resize(roots_.size());
+    if (redivide_)
+      tbb::parallel_for(size_t(0), pairs_.size(), [&](size_t p) { redivide(pairs_[p]); });
     // Each cluster on its own: local nodes (index 0 = the cluster root) and prims.
     std::vector<Local> local(roots_.size());
     tbb::parallel_for(size_t(0), roots_.size(), [&](size_t c) {
@@ -65,7 +76,10 @@ class ClusterReshaper {
       thread_local std::vector<Item> items;
       thread_local Local scratch;
       v.clear();
-      collect(roots_[c].in, v);
+      if (given_[c].empty())
+        collect(roots_[c].in, v);
+      else
+        v.swap(given_[c]);
       items.resize(v.size());
       for (size_t k = 0; k < v.size(); ++k) {
         const Box3f b = tri_box(v[k]);
@@ -192,9 +206,14 @@ class ClusterReshaper {
   };
   const Bvh2& in_;
   ClusterSource& src_;
+  bool redivide_;  // BuildOptions::cluster_redivide
   std::vector<uint32_t> count_;
   std::vector<Bvh2Node> nodes_;  // the nodes above the clusters
   std::vector<Root> roots_;
+  // Sibling clusters (a node of 65..128 triangles whose two children are clusters): the roots_
+  // index of each pair's first cluster, and per root its triangles where redivide() moved some.
+  std::vector<uint32_t> pairs_;
+  std::vector<std::vector<uint32_t>> given_;
   int depth_ = 0;
 
   uint32_t count(uint32_t i) {
@@ -228,8 +247,176 @@ class ClusterReshaper {
     nodes_[idx] = {n.box, c, 0};
     nodes_.resize(c + 2);
     depth_ = std::max(depth_, depth + 1);
+    if (count_[n.first] <= kClusterMax && count_[n.first + 1] <= kClusterMax)
+      pairs_.push_back(uint32_t(roots_.size()));
     upper(n.first, c, depth + 1);
     upper(n.first + 1, c + 1, depth + 1);
+  }
+
+  // Sibling clusters r and r + 1 divided anew where that stores fewer vertices. The SAH cuts space
+  // by planes, so where a surface folds or thin parts lie side by side a cluster takes pieces that
+  // share no edge, and the vertices on each piece's border are stored in both clusters that hold
+  // its neighbours (ogre: 61% of the clusters hold two pieces or more). The pair's vertices (its
+  // distinct codes, as the encoder counts them) are fixed; a division stores again those the two
+  // clusters share. Here a growth over the surface orders the pair's triangles: from the triangle
+  // lowest along the pair's widest axis, each step takes the triangle with the fewest vertices not
+  // yet taken, then the lowest along the axis. The first s triangles become the first cluster and
+  // the rest the second, s the cut (both parts kRedivideMinPart..kClusterMax triangles) that
+  // shares the fewest vertices, if it shares fewer than the SAH's division and the two clusters'
+  // boxes grow by at most kRedivideGrowth in surface area (their union, the parent's box, stays
+  // the same).
+  void redivide(uint32_t r) {
+    constexpr uint32_t kMax = 2 * kClusterMax, kWords = kMax / 64;
+    thread_local std::vector<uint32_t> t;
+    t.clear();
+    collect(roots_[r].in, t);
+    const uint32_t na = uint32_t(t.size());
+    collect(roots_[r + 1].in, t);
+    const uint32_t n = uint32_t(t.size());
+    // A pair's parent holds more than kClusterMax triangles, each child at most kClusterMax.
+    if (n <= kClusterMax || n > kMax)
+      throw std::logic_error("cluster: sibling pair of n triangles");
+    const uint32_t lo = std::max(kRedivideMinPart, n - kClusterMax);
+    const uint32_t hi = std::min(kClusterMax, n - kRedivideMinPart);
+    // The pair's vertices numbered 0..m-1 in order of first sight, vert[3i + k] triangle i's
+    // corner k: an open-addressing table of the thread's whose entries are this call's while their
+    // top 32 bits are `stamp` (no clearing but when the stamp wraps), each a vertex's input index.
+    constexpr uint32_t kSlotBits = 10, kSlots = 1u << kSlotBits;
+    static_assert(kSlots >= 2 * 3 * kMax, "the table at most half full");
+    thread_local std::vector<uint64_t> slot(kSlots, 0);
+    thread_local std::vector<uint16_t> slot_vert(kSlots);
+    thread_local uint32_t stamp = 0;
+    if (++stamp == 0) {
+      std::fill(slot.begin(), slot.end(), 0);
+      stamp = 1;
+    }
+    uint16_t vert[3 * kMax];
+    uint32_t m = 0;
+    for (uint32_t i = 0; i < n; ++i)
+      for (uint32_t k = 0; k < 3; ++k) {
+        const uint32_t g = src_.tris[3 * size_t(t[i]) + k];
+        const uint32_t* code = &src_.codes[3 * size_t(g)];
+        uint32_t h = cluster::code_slot(code, kSlotBits);
+        for (; slot[h] >> 32 == stamp; h = (h + 1) & (kSlots - 1)) {
+          const uint32_t* seen = &src_.codes[3 * (slot[h] & 0xffffffffu)];
+          if (seen[0] == code[0] && seen[1] == code[1] && seen[2] == code[2]) break;
+        }
+        if (slot[h] >> 32 != stamp) {
+          slot[h] = uint64_t(stamp) << 32 | g;
+          slot_vert[h] = uint16_t(m++);
+        }
+        vert[3 * i + k] = slot_vert[h];
+      }
+    // Per vertex its triangles, tri_of[first[v]..first[v + 1]) (a triangle once per corner).
+    uint16_t first[3 * kMax + 1], tri_of[3 * kMax];
+    std::fill(first, first + m + 1, uint16_t(0));
+    for (uint32_t j = 0; j < 3 * n; ++j) ++first[vert[j] + 1];
+    for (uint32_t v = 0; v < m; ++v) first[v + 1] = uint16_t(first[v + 1] + first[v]);
+    {
+      uint16_t at[3 * kMax];
+      std::copy(first, first + m, at);
+      for (uint32_t i = 0; i < n; ++i)
+        for (uint32_t k = 0; k < 3; ++k) tri_of[at[vert[3 * i + k]]++] = uint16_t(i);
+    }
+    // The SAH's division shares the vertices of the second cluster that the first has.
+    uint32_t fewest = 0;
+    {
+      bool in_first[3 * kMax];
+      std::fill(in_first, in_first + m, false);
+      for (uint32_t j = 0; j < 3 * na; ++j) in_first[vert[j]] = true;
+      for (uint32_t j = 3 * na; j < 3 * n; ++j) fewest += std::exchange(in_first[vert[j]], false);
+    }
+    // The triangles as items (boxes, centers) and the SAH division's box areas.
+    Item it[kMax];
+    Box4 all, part[2];
+    for (uint32_t i = 0; i < n; ++i) {
+      const Box3f b = tri_box(t[i]);
+      const Vec3f c = b.center();
+      it[i] = {
+          {b.lo.x, b.lo.y, b.lo.z, 0.0f}, {b.hi.x, b.hi.y, b.hi.z, 0.0f}, {c.x, c.y, c.z}, t[i]};
+      all.extend(it[i]);
+      part[i < na ? 0 : 1].extend(it[i]);
+    }
+    const float bound =
+        (1.0f + kRedivideGrowth) * (part[0].box3().half_area() + part[1].box3().half_area());
+    // The triangles by their centers on the pair's widest axis (ties by place; float_key orders
+    // any float, NaN too): rank k is triangle byc[k], triangle i has rank[i].
+    const Box3f ab = all.box3();
+    const Vec3f ext = ab.hi - ab.lo;
+    const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : (ext.y >= ext.z ? 1 : 2);
+    uint16_t byc[kMax], rank[kMax];
+    {
+      uint64_t key[kMax];
+      for (uint32_t i = 0; i < n; ++i)
+        key[i] = uint64_t(cluster::float_key(it[i].c[axis])) << 32 | i;
+      std::sort(key, key + n);
+      for (uint32_t k = 0; k < n; ++k) {
+        byc[k] = uint16_t(key[k]);
+        rank[byc[k]] = uint16_t(k);
+      }
+    }
+    // The growth, hi steps. open[j]: bit k set while the triangle of rank k is not taken and has j
+    // corners whose vertex is not taken (left[i]); rest[v]: vertex v's corners in triangles not
+    // taken. After s steps the taken triangles share with the others the vertices taken less those
+    // whose triangles are all taken: shared[s] = ntaken - nclosed.
+    uint64_t open[4][kWords] = {};
+    for (uint32_t k = 0; k < n; ++k) open[3][k / 64] |= uint64_t(1) << (k % 64);
+    uint8_t left[kMax];
+    std::fill(left, left + n, uint8_t(3));
+    uint16_t rest[3 * kMax];
+    for (uint32_t v = 0; v < m; ++v) rest[v] = uint16_t(first[v + 1] - first[v]);
+    bool taken[3 * kMax], tri_taken[kMax] = {};
+    std::fill(taken, taken + m, false);
+    uint16_t order[kMax];  // the growth's triangles, then (from hi) the others in place order
+    uint32_t ntaken = 0, nclosed = 0, shared[kMax + 1];
+    for (uint32_t s = 0; s < hi; ++s) {
+      uint32_t k = kMax;
+      for (uint32_t j = 0; j < 4 && k == kMax; ++j)
+        for (uint32_t w = 0; w < kWords; ++w)
+          if (open[j][w]) {
+            k = 64 * w + uint32_t(__builtin_ctzll(open[j][w]));
+            break;
+          }
+      const uint32_t next = byc[k];
+      open[left[next]][k / 64] &= ~(uint64_t(1) << (k % 64));
+      order[s] = uint16_t(next);
+      tri_taken[next] = true;
+      for (uint32_t q = 0; q < 3; ++q) {
+        const uint32_t v = vert[3 * next + q];
+        nclosed += --rest[v] == 0;
+        if (std::exchange(taken[v], true)) continue;
+        ++ntaken;
+        for (uint32_t j = first[v]; j < first[v + 1]; ++j) {
+          const uint32_t i = tri_of[j], rk = rank[i];
+          const uint64_t bit = uint64_t(1) << (rk % 64);
+          if (!(open[left[i]][rk / 64] & bit)) continue;  // taken (next among them)
+          open[left[i]][rk / 64] &= ~bit;
+          open[--left[i]][rk / 64] |= bit;
+        }
+      }
+      shared[s + 1] = ntaken - nclosed;
+    }
+    for (uint32_t i = 0, s = hi; i < n; ++i)
+      if (!tri_taken[i]) order[s++] = uint16_t(i);
+    // The cut: the fewest shared vertices (the first such) of the cuts whose boxes stay within the
+    // bound. area[s]: the boxes' surface areas of order[0, s) and order[s, n).
+    float area[kMax + 1];
+    Box4 b;
+    for (uint32_t s = n; s-- > lo;) {
+      b.extend(it[order[s]]);
+      area[s] = b.box3().half_area();
+    }
+    b = Box4();
+    uint32_t best = 0;
+    for (uint32_t s = 0; s < hi; ++s) {
+      b.extend(it[order[s]]);
+      if (s + 1 >= lo && shared[s + 1] < fewest && area[s + 1] + b.box3().half_area() <= bound) {
+        fewest = shared[s + 1];
+        best = s + 1;
+      }
+    }
+    if (!best) return;
+    for (uint32_t s = 0; s < n; ++s) given_[r + (s < best ? 0 : 1)].push_back(t[order[s]]);
   }
 
   // The ranks (below) of the places of G groups of 8 from group g0, into ranks[0, 8G): each place
@@ -495,7 +682,7 @@ std::unique_ptr<Scene::Impl> build_with(TriangleMesh& tm, const BuildOptions& op
   hooks.quantized_inner = true;
   hooks.reshape = [&](Bvh2& b2) {
     std::vector<uint32_t> dropped = std::move(b2.dropped);  // duplicates outside every cluster
-    b2 = ClusterReshaper(b2, src).run();
+    b2 = ClusterReshaper(b2, src, opt.cluster_redivide).run();
     b2.dropped = std::move(dropped);
   };
   s->build(src, uint32_t(tm.tri_count()), o, hooks);

@@ -67,7 +67,7 @@ constexpr uint64_t kSmallSection = 64 * 1024;
 
 struct OptionsRecord {
   uint8_t nodes, leaf, grid_encoding, pairing, collapse, grid_leftovers;
-  uint8_t coordinate_keys, weld, augment, reserved[7];
+  uint8_t coordinate_keys, weld, augment, cluster_redivide, reserved[6];
   int32_t grid_parts, sah_bins, max_leaf_size, threads;
   double prescan_threshold, cluster_error;
   char costa[16];
@@ -147,6 +147,7 @@ OptionsRecord options_record(const BuildOptions& o) {
   r.coordinate_keys = o.pairing_options.coordinate_keys;
   r.weld = o.pairing_options.weld;
   r.augment = o.pairing_options.augment;
+  r.cluster_redivide = o.cluster_redivide;
   r.grid_parts = o.grid_parts;
   r.sah_bins = o.sah_bins;
   r.max_leaf_size = o.max_leaf_size;
@@ -368,6 +369,7 @@ BuildOptions options_of(const OptionsRecord& r, Opener& o) {
   b.pairing_options.coordinate_keys = r.coordinate_keys != 0;
   b.pairing_options.weld = r.weld != 0;
   b.pairing_options.augment = r.augment != 0;
+  b.cluster_redivide = r.cluster_redivide != 0;
   b.pairing_options.prescan_threshold = r.prescan_threshold;
   b.grid_parts = r.grid_parts;
   b.sah_bins = r.sah_bins;

@@ -217,8 +217,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       std::array<uint8_t, 3> tc{};
       for (int q = 0; q < 3; ++q) {
         const uint32_t* code = &s.codes[3 * size_t(s.tris[3 * size_t(t) + q])];
-        uint32_t x = (code[0] * 0x9E3779B1u) ^ (code[1] * 0x85EBCA77u) ^ (code[2] * 0xC2B2AE3Du);
-        for (x = (x ^ (x >> 15)) & 1023;; x = (x + 1) & 1023) {
+        for (uint32_t x = code_slot(code, 10);; x = (x + 1) & 1023) {
           const uint16_t i = table[x];
           if (i == 0xffff) {
             table[x] = uint16_t(npv);

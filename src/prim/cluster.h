@@ -478,6 +478,13 @@ SLIM_INLINE float decode_coord(const ClusterLattice& lat, int axis, uint32_t cod
 
 SLIM_INLINE uint32_t bit_width(uint32_t x) { return x ? 32u - uint32_t(__builtin_clz(x)) : 0u; }
 
+// The start slot of a vertex's three codes in an open-addressing table of 2^bits entries (the
+// encoder's vertex numbering, the reshaper's sibling clusters: a vertex is its codes).
+SLIM_INLINE uint32_t code_slot(const uint32_t* code, uint32_t bits) {
+  const uint32_t x = (code[0] * 0x9E3779B1u) ^ (code[1] * 0x85EBCA77u) ^ (code[2] * 0xC2B2AE3Du);
+  return (x ^ (x >> 15)) & ((1u << bits) - 1);
+}
+
 SLIM_INLINE uint32_t child_sizes(const ClusterHeader& h) {
   return uint32_t(h.sizes[0]) | uint32_t(h.sizes[1]) << 8 | uint32_t(h.sizes[2]) << 16;
 }

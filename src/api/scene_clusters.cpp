@@ -62,9 +62,10 @@ class ClusterReshaper {
     count(0);
     nodes_.push_back({});
     upper(0, 0, 0);
-    given_.resize(roots_.size());
-    if (redivide_)
+    if (redivide_) {
+      given_.resize(roots_.size());
       tbb::parallel_for(size_t(0), pairs_.size(), [&](size_t p) { redivide(pairs_[p]); });
+    }
     // Each cluster on its own: local nodes (index 0 = the cluster root) and prims.
     std::vector<Local> local(roots_.size());
     tbb::parallel_for(size_t(0), roots_.size(), [&](size_t c) {
@@ -76,7 +77,7 @@ class ClusterReshaper {
       thread_local std::vector<Item> items;
       thread_local Local scratch;
       v.clear();
-      if (given_[c].empty())
+      if (given_.empty() || given_[c].empty())
         collect(roots_[c].in, v);
       else
         v.swap(given_[c]);
@@ -211,7 +212,8 @@ class ClusterReshaper {
   std::vector<Bvh2Node> nodes_;  // the nodes above the clusters
   std::vector<Root> roots_;
   // Sibling clusters (a node of 65..128 triangles whose two children are clusters): the roots_
-  // index of each pair's first cluster, and per root its triangles where redivide() moved some.
+  // index of each pair's first cluster, and (with the option) per root its triangles where
+  // redivide() moved some.
   std::vector<uint32_t> pairs_;
   std::vector<std::vector<uint32_t>> given_;
   int depth_ = 0;
@@ -280,7 +282,8 @@ class ClusterReshaper {
     const uint32_t hi = std::min(kClusterMax, n - kRedivideMinPart);
     // The pair's vertices numbered 0..m-1 in order of first sight, vert[3i + k] triangle i's
     // corner k: an open-addressing table of the thread's whose entries are this call's while their
-    // top 32 bits are `stamp` (no clearing but when the stamp wraps), each a vertex's input index.
+    // top 32 bits are `stamp` (no clearing but when the stamp wraps), each holding the input index
+    // of the first vertex seen with its codes.
     constexpr uint32_t kSlotBits = 10, kSlots = 1u << kSlotBits;
     static_assert(kSlots >= 2 * 3 * kMax, "the table at most half full");
     thread_local std::vector<uint64_t> slot(kSlots, 0);
@@ -399,7 +402,8 @@ class ClusterReshaper {
     for (uint32_t i = 0, s = hi; i < n; ++i)
       if (!tri_taken[i]) order[s++] = uint16_t(i);
     // The cut: the fewest shared vertices (the first such) of the cuts whose boxes stay within the
-    // bound. area[s]: the boxes' surface areas of order[0, s) and order[s, n).
+    // bound. area[s]: the surface area of order[s, n)'s box, to which the second loop adds
+    // order[0, s)'s.
     float area[kMax + 1];
     Box4 b;
     for (uint32_t s = n; s-- > lo;) {

@@ -82,12 +82,7 @@ class ClusterReshaper {
       else
         v.swap(given_[c]);
       items.resize(v.size());
-      for (size_t k = 0; k < v.size(); ++k) {
-        const Box3f b = tri_box(v[k]);
-        const Vec3f m = b.center();
-        Item& x = items[k];
-        x = {{b.lo.x, b.lo.y, b.lo.z, 0.0f}, {b.hi.x, b.hi.y, b.hi.z, 0.0f}, {m.x, m.y, m.z}, v[k]};
-      }
+      for (size_t k = 0; k < v.size(); ++k) items[k] = item(v[k]);
       scratch.nodes.clear();
       scratch.prims.clear();
       scratch.nodes.reserve(2 * v.size());  // at most one leaf per triangle
@@ -231,10 +226,12 @@ class ClusterReshaper {
     collect(n.first, v);
     collect(n.first + 1, v);
   }
-  Box3f tri_box(uint32_t t) const {
+  // Triangle t as an item: its box and center.
+  Item item(uint32_t t) const {
     Box3f b;
     for (int k = 0; k < 3; ++k) b.extend(src_.vertices[src_.tris[3 * size_t(t) + k]]);
-    return b;
+    const Vec3f m = b.center();
+    return {{b.lo.x, b.lo.y, b.lo.z, 0.0f}, {b.hi.x, b.hi.y, b.hi.z, 0.0f}, {m.x, m.y, m.z}, t};
   }
 
   // The nodes above the clusters, each cluster root remembered for the parallel pass.
@@ -333,10 +330,7 @@ class ClusterReshaper {
     Item it[kMax];
     Box4 all, part[2];
     for (uint32_t i = 0; i < n; ++i) {
-      const Box3f b = tri_box(t[i]);
-      const Vec3f c = b.center();
-      it[i] = {
-          {b.lo.x, b.lo.y, b.lo.z, 0.0f}, {b.hi.x, b.hi.y, b.hi.z, 0.0f}, {c.x, c.y, c.z}, t[i]};
+      it[i] = item(t[i]);
       all.extend(it[i]);
       part[i < na ? 0 : 1].extend(it[i]);
     }
@@ -344,9 +338,7 @@ class ClusterReshaper {
         (1.0f + kRedivideGrowth) * (part[0].box3().half_area() + part[1].box3().half_area());
     // The triangles by their centers on the pair's widest axis (ties by place; float_key orders
     // any float, NaN too): rank k is triangle byc[k], triangle i has rank[i].
-    const Box3f ab = all.box3();
-    const Vec3f ext = ab.hi - ab.lo;
-    const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : (ext.y >= ext.z ? 1 : 2);
+    const int axis = max_dim(all.box3().size());
     uint16_t byc[kMax], rank[kMax];
     {
       uint64_t key[kMax];

@@ -90,7 +90,7 @@ class ClusterReshaper {
       scratch.nodes.push_back({});
       // A whole scene of at most 8 triangles is one leaf (no box test, as the other formats).
       const bool whole = roots_[c].depth == 0 && items.size() <= 8;
-      l.depth = split(scratch, items, 0, uint32_t(items.size()), 0, !whole);
+      l.depth = split(scratch, items, Orders(items), uint32_t(items.size()), -1, 0, !whole);
       l.nodes.assign(scratch.nodes.begin(), scratch.nodes.end());
       l.prims.assign(scratch.prims.begin(), scratch.prims.end());
       if (l.nodes.size() > 1) {  // a multi-leaf: its block, keyed by its first triangle
@@ -163,12 +163,6 @@ class ClusterReshaper {
     float lo[4], hi[4];
     float c[3];
     uint32_t prim;
-  };
-  // What std::sort sorts on one axis where stable_order cannot (a NaN center): an item's center on
-  // the axis and its position in the node.
-  struct Key {
-    float c;
-    uint32_t i;
   };
   // A box grown item by item: min/max with the item first, the operand order of
   // Box3f::extend's std::min/std::max (the same result for equal values, signed zeros too).
@@ -458,9 +452,10 @@ class ClusterReshaper {
   // centers on one axis, by position): place k goes to its rank, the centers below its own plus
   // the equal ones at places before it, counted for up to 32 places a pass (count_ranks). Equal
   // centers (neighbouring triangles often share one) keep their order, so the clusters do not
-  // depend on the standard library's sort. Counts up to 64 are exact in floats. Returns false
-  // (order unchanged) if the ranks are not 0..n-1 once each (a NaN center).
-  static bool stable_order(const float* centers, uint8_t* order, uint32_t n) {
+  // depend on the standard library's sort. Counts up to 64 are exact in floats. Where the ranks
+  // are not 0..n-1 once each (a NaN center), sorts keys that order any float (cluster::float_key)
+  // instead, ties by place.
+  static void stable_order(const float* centers, uint8_t* order, uint32_t n) {
     constexpr uint32_t kPad = (kClusterMax + 7) / 8 * 8;
     static_assert(kPad <= 64, "ranks are bits of a 64-bit mask");
     alignas(32) float w[kPad];  // the centers in `order`'s order
@@ -483,29 +478,51 @@ class ClusterReshaper {
         g0 += 1;
       }
     }
-    uint8_t out[kPad];
     uint64_t seen = 0;
-    for (uint32_t k = 0; k < n; ++k) {
-      const uint32_t r = uint32_t(ranks[k]);
-      if (r >= n) return false;
-      out[r] = order[k];
-      seen |= uint64_t(1) << r;
+    for (uint32_t k = 0; k < n; ++k)
+      if (const uint32_t r = uint32_t(ranks[k]); r < n) seen |= uint64_t(1) << r;
+    uint8_t out[kPad];
+    if (seen == (n == 64 ? ~uint64_t(0) : (uint64_t(1) << n) - 1)) {
+      for (uint32_t k = 0; k < n; ++k) out[uint32_t(ranks[k])] = order[k];
+    } else {
+      uint64_t key[kPad];  // + 0.0f: -0 ties with +0, as the float comparisons above have it
+      for (uint32_t k = 0; k < n; ++k) key[k] = uint64_t(cluster::float_key(w[k] + 0.0f)) << 8 | k;
+      std::sort(key, key + n);
+      for (uint32_t k = 0; k < n; ++k) out[k] = order[key[k] & 0xffu];
     }
-    if (seen != (n == 64 ? ~uint64_t(0) : (uint64_t(1) << n) - 1)) return false;
     std::copy(out, out + n, order);
-    return true;
   }
 
-  // Items [b, e) of one cluster into local node idx; returns the subtree depth.
-  int split(Local& l, std::vector<Item>& it, uint32_t b, uint32_t e, uint32_t idx,
-            bool root) const {
-    const uint32_t n = e - b;
+  // A cluster's items (their indices) in the order of their centers on each axis: axis 0's ties
+  // by index, axis 1's by axis 0's order, axis 2's by axis 1's.
+  struct Orders {
+    uint8_t by[3][kClusterMax];
+    explicit Orders(const std::vector<Item>& it) {
+      const uint32_t n = uint32_t(it.size());
+      std::iota(by[0], by[0] + n, uint8_t(0));
+      for (int a = 0; a < 3; ++a) {
+        alignas(32) float centers[kClusterMax];
+        for (uint32_t k = 0; k < n; ++k) centers[k] = it[k].c[a];
+        if (a > 0) std::copy(by[a - 1], by[a - 1] + n, by[a]);
+        stable_order(centers, by[a], n);
+      }
+    }
+    Orders() = default;
+  };
+
+  // The node of the n items `o` into local node idx; returns the subtree depth. The cluster
+  // root's orders are sorted (Orders), each child's are its parent's without the other child's
+  // items, which keeps them sorted: no sort below the root. A leaf holds its items in the order of
+  // `axis`, its parent's split axis (-1: the cluster's own order, a scene of one leaf).
+  int split(Local& l, const std::vector<Item>& it, const Orders& o, uint32_t n, int axis,
+            uint32_t idx, bool root) const {
+    static_assert(kClusterMax <= 64, "a node's items are bits of a 64-bit mask");
     Box4 grown;
-    for (uint32_t k = b; k < e; ++k) grown.extend(it[k]);
+    for (uint32_t k = 0; k < n; ++k) grown.extend(it[o.by[0][k]]);
     const Box3f box = grown.box3();
     if (n == 1 || (n <= 8 && !root)) {
       l.nodes[idx] = {box, uint32_t(l.prims.size()), n};
-      for (uint32_t k = b; k < e; ++k) l.prims.push_back(it[k].prim);
+      for (uint32_t k = 0; k < n; ++k) l.prims.push_back(it[axis < 0 ? k : o.by[axis][k]].prim);
       return 0;
     }
     // SAH over the left sizes allowed: any when n <= 8 (the cluster root must be an inner node to
@@ -516,25 +533,8 @@ class ClusterReshaper {
     uint32_t best_left = unit;
     // right[nl / unit]: the box of the sorted items nl..n-1, for the left sizes nl allowed.
     Box3f right[9];
-    // The items are sorted by their centers on axis 0, that order by axis 1, that by axis 2, and
-    // that by the best axis: order[k] = the item (its position in the node) at place k.
-    alignas(32) float centers[3][kClusterMax];
-    for (uint32_t k = 0; k < n; ++k)
-      for (int a = 0; a < 3; ++a) centers[a][k] = it[b + k].c[a];
-    uint8_t order[kClusterMax];
-    std::iota(order, order + n, uint8_t(0));
-    // Returns whether the sort was stable_order's (sorting its result again changes nothing).
-    auto sort_by = [&](int a) {
-      if (stable_order(centers[a], order, n)) return true;
-      Key key[kClusterMax];
-      for (uint32_t k = 0; k < n; ++k) key[k] = {centers[a][order[k]], order[k]};
-      std::sort(key, key + n, [](const Key& x, const Key& y) { return x.c < y.c; });
-      for (uint32_t k = 0; k < n; ++k) order[k] = uint8_t(key[k].i);
-      return false;
-    };
-    bool sorted_by_2 = false;  // order is stable_order's by axis 2
     for (int a = 0; a < 3; ++a) {
-      sorted_by_2 = sort_by(a) && a == 2;
+      const uint8_t* by = o.by[a];
       auto consider = [&](uint32_t nl, const Box3f& left) {
         const float cost = left.half_area() * float((nl + 7) / 8) +
                            right[nl / unit].half_area() * float((n - nl + 7) / 8);
@@ -550,7 +550,7 @@ class ClusterReshaper {
         // boxes of sweeps item by item (up to the sign of a zero, which no cost compares).
         const uint32_t nb = (n + 7) / 8;
         Box4 part[8];
-        for (uint32_t k = 0; k < n; ++k) part[k / 8].extend(it[b + order[k]]);
+        for (uint32_t k = 0; k < n; ++k) part[k / 8].extend(it[by[k]]);
         Box4 r;
         for (uint32_t j = nb; j-- > 1;) {
           r.extend(part[j]);
@@ -565,24 +565,32 @@ class ClusterReshaper {
       }
       Box4 r;
       for (uint32_t k = n; k-- > 1;) {
-        r.extend(it[b + order[k]]);
+        r.extend(it[by[k]]);
         right[k] = r.box3();
       }
       Box4 grown_left;
       for (uint32_t k = 0; k + 1 < n; ++k) {
-        grown_left.extend(it[b + order[k]]);
+        grown_left.extend(it[by[k]]);
         consider(k + 1, grown_left.box3());
       }
     }
-    if (best_axis != 2 || !sorted_by_2) sort_by(best_axis);
-    Item sorted[kClusterMax];
-    for (uint32_t k = 0; k < n; ++k) sorted[k] = it[b + order[k]];
-    std::copy(sorted, sorted + n, it.begin() + b);
+    // The children's orders: each axis's order split by side, kept in order.
+    uint64_t in_left = 0;
+    for (uint32_t k = 0; k < best_left; ++k) in_left |= uint64_t(1) << o.by[best_axis][k];
+    Orders lo, ro;
+    for (int a = 0; a < 3; ++a)
+      for (uint32_t k = 0, nl = 0, nr = 0; k < n; ++k) {
+        const uint8_t x = o.by[a][k];
+        if ((in_left >> x) & 1)
+          lo.by[a][nl++] = x;
+        else
+          ro.by[a][nr++] = x;
+      }
     const uint32_t c = uint32_t(l.nodes.size());
     l.nodes[idx] = {box, c, 0};
     l.nodes.resize(c + 2);
-    const int d0 = split(l, it, b, b + best_left, c, false);
-    const int d1 = split(l, it, b + best_left, e, c + 1, false);
+    const int d0 = split(l, it, lo, best_left, best_axis, c, false);
+    const int d1 = split(l, it, ro, n - best_left, best_axis, c + 1, false);
     return 1 + std::max(d0, d1);
   }
 };

@@ -410,7 +410,7 @@ class ClusterReshaper {
   }
 
   // The ranks (below) of the places of G groups of 8 from group g0, into ranks[0, 8G): each place
-  // j of the node's n is compared once with the G rows, whose counts stay in registers.
+  // j of the cluster's n is compared once with the G rows, whose counts stay in registers.
   template <int G>
   static SLIM_INLINE void count_ranks(const float* w, uint32_t n, uint32_t g0, float* ranks) {
     using simd::vfloat8;
@@ -448,8 +448,8 @@ class ClusterReshaper {
     for (int q = 0; q < G; ++q) r[q].storeu(ranks + 8 * q);
   }
 
-  // Sorts `order` (positions in a node of n <= kClusterMax items) stably by `centers` (the node's
-  // centers on one axis, by position): place k goes to its rank, the centers below its own plus
+  // Sorts `order` (indices of a cluster's n <= kClusterMax items) stably by `centers` (the items'
+  // centers on one axis, by index): place k goes to its rank, the centers below its own plus
   // the equal ones at places before it, counted for up to 32 places a pass (count_ranks). Equal
   // centers (neighbouring triangles often share one) keep their order, so the clusters do not
   // depend on the standard library's sort. Counts up to 64 are exact in floats. Where the ranks
@@ -501,7 +501,7 @@ class ClusterReshaper {
       const uint32_t n = uint32_t(it.size());
       std::iota(by[0], by[0] + n, uint8_t(0));
       for (int a = 0; a < 3; ++a) {
-        alignas(32) float centers[kClusterMax];
+        float centers[kClusterMax];
         for (uint32_t k = 0; k < n; ++k) centers[k] = it[k].c[a];
         if (a > 0) std::copy(by[a - 1], by[a - 1] + n, by[a]);
         stable_order(centers, by[a], n);
@@ -513,7 +513,7 @@ class ClusterReshaper {
   // The node of the n items `o` into local node idx; returns the subtree depth. The cluster
   // root's orders are sorted (Orders), each child's are its parent's without the other child's
   // items, which keeps them sorted: no sort below the root. A leaf holds its items in the order of
-  // `axis`, its parent's split axis (-1: the cluster's own order, a scene of one leaf).
+  // `axis`, its parent's split axis (-1: at the cluster root, in the cluster's own order).
   int split(Local& l, const std::vector<Item>& it, const Orders& o, uint32_t n, int axis,
             uint32_t idx, bool root) const {
     static_assert(kClusterMax <= 64, "a node's items are bits of a 64-bit mask");

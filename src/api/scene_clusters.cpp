@@ -330,20 +330,12 @@ class ClusterReshaper {
     }
     const float bound =
         (1.0f + kRedivideGrowth) * (part[0].box3().half_area() + part[1].box3().half_area());
-    // The triangles by their centers on the pair's widest axis (ties by place; float_key orders
-    // any float, NaN too): rank k is triangle byc[k], triangle i has rank[i].
+    // The triangles by their centers on the pair's widest axis, ties by place: rank k is triangle
+    // byc[k], triangle i has rank[i].
     const int axis = max_dim(all.box3().size());
     uint16_t byc[kMax], rank[kMax];
-    {
-      uint64_t key[kMax];
-      for (uint32_t i = 0; i < n; ++i)
-        key[i] = uint64_t(cluster::float_key(it[i].c[axis])) << 32 | i;
-      std::sort(key, key + n);
-      for (uint32_t k = 0; k < n; ++k) {
-        byc[k] = uint16_t(key[k]);
-        rank[byc[k]] = uint16_t(k);
-      }
-    }
+    sort_places([&](uint32_t i) { return it[i].c[axis]; }, n, byc);
+    for (uint32_t k = 0; k < n; ++k) rank[byc[k]] = uint16_t(k);
     // The growth, hi steps. open[j]: bit k set while the triangle of rank k is not taken and has j
     // corners whose vertex is not taken (left[i]); rest[v]: vertex v's corners in triangles not
     // taken. After s steps the taken triangles share with the others the vertices taken less those
@@ -448,13 +440,24 @@ class ClusterReshaper {
     for (int q = 0; q < G; ++q) r[q].storeu(ranks + 8 * q);
   }
 
+  // places[0, n) = the places 0..n-1 (n <= 2 kClusterMax) in the order of the values value(place),
+  // ties by place: a sort of keys that order any float (cluster::float_key, NaN too; + 0.0f: -0
+  // ties with +0, as float comparisons have it), independent of the standard library's sort.
+  template <class Value, class Place>
+  static void sort_places(const Value& value, uint32_t n, Place* places) {
+    uint64_t key[2 * kClusterMax];
+    for (uint32_t k = 0; k < n; ++k)
+      key[k] = uint64_t(cluster::float_key(value(k) + 0.0f)) << 32 | k;
+    std::sort(key, key + n);
+    for (uint32_t k = 0; k < n; ++k) places[k] = Place(key[k]);
+  }
+
   // Sorts `order` (indices of a cluster's n <= kClusterMax items) stably by `centers` (the items'
   // centers on one axis, by index): place k goes to its rank, the centers below its own plus
   // the equal ones at places before it, counted for up to 32 places a pass (count_ranks). Equal
   // centers (neighbouring triangles often share one) keep their order, so the clusters do not
   // depend on the standard library's sort. Counts up to 64 are exact in floats. Where the ranks
-  // are not 0..n-1 once each (a NaN center), sorts keys that order any float (cluster::float_key)
-  // instead, ties by place.
+  // are not 0..n-1 once each (a NaN center), sort_places orders them instead.
   static void stable_order(const float* centers, uint8_t* order, uint32_t n) {
     constexpr uint32_t kPad = (kClusterMax + 7) / 8 * 8;
     static_assert(kPad <= 64, "ranks are bits of a 64-bit mask");
@@ -485,10 +488,9 @@ class ClusterReshaper {
     if (seen == (n == 64 ? ~uint64_t(0) : (uint64_t(1) << n) - 1)) {
       for (uint32_t k = 0; k < n; ++k) out[uint32_t(ranks[k])] = order[k];
     } else {
-      uint64_t key[kPad];  // + 0.0f: -0 ties with +0, as the float comparisons above have it
-      for (uint32_t k = 0; k < n; ++k) key[k] = uint64_t(cluster::float_key(w[k] + 0.0f)) << 8 | k;
-      std::sort(key, key + n);
-      for (uint32_t k = 0; k < n; ++k) out[k] = order[key[k] & 0xffu];
+      uint8_t place[2 * kClusterMax];  // sort_places' bound
+      sort_places([&](uint32_t k) { return w[k]; }, n, place);
+      for (uint32_t k = 0; k < n; ++k) out[k] = order[place[k]];
     }
     std::copy(out, out + n, order);
   }

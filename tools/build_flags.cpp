@@ -87,7 +87,7 @@ void add_build_options(CLI::App& app, BuildOptions& tuning) {
   auto state = [](bool on) { return std::string(on ? " (default on)" : " (default off)"); };
   app.add_flag("--cluster-redivide", tuning.cluster_redivide,
                "clusters: divide two sibling clusters anew where that stores fewer vertices "
-               "(smaller, builds about 8% longer)" +
+               "(smaller, builds longer)" +
                    state(tuning.cluster_redivide))
       ->group(group);
   app.add_flag("--pair-coordinate-keys", p.coordinate_keys,

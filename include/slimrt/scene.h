@@ -124,8 +124,8 @@ struct BuildOptions {
   // or coarser on an axis whose vertices all lie on a coarser lattice, as a grid's rows).
   double cluster_error = 1e-5;
   // Leaf::Clusters and Leaf::LosslessClusters: two sibling clusters of the SAH's divide their
-  // triangles anew where that stores fewer vertices (0.3-2.6% smaller on the benchmark scenes,
-  // builds about 8% longer: docs/results.md, "Sibling clusters divided anew").
+  // triangles anew where that stores fewer vertices (smaller scenes, longer builds: README's
+  // options table).
   bool cluster_redivide = false;
   // The box the lossy formats derive their scene-wide quantities from (the cluster lattice's origin
   // and steps, the grids' displacement bias); empty = the bounds of the meshes being built. A

@@ -271,36 +271,16 @@ class ClusterReshaper {
       throw std::logic_error("cluster: sibling pair of n triangles");
     const uint32_t lo = std::max(kRedivideMinPart, n - kClusterMax);
     const uint32_t hi = std::min(kClusterMax, n - kRedivideMinPart);
-    // The pair's vertices numbered 0..m-1 in order of first sight, vert[3i + k] triangle i's
-    // corner k: an open-addressing table of the thread's whose entries are this call's while their
-    // top 32 bits are `stamp` (no clearing but when the stamp wraps), each holding the input index
-    // of the first vertex seen with its codes.
-    constexpr uint32_t kSlotBits = 10, kSlots = 1u << kSlotBits;
-    static_assert(kSlots >= 2 * 3 * kMax, "the table at most half full");
-    thread_local std::vector<uint64_t> slot(kSlots, 0);
-    thread_local std::vector<uint16_t> slot_vert(kSlots);
-    thread_local uint32_t stamp = 0;
-    if (++stamp == 0) {
-      std::fill(slot.begin(), slot.end(), 0);
-      stamp = 1;
-    }
+    // The pair's vertices numbered 0..m-1 by their codes in order of first sight, as the encoder
+    // numbers a cluster's: vert[3i + k] triangle i's corner k.
+    static_assert(3 * kMax <= cluster::CodeNumbering::kMaxVertices, "at most one vertex a corner");
+    cluster::CodeNumbering numbering;
     uint16_t vert[3 * kMax];
-    uint32_t m = 0;
     for (uint32_t i = 0; i < n; ++i)
-      for (uint32_t k = 0; k < 3; ++k) {
-        const uint32_t g = src_.tris[3 * size_t(t[i]) + k];
-        const uint32_t* code = &src_.codes[3 * size_t(g)];
-        uint32_t h = cluster::code_slot(code, kSlotBits);
-        for (; slot[h] >> 32 == stamp; h = (h + 1) & (kSlots - 1)) {
-          const uint32_t* seen = &src_.codes[3 * (slot[h] & 0xffffffffu)];
-          if (seen[0] == code[0] && seen[1] == code[1] && seen[2] == code[2]) break;
-        }
-        if (slot[h] >> 32 != stamp) {
-          slot[h] = uint64_t(stamp) << 32 | g;
-          slot_vert[h] = uint16_t(m++);
-        }
-        vert[3 * i + k] = slot_vert[h];
-      }
+      for (uint32_t k = 0; k < 3; ++k)
+        vert[3 * i + k] =
+            uint16_t(numbering.number(&src_.codes[3 * size_t(src_.tris[3 * size_t(t[i]) + k])]));
+    const uint32_t m = numbering.size();
     // Per vertex its triangles, tri_of[first[v]..first[v + 1]) (a triangle once per corner).
     uint16_t first[3 * kMax + 1], tri_of[3 * kMax];
     std::fill(first, first + m + 1, uint16_t(0));

@@ -198,43 +198,25 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   }
   static_assert(kMaxTriangles == 8 * 8, "the checks above keep ntris within kMaxTriangles");
   for (int i = 0; i < 3; ++i) h.sizes[i] = uint8_t(sizes >> (8 * i));
-  // Distinct vertex codes in order of first sight (duplicated input vertices with the same code
-  // are one vertex), found through a small open-addressing table: the triangles' corners as
-  // these provisional numbers, in child order.
+  // The triangles' corners as provisional vertex numbers (distinct codes in order of first
+  // sight), in child order.
   // Per triangle and per corner, arrays of the cluster's size (ntris <= kMaxTriangles, above); the
   // vectors further on are a thread's own, kept between calls: no allocation but the first.
   std::array<uint8_t, 3> corners[kMaxTriangles];
-  uint32_t tris[kMaxTriangles];            // input triangles in child order
-  uint32_t nt = 0;                         // triangles read
-  uint32_t pcodes[3 * 3 * kMaxTriangles];  // 3 codes per provisional vertex, at most one a corner
-  uint32_t npv = 0;
-  uint16_t table[1024];
-  std::fill(std::begin(table), std::end(table), uint16_t(0xffff));
+  uint32_t tris[kMaxTriangles];  // input triangles in child order
+  uint32_t nt = 0;               // triangles read
+  static_assert(3 * kMaxTriangles <= CodeNumbering::kMaxVertices, "at most one vertex a corner");
+  CodeNumbering pv;
   for (int c = 0; c < k; ++c)
     for (uint32_t j = 0; j < counts[c]; ++j) {
       const uint32_t t = prims[c][j];
       tris[nt] = t;
       std::array<uint8_t, 3> tc{};
-      for (int q = 0; q < 3; ++q) {
-        const uint32_t* code = &s.codes[3 * size_t(s.tris[3 * size_t(t) + q])];
-        for (uint32_t x = code_slot(code, 10);; x = (x + 1) & 1023) {
-          const uint16_t i = table[x];
-          if (i == 0xffff) {
-            table[x] = uint16_t(npv);
-            tc[q] = uint8_t(npv);
-            std::copy(code, code + 3, pcodes + 3 * npv++);
-            break;
-          }
-          if (pcodes[3 * i] == code[0] && pcodes[3 * i + 1] == code[1] &&
-              pcodes[3 * i + 2] == code[2]) {
-            tc[q] = uint8_t(i);
-            break;
-          }
-        }
-      }
+      for (int q = 0; q < 3; ++q)
+        tc[q] = uint8_t(pv.number(&s.codes[3 * size_t(s.tris[3 * size_t(t) + q])]));
       corners[nt++] = tc;
     }
-  const uint32_t nv = npv;
+  const uint32_t nv = pv.size();
   if (nv > 255) throw std::logic_error("cluster: more than 255 vertices");
   h.nverts = uint8_t(nv);
 
@@ -417,7 +399,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   auto reference = [&](uint8_t v) {
     if (number[v] < 0) {
       number[v] = int(cnt);
-      std::copy(pcodes + 3 * size_t(v), pcodes + 3 * size_t(v) + 3, codes.data() + 3 * cnt++);
+      std::copy(pv.codes(v), pv.codes(v) + 3, codes.data() + 3 * cnt++);
       refs[nrefs++] = -1;
     } else {
       const uint32_t d = cnt - 1 - uint32_t(number[v]);

@@ -126,6 +126,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <iterator>
 #include <mutex>
 #include <string>
 #include <unordered_map>
@@ -478,12 +479,37 @@ SLIM_INLINE float decode_coord(const ClusterLattice& lat, int axis, uint32_t cod
 
 SLIM_INLINE uint32_t bit_width(uint32_t x) { return x ? 32u - uint32_t(__builtin_clz(x)) : 0u; }
 
-// The start slot of a vertex's three codes in an open-addressing table of 2^bits entries (the
-// encoder's vertex numbering, the reshaper's sibling clusters: a vertex is its codes).
-SLIM_INLINE uint32_t code_slot(const uint32_t* code, uint32_t bits) {
-  const uint32_t x = (code[0] * 0x9E3779B1u) ^ (code[1] * 0x85EBCA77u) ^ (code[2] * 0xC2B2AE3Du);
-  return (x ^ (x >> 15)) & ((1u << bits) - 1);
-}
+// Vertices numbered 0, 1, ... in order of first sight by their three codes (a vertex is its
+// codes: duplicated input vertices with the same code are one), through an open-addressing table
+// kept at most half full: up to kMaxVertices vertices (the encoder's cluster, the reshaper's
+// sibling pairs).
+class CodeNumbering {
+ public:
+  static constexpr uint32_t kSlots = 1024, kMaxVertices = kSlots / 2;
+  CodeNumbering() { std::fill(std::begin(slot_), std::end(slot_), kEmpty); }
+  // The number of the vertex with these codes; a new number if none had them before.
+  SLIM_INLINE uint32_t number(const uint32_t* code) {
+    const uint32_t x0 = (code[0] * 0x9E3779B1u) ^ (code[1] * 0x85EBCA77u) ^ (code[2] * 0xC2B2AE3Du);
+    for (uint32_t x = (x0 ^ (x0 >> 15)) & (kSlots - 1);; x = (x + 1) & (kSlots - 1)) {
+      const uint16_t i = slot_[x];
+      if (i == kEmpty) {
+        slot_[x] = uint16_t(n_);
+        std::copy(code, code + 3, codes_ + 3 * n_);
+        return n_++;
+      }
+      const uint32_t* seen = codes_ + 3 * i;
+      if (seen[0] == code[0] && seen[1] == code[1] && seen[2] == code[2]) return i;
+    }
+  }
+  uint32_t size() const { return n_; }
+  const uint32_t* codes(uint32_t v) const { return codes_ + 3 * v; }  // vertex v's codes
+
+ private:
+  static constexpr uint16_t kEmpty = 0xffff;
+  uint16_t slot_[kSlots];
+  uint32_t codes_[3 * kMaxVertices];
+  uint32_t n_ = 0;
+};
 
 SLIM_INLINE uint32_t child_sizes(const ClusterHeader& h) {
   return uint32_t(h.sizes[0]) | uint32_t(h.sizes[1]) << 8 | uint32_t(h.sizes[2]) << 16;

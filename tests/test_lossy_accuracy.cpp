@@ -456,15 +456,20 @@ TEST(LossyAccuracy, LossyGridsWithinThePerVertexBoundOnAKnownSubgridPatch) {
 
 // cluster: every decoded vertex against its INPUT vertex, with the promise of the format's
 // specification (prim/cluster.h): one scene-wide lattice with its origin at the low corner of the
-// box (the input's box, or BuildOptions::lattice_box when given) and a power-of-two step per axis:
-// s, the largest with s * sqrt(3) / 2 <= cluster_error x the box diagonal, or 2s on the widest axes
-// (ties in axis order) while half the steps' diagonal, with half an ulp of the box's largest
-// coordinate per axis, stays within that bound; every coordinate rounds to the nearest lattice
-// point. So per axis |decoded - input| <= step / 2, |decoded - input| <= cluster_error x diagonal,
-// and (decoded - origin) / step is an integer (up to one float rounding of origin + q * step). The
-// correspondence decoded corner -> input vertex comes from the input faces alone:
-// cluster_triangles() gives the fan triangles of each face in triangulation order with their
-// corners in input order (v0, vk, vk+1).
+// box (the input's box, or BuildOptions::lattice_box when given) and a step per axis: the three
+// steps (8 + m) 2^e / 8 (m < 8) with the largest product (of equal products the smallest error,
+// then the first with x, then y, the smallest) whose error, half the steps' diagonal with half an
+// ulp of the box's largest coordinate per axis, stays within cluster_error x the box diagonal,
+// with at most 2^20 - 2 steps across the box and none above the power of two at or above its
+// widest extent. Without a given box, where the power-of-two steps (s, the largest with
+// s * sqrt(3) / 2 <= that bound, or 2s on the widest axes, ties in axis order, while the error
+// stays within the bound) put every vertex of an axis on an even code (a grid), the lattice takes
+// the power-of-two steps instead. Every coordinate rounds to the nearest lattice point. So per axis
+// |decoded - input| <= step / 2, |decoded - input| <= cluster_error x diagonal, and (decoded -
+// origin) / step is an integer (up to one float rounding of origin + q * step). The correspondence
+// decoded corner -> input vertex comes from the input faces alone: cluster_triangles() gives the
+// fan triangles of each face in triangulation order with their corners in input order (v0, vk,
+// vk+1).
 TEST(LossyAccuracy, ClusterVerticesFollowClusterError) {
   std::vector<PolyMesh> meshes;
   meshes.push_back(icosphere(4));
@@ -510,6 +515,39 @@ TEST(LossyAccuracy, ClusterVerticesFollowClusterError) {
       for (int b = 0; b < 3; ++b) d2 += std::pow((b == a ? step[b] : step[b] / 2) + ulp[b], 2);
       if (std::sqrt(d2) <= e) step[a] *= 2;
     }
+    bool grid = false;
+    for (int a = 0; a < 3 && !given; ++a) {
+      uint32_t any = 0;
+      for (const PolyMesh& m : meshes)
+        for (const Vec3f& p : m.positions)
+          any |= uint32_t(std::nearbyint((double(p[a]) - double(box.lo[a])) / step[a]));
+      grid |= any && (any & 1) == 0;
+    }
+    // The finer steps, over a wider range of exponents than any within the bound.
+    const double widest = std::max({extent[0], extent[1], extent[2]});
+    const double cap = std::exp2(std::ceil(std::log2(widest)));
+    std::vector<double> cand[3];
+    for (int a = 0; a < 3; ++a)
+      for (int x = int(std::log2(s)) - 6; x <= int(std::log2(s)) + 6; ++x)
+        for (int m = 0; m < 8; ++m) {
+          const double v = std::ldexp((8 + m) / 8.0, x);
+          if (v <= cap && extent[a] / v < (1 << 20) - 2) cand[a].push_back(v);
+        }
+    double fine[3] = {0, 0, 0}, best = 0, best_d2 = 0;
+    for (double x : cand[0])
+      for (double y : cand[1])
+        for (double z : cand[2]) {
+          const double v[3] = {x, y, z};
+          double d2 = 0;
+          for (int b = 0; b < 3; ++b) d2 += std::pow(v[b] / 2 + ulp[b], 2);
+          if (std::sqrt(d2) <= e && (x * y * z > best || (x * y * z == best && d2 < best_d2))) {
+            best = x * y * z;
+            best_d2 = d2;
+            std::copy(v, v + 3, fine);
+          }
+        }
+    ASSERT_GT(best, 0);
+    if (!grid) std::copy(fine, fine + 3, step);
     const double round = rounding(box);
     const ClusterTriangles ct = cluster_triangles(ptrs, opt);
     uint64_t expect_tris = 0;
@@ -559,10 +597,10 @@ TEST(LossyAccuracy, ClusterVerticesFollowClusterError) {
         EXPECT_EQ(fan_seen[std::make_pair(g, f)] + 2, meshes[g].face_sizes[f])
             << "face " << g << "/" << f;
     std::printf(
-        "  cluster_error %.0e%s: steps 2^%d, 2^%d, 2^%d, decoded axes within %.3f of step/2, "
+        "  cluster_error %.0e%s: steps %g, %g, %g%s, decoded axes within %.3f of step/2, "
         "vertices within %.3f of cluster_error x diagonal\n",
-        c.err, given ? " (lattice_box)" : "", int(std::log2(step[0])), int(std::log2(step[1])),
-        int(std::log2(step[2])), worst_axis, worst_vertex);
+        c.err, given ? " (lattice_box)" : "", step[0], step[1], step[2], grid ? " (grid)" : "",
+        worst_axis, worst_vertex);
     EXPECT_EQ(over_axis, 0u) << first;
     EXPECT_EQ(over_vertex, 0u) << first;
     EXPECT_EQ(off_lattice, 0u) << first;

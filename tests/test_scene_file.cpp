@@ -887,7 +887,7 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
          put32(b, section(b, "cluster.lattice").offset + offsetof(ClusterLattice, step),
                0x7f000000u);
        },
-       "cluster.lattice", "is not a power of two in [2^-126, 2^102]",
+       "cluster.lattice", "is not (8 + m) 2^e / 8 (m < 8) in [2^-126, 2^102]",
        offsetof(ClusterLattice, step)},
   };
   int checked = 0;

@@ -1,4 +1,4 @@
-// Compressed triangle clusters: `cluster` (lossy, one scene-wide lattice, power-of-two steps) and
+// Compressed triangle clusters: `cluster` (lossy, one scene-wide lattice, a step per axis) and
 // `cluster-lossless` (exact floats). Format: prim/cluster.h.
 //
 // Clusters come from the SAH BVH2, built with leaves of up to 64 triangles (the multi-leaf limit

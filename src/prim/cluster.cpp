@@ -869,19 +869,26 @@ std::string check_lattice(const ClusterLattice& lat, size_t* offset) {
     if (lat.anchor_bits[a] > 24)
       return "lattice anchor width " + std::to_string(lat.anchor_bits[a]) + " of axis " +
              std::to_string(a) + " beyond 24 bits";
-    // A power of two in [kMinLatticeStep, kMaxLatticeStep] (mantissa 0), so that box_extent's
-    // largest scale stays finite.
+    // (8 + m) 2^e / 8, m < 2^kStepMantissaBits, in [kMinLatticeStep, kMaxLatticeStep], so that
+    // box_extent's products are exact and its largest scale stays finite.
     if (offset) *offset = offsetof(ClusterLattice, step) + 4 * size_t(a);
     const float st = lat.step[a];
+    uint32_t u;
+    std::memcpy(&u, &st, 4);
+    const uint32_t mantissa = u & ((1u << 23) - 1);
     if (!(st >= float(kMinLatticeStep) && st <= float(kMaxLatticeStep)) ||
-        std::ldexp(1.0f, std::ilogb(st)) != st) {
-      uint32_t u;
-      std::memcpy(&u, &st, 4);
+        (mantissa & ((1u << (23 - kStepMantissaBits)) - 1)) != 0) {
       char bits[16];
       std::snprintf(bits, sizeof bits, "0x%08x", u);
       return "lattice step of axis " + std::to_string(a) + " (float bits " + bits +
-             ") is not a power of two in [2^-126, 2^102]";
+             ") is not (8 + m) 2^e / 8 (m < 8) in [2^-126, 2^102]";
     }
+    // With m > 0 the codes stay below 2^kFineStepCodeBits: float(q) x step exact.
+    if (offset) *offset = offsetof(ClusterLattice, anchor_bits) + size_t(a);
+    if (mantissa && lat.anchor_bits[a] > kFineStepCodeBits)
+      return "lattice anchor width " + std::to_string(lat.anchor_bits[a]) + " of axis " +
+             std::to_string(a) + " beyond " + std::to_string(kFineStepCodeBits) +
+             " bits with a step that is not a power of two";
   }
   return {};
 }
@@ -1083,6 +1090,48 @@ bool lattice_steps(double bound, const Box3f& box, double* step) {
   return within;
 }
 
+bool fine_lattice_steps(double bound, const Box3f& box, double* step) {
+  if (!(bound > 0) || !std::isfinite(bound) || box.empty()) return false;
+  double extent[3], slack[3];
+  for (int a = 0; a < 3; ++a) {
+    extent[a] = double(box.hi[a]) - double(box.lo[a]);
+    slack[a] = std::max(std::fabs(box.lo[a]), std::fabs(box.hi[a])) * 0x1p-24;  // lattice_steps'
+  }
+  const double widest = std::max({extent[0], extent[1], extent[2]});
+  const double cap = widest > 0 ? std::exp2(std::ceil(std::log2(widest))) : 1.0;
+  // Per axis the candidates (8 + m) 2^e / 8 from a quarter to twice the equal steps' s, s sqrt(3)
+  // / 2 = bound (within them: an axis at 1/4 s leaves the others at most 2s).
+  constexpr uint32_t kMantissas = 1u << kStepMantissaBits;
+  const int e0 = int(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) - 2;
+  double cand[3][4 * kMantissas];
+  uint32_t n[3] = {0, 0, 0};
+  for (int a = 0; a < 3; ++a)
+    for (int e = e0; e < e0 + 4; ++e)
+      for (uint32_t m = 0; m < kMantissas; ++m) {
+        const double v = std::ldexp(double(kMantissas + m) / kMantissas, e);
+        if (v >= kMinLatticeStep && v <= kMaxLatticeStep && v <= cap &&
+            extent[a] / v < double(1u << kFineStepCodeBits) - 2)
+          cand[a][n[a]++] = v;
+      }
+  // The largest product within the bound (products of such steps are exact in doubles), of equal
+  // products the smallest error, then the first in this order.
+  double best = 0, best_e2 = 0;
+  for (uint32_t i = 0; i < n[0]; ++i)
+    for (uint32_t j = 0; j < n[1]; ++j)
+      for (uint32_t k = 0; k < n[2]; ++k) {
+        const double v[3] = {cand[0][i], cand[1][j], cand[2][k]};
+        const double p = v[0] * v[1] * v[2];
+        double e2 = 0;
+        for (int a = 0; a < 3; ++a) e2 += (v[a] / 2 + slack[a]) * (v[a] / 2 + slack[a]);
+        if (std::sqrt(e2) <= bound && (p > best || (p == best && e2 < best_e2))) {
+          best = p;
+          best_e2 = e2;
+          std::copy(v, v + 3, step);
+        }
+      }
+  return best > 0;
+}
+
 Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_t ntris,
                    double rel_error, bool lossless, const Box3f& lattice_box) {
   constexpr size_t kGrain = 4096;  // vertices or corners a task
@@ -1114,7 +1163,30 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
     if (!(rel_error > 0.0) || !std::isfinite(rel_error))
       throw Error(
           "cluster: the error bound (BuildOptions::cluster_error) must be positive and finite");
-    z.coarsened = !lattice_steps(rel_error * z.diag, ntris || given ? box : Box3f(), step);
+    const Box3f lbox = ntris || given ? box : Box3f();
+    z.coarsened = !lattice_steps(rel_error * z.diag, lbox, step);
+    double fine[3];
+    if (!z.coarsened && fine_lattice_steps(rel_error * z.diag, lbox, fine)) {
+      // lattice_steps' codes, or-ed per axis: an axis whose codes all end in a zero bit lies on a
+      // coarser power-of-two lattice (quantize's shift, below), which those steps keep.
+      bool grid = false;
+      if (!given) {
+        std::atomic<uint32_t> any[3] = {0, 0, 0};
+        tbb::parallel_for(
+            tbb::blocked_range<size_t>(0, nv, kGrain), [&](const tbb::blocked_range<size_t>& r) {
+              uint32_t o[3] = {0, 0, 0};
+              for (size_t i = r.begin(); i < r.end(); ++i)
+                if (used[i])
+                  for (int a = 0; a < 3; ++a)
+                    o[a] |= uint32_t(std::clamp(
+                        std::nearbyint((double(vertices[i][a]) - double(box.lo[a])) / step[a]), 0.0,
+                        double(kLatticeMax)));
+              for (int a = 0; a < 3; ++a) any[a].fetch_or(o[a], std::memory_order_relaxed);
+            });
+        for (int a = 0; a < 3; ++a) grid |= any[a] && (any[a] & 1) == 0;
+      }
+      if (!grid) std::copy(fine, fine + 3, step);
+    }
     for (int a = 0; a < 3; ++a) {
       z.lattice.step[a] = float(step[a]);
       z.lattice.origin[a] = ntris || given ? box.lo[a] : 0.0f;

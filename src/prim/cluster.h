@@ -91,10 +91,10 @@
 // where they save more than their 2 ntris bits cost (igea: about 2 bits a triangle).
 //
 // Lossy (`cluster`): a vertex's code is its lattice integer q = round((x - origin) / step) per
-// axis, decoded as origin + float(q) * step (a power of two per axis: lattice_steps' for the error
-// bound, or coarser where every vertex lies on the coarser lattice, quantize). Every cluster
-// decodes a vertex with the same float operations from the same integer (the product is exact:
-// q < 2^24, step a power of two), so a
+// axis, decoded as origin + float(q) * step (per axis (8 + m) 2^e / 8 with m < 8, the largest that
+// keeps the error bound, or a power of two: quantize). Every cluster decodes a vertex with the
+// same float operations from the same integer (the product is exact: q x (8 + m) < 2^24, a code
+// below 2^20 where m > 0: check_lattice), so a
 // vertex shared by clusters decodes bit-identically in all of them and the watertight test
 // (core/watertight.h) sees one closed surface.
 // Lossless (`cluster-lossless`): per cluster one of two codes (the mode in the top 4 bits of the
@@ -146,7 +146,7 @@ namespace slim {
 // The scene-wide lattice of the lossy variant.
 struct ClusterLattice {
   float origin[3] = {0, 0, 0};
-  float step[3] = {1.0f, 1.0f, 1.0f};  // per axis a power of two (quantize)
+  float step[3] = {1.0f, 1.0f, 1.0f};  // per axis (8 + m) 2^e / 8, m < 8 (quantize)
   // Bits of a lossy cluster's anchor per axis (<= 24): bit_width of the largest lattice code a
   // vertex of the scene can take on the axis (quantize: from the lattice's box, which a chunked
   // build shares with the other chunks). The anchors of canyon:1024 take 16 bits.
@@ -311,7 +311,7 @@ SLIM_INLINE uint32_t lossless_anchor(uint32_t start_bits, uint32_t mode, uint32_
 
 // The one decoding of a lossy coordinate (build and traversal use this function only).
 SLIM_INLINE float lattice_coord(const ClusterLattice& lat, int axis, uint32_t q) {
-  return lat.origin[axis] + float(q) * lat.step[axis];  // exact product: a power-of-two step
+  return lat.origin[axis] + float(q) * lat.step[axis];  // exact product (check_lattice)
 }
 
 // ---- the lossy clusters' multi-leaf boxes (ClusterLeaf<false>, traverse.h HasMultiLeafBoxes) ----
@@ -425,8 +425,11 @@ SLIM_INLINE void lattice_planes_avx2(const uint8_t* boxes, const uint8_t* lows, 
 #endif
 constexpr uint32_t kMaxBoxScaleExp = 24;  // 255 x 2^24 steps span any cluster (< 2^24 steps)
 // The lattice steps a lossy scene may have (check_lattice): normal floats whose box extents
-// (box_extent: up to 2^(kMaxBoxScaleExp + 1) steps) stay finite.
+// (box_extent: up to 2^(kMaxBoxScaleExp + 1) steps) stay finite, (8 + m) 2^e / 8 with m below
+// 2^kStepMantissaBits; with m > 0 the axis' codes stay below 2^kFineStepCodeBits, so that
+// float(q) x step is exact (q x 15 < 2^24).
 constexpr double kMinLatticeStep = 0x1p-126, kMaxLatticeStep = 0x1p102;
+constexpr uint32_t kStepMantissaBits = 3, kFineStepCodeBits = 20;
 
 // ---- the lossless clusters' multi-leaf boxes (ClusterLeaf<true>) ----
 // The start is the cluster's lowest coordinate per axis, exactly a vertex coordinate: the
@@ -449,17 +452,19 @@ SLIM_INLINE float bfloat16_float(uint16_t b) {
 // zero while tracing) and finite.
 SLIM_INLINE bool extent_ok(uint16_t b) { return b >= 0x0080 && b < 0x7f80; }
 
-// The extent of scale byte `scale` (build and traversal use this function only): the step (a
-// power of two: mantissa 0) with e added to its exponent and m as its top 3 mantissa bits, which
-// is (8 + m) 2^e x step / 8 while the step and the result are normal floats, in 2 integer
-// instructions.
-SLIM_INLINE float box_extent(const ClusterLattice& lat, int axis, uint32_t scale) {
-  uint32_t u;
-  std::memcpy(&u, &lat.step[axis], 4);
-  u += (scale & 0xff) << 20;
+// The float (8 + m) 2^e / 8 of scale byte e << 3 | m: e in the exponent, m the top 3 mantissa
+// bits.
+SLIM_INLINE float scale_factor(uint32_t scale) {
+  const uint32_t u = ((scale & 0xff) << 20) + (127u << 23);
   float f;
   std::memcpy(&f, &u, 4);
   return f;
+}
+// The extent of scale byte `scale` (build and traversal use this function only): (8 + m) 2^e / 8
+// steps, an exact product (two mantissas of at most 4 bits; check_lattice keeps it a normal
+// float).
+SLIM_INLINE float box_extent(const ClusterLattice& lat, int axis, uint32_t scale) {
+  return scale_factor(scale) * lat.step[axis];
 }
 
 // mode: coord_mode() of the cluster (lossless only).
@@ -1446,8 +1451,7 @@ struct LatticeFrame {
   alignas(16) uint32_t shift[4] = {};
   alignas(16) uint32_t mask[4] = {};
   alignas(16) float origin[4] = {};        // lane 3: 0
-  alignas(16) float step[4] = {};          // lat.step, lane 3: 0
-  alignas(16) uint32_t step_bits[4] = {};  // lat.step's bits, lane 3: 0
+  alignas(16) float step[4] = {};  // lat.step, lane 3: 0
   uint32_t first[3] = {}, width[3] = {};
 };
 SLIM_INLINE LatticeFrame lattice_frame(const ClusterLattice& lat) {
@@ -1456,7 +1460,6 @@ SLIM_INLINE LatticeFrame lattice_frame(const ClusterLattice& lat) {
   for (int a = 0; a < 3; ++a) {
     f.origin[a] = lat.origin[a];
     f.step[a] = lat.step[a];
-    std::memcpy(&f.step_bits[a], &lat.step[a], 4);
   }
   uint32_t o = 0;
   for (int a = 0; a < 3; ++a) {
@@ -1476,8 +1479,8 @@ SLIM_INLINE LatticeFrame lattice_frame(const ClusterLattice& lat) {
 // anchors (f.width[a] <= 24 bits each) in the first 16 bytes at `bits` (the stream's start; the
 // builder passes a padded copy). The one computation of it, for the builder and the traversal
 // alike; the AVX2 path takes the three axes at once (one load, a byte shuffle, a shift and a mask
-// per lane: read_bits' bits) with one fma (the product is exact: q < 2^24 and a power-of-two
-// step, so it rounds as lattice_coord's sum).
+// per lane: read_bits' bits) with one fma (the product is exact, check_lattice: it rounds as
+// lattice_coord's sum).
 SLIM_INLINE void box_start(const LatticeFrame& f, const uint8_t* bits, float* start) {
 #if defined(SLIM_SIMD_AVX2)
   const __m128i raw = _mm_lddqu_si128(reinterpret_cast<const __m128i*>(bits));
@@ -1498,8 +1501,8 @@ SLIM_INLINE void box_start(const LatticeFrame& f, const uint8_t* bits, float* st
 // The frame (start, extent per axis; 4 floats each, the 4th unused) of the LatticeBoxes8 at p,
 // the cluster's data right behind them (its stream holds the anchors and more, plus
 // kClusterReadSlack: 16 bytes to read). Read on every multi-leaf visit: the AVX2 path takes the
-// three axes at once (a dozen instructions instead of some 45), the extents with box_extent's
-// integer operations lane by lane.
+// three axes at once (a dozen instructions instead of some 45), the extents as box_extent's
+// products lane by lane.
 SLIM_INLINE void box_frame(const LatticeFrame& f, const uint8_t* p, float* start, float* extent) {
   const uint8_t* scale = p + offsetof(LatticeBoxes8, scale);
   box_start(f, stream_of(p + sizeof(LatticeBoxes8)), start);
@@ -1507,8 +1510,8 @@ SLIM_INLINE void box_frame(const LatticeFrame& f, const uint8_t* p, float* start
   uint32_t sc;
   std::memcpy(&sc, scale, 4);  // the 3 scale bytes and the cluster header's first
   const __m128i e = _mm_add_epi32(_mm_slli_epi32(_mm_cvtepu8_epi32(_mm_cvtsi32_si128(int(sc))), 20),
-                                  _mm_load_si128(reinterpret_cast<const __m128i*>(f.step_bits)));
-  _mm_storeu_ps(extent, _mm_castsi128_ps(e));
+                                  _mm_set1_epi32(127 << 23));  // scale_factor's bits
+  _mm_storeu_ps(extent, _mm_mul_ps(_mm_castsi128_ps(e), _mm_load_ps(f.step)));
 #else
   for (int a = 0; a < 3; ++a) extent[a] = box_extent(f.lat, a, scale[a]);
   extent[3] = 0.0f;
@@ -1699,13 +1702,24 @@ bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const
 // coarser than the bound's (the bound may not hold); throws Error if an axis would need a step
 // above kMaxLatticeStep.
 bool lattice_steps(double bound, const Box3f& box, double* step);
+// The lossy lattice's finer steps: per axis (8 + m) 2^e / 8 (m < 2^kStepMantissaBits), the three
+// with the largest product (the fewest lattice points, so the fewest bits a vertex) whose error,
+// half a step and the decode's rounding per axis, stays within the bound. A power of two wastes
+// up to half of that: 0.25-1.24 bits a vertex on the benchmark's meshes (docs/results.md,
+// "Lattice steps between powers of two"). False where they do not apply: a bound not positive, an
+// empty box, or an extent of 2^kFineStepCodeBits - 2 steps or more, or a step out of
+// [kMinLatticeStep, kMaxLatticeStep] (lattice_steps' then).
+bool fine_lattice_steps(double bound, const Box3f& box, double* step);
 
 // Codes and decoded positions of the vertices that the triangles use (others: code 0, position
-// unchanged). Lossy: origin = the box minimum, the steps lattice_steps'. The box is `lattice_box`
+// unchanged). Lossy: origin = the box minimum, the steps fine_lattice_steps' where they apply,
+// else lattice_steps'. The box is `lattice_box`
 // when it is not empty (BuildOptions::lattice_box, which must contain the vertices: meshes
 // quantized with the same box share one lattice, so a vertex they share gets the same code and
 // decodes to the same bits in each), else the used vertices' box; then an axis whose codes all
 // end in k zero bits takes 2^k times the step and the codes k bits less (the same decoded bits).
+// That is checked on lattice_steps' codes first: where an axis has such codes (the rows of a
+// grid terrain, whose grid lies on a power-of-two lattice) the lattice keeps lattice_steps'.
 // The lattice's anchor_bits: per axis the bit width of the largest code of the box (or of a used
 // vertex, if larger). Lossless: the order keys of the exact floats.
 struct Quantized {

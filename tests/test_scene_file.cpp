@@ -874,13 +874,22 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
        },
        "costa.params", "primitive count beyond what the leaf blocks can hold",
        offsetof(CostaParams, prim_count)},
-      // The lossy lattice's steps: powers of two (box_extent adds to their exponents).
+      // The lossy lattice's steps: (8 + m) 2^e / 8, m < 8 (box_extent's products exact).
       {"cluster", "lattice step",
        [](std::string& b) {
          put32(b, section(b, "cluster.lattice").offset + offsetof(ClusterLattice, step) + 4,
                0x3f800001u);
        },
        "cluster.lattice", "lattice step", offsetof(ClusterLattice, step) + 4},
+      // A step with a mantissa on an axis of 21-bit codes: float(q) x step would round.
+      {"cluster", "lattice step 1.375 with 21-bit codes",
+       [](std::string& b) {
+         const uint64_t lat = section(b, "cluster.lattice").offset;
+         put32(b, lat + offsetof(ClusterLattice, step), 0x3fb00000u);  // 1.375f
+         b[lat + offsetof(ClusterLattice, anchor_bits)] = 21;
+       },
+       "cluster.lattice", "beyond 20 bits with a step that is not a power of two",
+       offsetof(ClusterLattice, anchor_bits)},
       // A power of two so large that the multi-leaves' scales would overflow its exponent.
       {"cluster", "lattice step 2^127",
        [](std::string& b) {

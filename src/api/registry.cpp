@@ -346,8 +346,9 @@ double ConfigInfo::promised_error(const std::vector<const MeshView*>& meshes) co
       return std::sqrt(h2) + rounding;
     }
     case Leaf::Clusters: {
-      // The lattice's steps (prim/cluster.cpp, lattice_steps; quantize's coarser steps of exact
-      // axes move no vertex): rounding moves a vertex by at most half a step per axis.
+      // The lattice's steps (prim/cluster.cpp: fine_lattice_steps' keep the bound, else
+      // lattice_steps'; quantize's coarser steps of exact axes move no vertex): rounding moves a
+      // vertex by at most half a step per axis.
       const double bound = options.cluster_error * std::sqrt(d2);
       double step[3], h2 = 0;
       cluster::lattice_steps(bound, box, step);

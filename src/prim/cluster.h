@@ -1450,8 +1450,8 @@ struct LatticeFrame {
   alignas(16) uint8_t bytes[16] = {};
   alignas(16) uint32_t shift[4] = {};
   alignas(16) uint32_t mask[4] = {};
-  alignas(16) float origin[4] = {};        // lane 3: 0
-  alignas(16) float step[4] = {};  // lat.step, lane 3: 0
+  alignas(16) float origin[4] = {};  // lane 3: 0
+  alignas(16) float step[4] = {};    // lat.step, lane 3: 0
   uint32_t first[3] = {}, width[3] = {};
 };
 SLIM_INLINE LatticeFrame lattice_frame(const ClusterLattice& lat) {

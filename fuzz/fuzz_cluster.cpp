@@ -134,12 +134,15 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
   std::vector<Vec3f> decoded(nv);
   ClusterLattice lat;
   lat.origin[1] = -3.0f;
-  for (int a = 0; a < 3; ++a) lat.step[a] = std::ldexp(0.5f, -a);  // a step of its own per axis
+  // A step of its own per axis: powers of two with codes of 24 bits, or with an odd vertex count
+  // steps (8 + m) 2^e / 8 with codes of 20 bits (check_lattice).
+  const bool stepped = !lossless && (nv & 1);
+  for (int a = 0; a < 3; ++a) lat.step[a] = std::ldexp(stepped ? 1.375f : 0.5f, -a);
   for (uint32_t i = 0; i < nv; ++i)
     for (int a = 0; a < 3; ++a) {
       uint32_t c = 0;
       in.bytes(&c, 4);
-      if (!lossless) c &= (1u << 24) - 1;
+      if (!lossless) c &= (1u << (stepped ? cluster::kFineStepCodeBits : 24)) - 1;
       if ((flavour & 1) && (c >> 29) != 7)
         c = cluster::float_key(cluster::decimal_coord(uint32_t(int32_t(c) >> shift), digits));
       codes[3 * i + a] = c;
@@ -249,14 +252,17 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const size_t n = block.size();
   block.resize(n + kClusterReadSlack, 0);
   block.shrink_to_fit();
-  // Lossy, twice: on a lattice of 24-bit anchors (the seeds') and on one of narrower anchors
-  // (0..24 bits per axis, from the input's size).
+  // Lossy, twice: on a lattice of 24-bit anchors and power-of-two steps (the seeds') and on one of
+  // narrower anchors (0..20 bits per axis, from the input's size) and steps (8 + m) 2^e / 8.
   ClusterLattice lat;
   lat.origin[0] = 1.0f;
   for (int a = 0; a < 3; ++a) lat.step[a] = std::ldexp(0.25f, a);
   for (int pass = 0; pass < (lossless ? 1 : 2); ++pass) {
     if (pass == 1)
-      for (int a = 0; a < 3; ++a) lat.anchor_bits[a] = uint8_t((size >> (5 * a)) % 25);
+      for (int a = 0; a < 3; ++a) {
+        lat.anchor_bits[a] = uint8_t((size >> (5 * a)) % (cluster::kFineStepCodeBits + 1));
+        lat.step[a] = std::ldexp(1.25f, a - 2);
+      }
     if (!cluster::check(block.data(), n, children, lat, lossless, nullptr)) continue;
     if (lossless)
       decode_all<true>(lat, block.data(), children);

@@ -32,6 +32,16 @@ uint32_t bits_of(float f) {
   return u;
 }
 
+// The box diagonal in doubles, as cluster::quantize takes it (the error bound's scale).
+double diagonal(const Box3f& b) {
+  double d2 = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double e = double(b.hi[a]) - double(b.lo[a]);
+    d2 += e * e;
+  }
+  return std::sqrt(d2);
+}
+
 // Two scenes of the same decoded triangles: 2000 random rays hit the same face at the same t, u
 // and v bit for bit (and more than 500 of them hit).
 void expect_same_hits(const Scene& a, const Scene& b, uint64_t seed) {
@@ -1416,7 +1426,8 @@ TEST(ClusterCodec, BoxExtentIsTheScaleInSteps) {
       float prev = 0;
       for (uint32_t sc = 0; (sc >> 3) <= cluster::kMaxBoxScaleExp; ++sc) {
         const float e = cluster::box_extent(lat, a, sc);
-        EXPECT_EQ(e, std::ldexp(float(8 + (sc & 7)), int(sc >> 3) - 3) * lat.step[a]) << sc;
+        EXPECT_EQ(double(e), std::ldexp(8.0 + (sc & 7), int(sc >> 3) - 3) * double(lat.step[a]))
+            << sc;
         EXPECT_GT(e, prev);
         prev = e;
       }
@@ -1540,10 +1551,9 @@ TEST(ClusterCodec, LatticeStepsPerAxis) {
 }
 
 // The finer steps (8 + m) 2^e / 8: for bounds across an octave, three of them within the bound
-// whose product is at least lattice_steps' (and more than 1/4 above it on average: a power of two
-// wastes up to half of it), each with a mantissa of at most 3 bits that check_lattice accepts.
-// An extent of 2^20 - 2 steps or more on an axis (codes beyond kFineStepCodeBits) leaves them to
-// lattice_steps.
+// whose product is at least lattice_steps' (and more than 1/4 above it on average), each with a
+// mantissa of at most 3 bits that check_lattice accepts. An axis whose extent spans 2^20 - 2 steps
+// or more (codes beyond kFineStepCodeBits) takes a power of two; 2^24 - 2 or more, none.
 TEST(ClusterCodec, FineLatticeSteps) {
   const Box3f box({-1, -2, -0.5f}, {3, 1, 0.5f});
   double gain = 0;
@@ -1574,8 +1584,16 @@ TEST(ClusterCodec, FineLatticeSteps) {
   }
   EXPECT_GT(gain / n, std::log2(1.25));
   double step[3];
-  EXPECT_FALSE(cluster::fine_lattice_steps(1e-3, Box3f({0, 0, 0}, {3000, 1, 1}), step));
-  EXPECT_TRUE(cluster::fine_lattice_steps(1e-3, Box3f({0, 0, 0}, {1000, 1, 1}), step));
+  auto mantissa = [](double v) {
+    int e;
+    return std::frexp(v, &e) != 0.5;
+  };
+  ASSERT_TRUE(cluster::fine_lattice_steps(1e-3, Box3f({0, 0, 0}, {3000, 1, 1}), step));
+  EXPECT_FALSE(mantissa(step[0])) << step[0];  // 2.6 M steps of the bound's size
+  EXPECT_LT(3000 / step[0], double((1u << 24) - 2));
+  ASSERT_TRUE(cluster::fine_lattice_steps(1e-3, Box3f({0, 0, 0}, {1000, 1, 1}), step));
+  EXPECT_TRUE(mantissa(step[0])) << step[0];  // 0.87 M steps
+  EXPECT_FALSE(cluster::fine_lattice_steps(1e-3, Box3f({0, 0, 0}, {1e5f, 1, 1}), step));
   EXPECT_FALSE(cluster::fine_lattice_steps(0, box, step));
   EXPECT_FALSE(cluster::fine_lattice_steps(1e-3, Box3f(), step));
   // check_lattice: at most 3 mantissa bits; with any, codes of at most 20 bits.
@@ -1594,7 +1612,7 @@ TEST(ClusterCodec, FineLatticeSteps) {
 TEST(ClusterScene, FinerStepsWhereTheBoundAllows) {
   PolyMesh sphere = icosphere(5);
   const Box3f box = sphere.bounds();
-  const double diag = length(box.size());
+  const double diag = diagonal(box);
   const double s = std::ldexp(1.0, -10);
   double bits[2];
   for (int i : {0, 1}) {
@@ -1614,10 +1632,6 @@ TEST(ClusterScene, FinerStepsWhereTheBoundAllows) {
   EXPECT_LT(bits[1], bits[0] - 0.4);  // log2(3.2 / 2.2) = 0.54 bits a coordinate
 }
 
-// A terrain's grid rows lie on a lattice 2^k times coarser than the bound needs: x and y take that
-// step (their codes k bits shorter), z keeps the bound's power of two (lattice_steps'). On the
-// lattice of a given box (as every piece of a chunked build derives it) the steps are the box's
-// alone, fine_lattice_steps': more position bits. Both keep the bound.
 // The lossy multi-leaf boxes' planes: coarse (6 bits, 39 bytes a multi-leaf) on a scan-like
 // surface, whose children's boxes grow little with them; fine (8 bits, 12 bytes more) on most of a
 // grid terrain's clusters, whose abutting square children would overlap. The scene's bytes count
@@ -1637,6 +1651,10 @@ TEST(ClusterScene, CoarsePlanesWhereTheBoxesGrowLittle) {
   for (const auto& [k, v] : stat_details(sl)) EXPECT_NE(k, "fine_plane_fraction");
 }
 
+// A terrain's grid rows lie on a lattice 2^k times coarser than the bound needs: x and y take that
+// step (their codes k bits shorter), z keeps the bound's power of two (lattice_steps'). On the
+// lattice of a given box (as every piece of a chunked build derives it) the steps are the box's
+// alone, fine_lattice_steps': more position bits. Both keep the bound.
 TEST(ClusterScene, ExactAxesTakeTheirCoarserLattice) {
   const PolyMesh grid = load("terrain:64");
   BuildOptions own = BuildOptions::from_config("cluster"), boxed = own;
@@ -1646,7 +1664,7 @@ TEST(ClusterScene, ExactAxesTakeTheirCoarserLattice) {
   ASSERT_TRUE(s.validate(&why)) << why;
   ASSERT_TRUE(sb.validate(&why)) << why;
   const Box3f box = grid.bounds();
-  const double bound = own.cluster_error * length(box.size());
+  const double bound = own.cluster_error * diagonal(box);
   double pow2[3], fine[3];
   ASSERT_TRUE(cluster::lattice_steps(bound, box, pow2));
   ASSERT_TRUE(cluster::fine_lattice_steps(bound, box, fine));

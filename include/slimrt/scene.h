@@ -120,8 +120,9 @@ struct BuildOptions {
   int max_leaf_size = 4;  // primitives per leaf (triangles; pairs and sub-grids use their own)
   int threads = 0;        // build threads; 0 = all cores
   // Leaf::Clusters: every vertex lies within this fraction of the scene's box diagonal of its
-  // input position (the lattice's steps, one per axis, are powers of two: the largest meeting it,
-  // or coarser on an axis whose vertices all lie on a coarser lattice, as a grid's rows).
+  // input position (the lattice's steps, one per axis, of at most 4 significant bits: the three of
+  // largest product meeting it; on a grid, whose rows lie on a coarser power-of-two lattice, powers
+  // of two, coarser on those axes).
   double cluster_error = 1e-5;
   // Leaf::Clusters and Leaf::LosslessClusters: two sibling clusters of the SAH's divide their
   // triangles anew where that stores fewer vertices (smaller scenes, longer builds: README's

@@ -1099,18 +1099,23 @@ bool fine_lattice_steps(double bound, const Box3f& box, double* step) {
   }
   const double widest = std::max({extent[0], extent[1], extent[2]});
   const double cap = widest > 0 ? std::exp2(std::ceil(std::log2(widest))) : 1.0;
-  // Per axis the candidates (8 + m) 2^e / 8 from a quarter to twice the equal steps' s, s sqrt(3)
-  // / 2 = bound (within them: an axis at 1/4 s leaves the others at most 2s).
+  // Per axis the candidates (8 + m) 2^e / 8 from above s / 64 to below 3.75 s, s the equal steps'
+  // with s sqrt(3) / 2 = bound. No axis can take more than 2 bound = sqrt(3) s. Without the
+  // rounding, an axis below s / 4 would leave a product below 0.375 s^3 where equal steps reach
+  // 0.70 s^3; the lower end leaves room for the rounding of coordinates up to some hundred box
+  // diagonals from the origin. A step with a mantissa keeps its axis' codes below
+  // 2^kFineStepCodeBits, a power of two below kLatticeMax (lattice_steps').
   constexpr uint32_t kMantissas = 1u << kStepMantissaBits;
-  const int e0 = int(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) - 2;
-  double cand[3][4 * kMantissas];
+  constexpr int kExponents = 7;
+  const int e0 = int(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) - 5;
+  double cand[3][kExponents * kMantissas];
   uint32_t n[3] = {0, 0, 0};
   for (int a = 0; a < 3; ++a)
-    for (int e = e0; e < e0 + 4; ++e)
+    for (int e = e0; e < e0 + kExponents; ++e)
       for (uint32_t m = 0; m < kMantissas; ++m) {
         const double v = std::ldexp(double(kMantissas + m) / kMantissas, e);
-        if (v >= kMinLatticeStep && v <= kMaxLatticeStep && v <= cap &&
-            extent[a] / v < double(1u << kFineStepCodeBits) - 2)
+        const double codes = m ? double(1u << kFineStepCodeBits) - 2 : double(kLatticeMax) - 1;
+        if (v >= kMinLatticeStep && v <= kMaxLatticeStep && v <= cap && extent[a] / v < codes)
           cand[a][n[a]++] = v;
       }
   // The largest product within the bound (products of such steps are exact in doubles), of equal
@@ -1243,10 +1248,11 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
   }
   // An axis whose codes all end in k zero bits (every vertex on a 2^k times coarser lattice, as
   // the rows of a terrain's grid) takes the step 2^k step and the codes q >> k: float(q >> k) x
-  // (2^k step) is the product float(q) x step (exact: q < 2^24, powers of two), so every vertex
-  // decodes to the same bits, in k bits less. Only on the vertices' own box: with a given box the
-  // steps depend on the box alone (BuildOptions::lattice_box), so that pieces quantized on it
-  // (the chunks of a chunked build) have one lattice.
+  // (2^k step) is the product float(q) x step (both exact, check_lattice: 2^k step keeps the
+  // step's mantissa), so every vertex decodes to the same bits, in k bits less. Only on the
+  // vertices' own box: with a given box the steps depend on the box alone
+  // (BuildOptions::lattice_box), so that pieces quantized on it (the chunks of a chunked build)
+  // have one lattice.
   uint32_t shift[3] = {0, 0, 0};
   if (!lossless && !given)
     for (int a = 0; a < 3; ++a) {

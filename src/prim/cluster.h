@@ -1,8 +1,9 @@
 // Compressed triangle clusters (configurations `cluster` and `cluster-lossless`), after AMD's Dense
-// Geometry Format (DGF, HPG 2024): positions on one scene-wide integer lattice with a power-of-two
-// step per axis, each cluster an anchor plus per-axis bit widths and bit-packed offsets, topology
-// as generalized triangle strips (DGF's control bits and implicit new-vertex indices), and primIDs
-// as runs (Elias-Fano coded run starts, a run index and an offset per triangle).
+// Geometry Format (DGF, HPG 2024): positions on one scene-wide integer lattice with a step of at
+// most 4 significant bits per axis, each cluster an anchor plus per-axis bit widths and bit-packed
+// offsets, topology as generalized triangle strips (DGF's control bits and implicit new-vertex
+// indices), and primIDs as runs (Elias-Fano coded run starts, a run index and an offset per
+// triangle).
 //
 // A cluster is one multi-leaf of the compressed-leaf BVH (bvh8.h; QBVH8 inner nodes above the
 // multi-leaves, NodeKind::QCompressedLeaf): its header holds the quantized boxes of up to 8
@@ -91,10 +92,10 @@
 // where they save more than their 2 ntris bits cost (igea: about 2 bits a triangle).
 //
 // Lossy (`cluster`): a vertex's code is its lattice integer q = round((x - origin) / step) per
-// axis, decoded as origin + float(q) * step (per axis (8 + m) 2^e / 8 with m < 8, the largest that
-// keeps the error bound, or a power of two: quantize). Every cluster decodes a vertex with the
-// same float operations from the same integer (the product is exact: q x (8 + m) < 2^24, a code
-// below 2^20 where m > 0: check_lattice), so a
+// axis, decoded as origin + float(q) * step (per axis (8 + m) 2^e / 8 with m < 8: the three of
+// largest product that keep the error bound, or powers of two: quantize). Every cluster decodes a
+// vertex with the same float operations from the same integer (the product is exact: q < 2^24
+// with a power of two, q < 2^20 with m > 0, check_lattice), so a
 // vertex shared by clusters decodes bit-identically in all of them and the watertight test
 // (core/watertight.h) sees one closed surface.
 // Lossless (`cluster-lossless`): per cluster one of two codes (the mode in the top 4 bits of the
@@ -147,7 +148,8 @@ namespace slim {
 struct ClusterLattice {
   float origin[3] = {0, 0, 0};
   float step[3] = {1.0f, 1.0f, 1.0f};  // per axis (8 + m) 2^e / 8, m < 8 (quantize)
-  // Bits of a lossy cluster's anchor per axis (<= 24): bit_width of the largest lattice code a
+  // Bits of a lossy cluster's anchor per axis (<= 24; <= 20 with a step of m > 0, check_lattice):
+  // bit_width of the largest lattice code a
   // vertex of the scene can take on the axis (quantize: from the lattice's box, which a chunked
   // build shares with the other chunks). The anchors of canyon:1024 take 16 bits.
   uint8_t anchor_bits[3] = {24, 24, 24};
@@ -1629,8 +1631,8 @@ uint64_t next_cache_tag();
 bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterLattice& lat,
            bool lossless, std::string* why, const uint8_t* boxes = nullptr);
 // The lattice fields the decoders take as given (lossy: anchor widths of at most 24 bits, steps
-// powers of two in [kMinLatticeStep, kMaxLatticeStep]), else what is wrong (and its byte in
-// `offset`).
+// (8 + m) 2^e / 8 with m < 8 in [kMinLatticeStep, kMaxLatticeStep], anchor widths of at most
+// kFineStepCodeBits where m > 0), else what is wrong (and its byte in `offset`).
 std::string check_lattice(const ClusterLattice& lat, size_t* offset = nullptr);
 
 // Per-scene encoding figures (info --clusters). The four parts add up to the clusters' bytes
@@ -1704,11 +1706,14 @@ bool multileaf_boxes(const ClusterSource& s, const uint32_t* const* prims, const
 bool lattice_steps(double bound, const Box3f& box, double* step);
 // The lossy lattice's finer steps: per axis (8 + m) 2^e / 8 (m < 2^kStepMantissaBits), the three
 // with the largest product (the fewest lattice points, so the fewest bits a vertex) whose error,
-// half a step and the decode's rounding per axis, stays within the bound. A power of two wastes
-// up to half of that: 0.25-1.24 bits a vertex on the benchmark's meshes (docs/results.md,
-// "Lattice steps between powers of two"). False where they do not apply: a bound not positive, an
-// empty box, or an extent of 2^kFineStepCodeBits - 2 steps or more, or a step out of
-// [kMinLatticeStep, kMaxLatticeStep] (lattice_steps' then).
+// half a step and the decode's rounding per axis, stays within the bound (of equal products the
+// smallest error). Powers of two alone waste up to about 1.5 bits a vertex of that: 0.07-1.22 on
+// the benchmark's meshes (docs/results.md, "Lattice steps between powers of two"). An axis takes
+// a step with m > 0 only where its extent spans fewer than 2^kFineStepCodeBits - 2 of them, a
+// power of two where fewer than 2^24 - 2. False where no three steps within [kMinLatticeStep,
+// kMaxLatticeStep] and at most the power of two at or above the widest extent keep the bound (a
+// bound not positive, an empty box, coordinates whose rounding takes most of the bound, an
+// extent too wide): lattice_steps' then.
 bool fine_lattice_steps(double bound, const Box3f& box, double* step);
 
 // Codes and decoded positions of the vertices that the triangles use (others: code 0, position

@@ -95,9 +95,9 @@
 // axis, decoded as origin + float(q) * step (per axis (8 + m) 2^e / 8 with m < 8: the three of
 // largest product that keep the error bound, or powers of two: quantize). Every cluster decodes a
 // vertex with the same float operations from the same integer (the product is exact: q < 2^24
-// with a power of two, q < 2^20 with m > 0, check_lattice), so a
-// vertex shared by clusters decodes bit-identically in all of them and the watertight test
-// (core/watertight.h) sees one closed surface.
+// with a power of two, q < 2^20 with m > 0, check_lattice), so a vertex shared by clusters
+// decodes bit-identically in all of them and the watertight test (core/watertight.h) sees one
+// closed surface.
 // Lossless (`cluster-lossless`): per cluster one of two codes (the mode in the top 4 bits of the
 // header's ib byte, whose low 4 bits hold ib <= 8):
 //   mode 0, float keys: the float's bit pattern mapped to an order-preserving unsigned integer, so
@@ -149,9 +149,9 @@ struct ClusterLattice {
   float origin[3] = {0, 0, 0};
   float step[3] = {1.0f, 1.0f, 1.0f};  // per axis (8 + m) 2^e / 8, m < 8 (quantize)
   // Bits of a lossy cluster's anchor per axis (<= 24; <= 20 with a step of m > 0, check_lattice):
-  // bit_width of the largest lattice code a
-  // vertex of the scene can take on the axis (quantize: from the lattice's box, which a chunked
-  // build shares with the other chunks). The anchors of canyon:1024 take 16 bits.
+  // bit_width of the largest lattice code a vertex of the scene can take on the axis (quantize:
+  // from the lattice's box, which a chunked build shares with the other chunks). The anchors of
+  // canyon:1024 take 16 bits.
   uint8_t anchor_bits[3] = {24, 24, 24};
   uint8_t pad = 0;
 };
@@ -1718,11 +1718,11 @@ bool fine_lattice_steps(double bound, const Box3f& box, double* step);
 
 // Codes and decoded positions of the vertices that the triangles use (others: code 0, position
 // unchanged). Lossy: origin = the box minimum, the steps fine_lattice_steps' where they apply,
-// else lattice_steps'. The box is `lattice_box`
-// when it is not empty (BuildOptions::lattice_box, which must contain the vertices: meshes
-// quantized with the same box share one lattice, so a vertex they share gets the same code and
-// decodes to the same bits in each), else the used vertices' box; then an axis whose codes all
-// end in k zero bits takes 2^k times the step and the codes k bits less (the same decoded bits).
+// else lattice_steps'. The box is `lattice_box` when it is not empty (BuildOptions::lattice_box,
+// which must contain the vertices: meshes quantized with the same box share one lattice, so a
+// vertex they share gets the same code and decodes to the same bits in each), else the used
+// vertices' box; then an axis whose codes all end in k zero bits takes 2^k times the step and the
+// codes k bits less (the same decoded bits).
 // That is checked on lattice_steps' codes first: where an axis has such codes (the rows of a
 // grid terrain, whose grid lies on a power-of-two lattice) the lattice keeps lattice_steps'.
 // The lattice's anchor_bits: per axis the bit width of the largest code of the box (or of a used

@@ -1049,14 +1049,25 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
 
 constexpr uint32_t kLatticeMax = (1u << 24) - 1;  // the largest lattice code
 
-bool lattice_steps(double bound, const Box3f& box, double* step) {
-  double extent[3], slack[3];
+// The lattice code of coordinate x: the nearest lattice point, clamped to [0, kLatticeMax].
+static uint32_t nearest_code(float x, float origin, double step) {
+  return uint32_t(
+      std::clamp(std::nearbyint((double(x) - double(origin)) / step), 0.0, double(kLatticeMax)));
+}
+
+// Per axis of `box` its extent and the decode's rounding: half an ulp (at most) of a decoded
+// coordinate, origin + float(q) x step rounding once (0 on an empty axis).
+static void axis_extents(const Box3f& box, double (&extent)[3], double (&slack)[3]) {
   for (int a = 0; a < 3; ++a) {
     const bool empty = !(box.lo[a] <= box.hi[a]);
     extent[a] = empty ? 0.0 : double(box.hi[a]) - double(box.lo[a]);
-    // Half an ulp (at most) of a decoded coordinate: origin + float(q) x step rounds once.
     slack[a] = empty ? 0.0 : std::max(std::fabs(box.lo[a]), std::fabs(box.hi[a])) * 0x1p-24;
   }
+}
+
+bool lattice_steps(double bound, const Box3f& box, double* step) {
+  double extent[3], slack[3];
+  axis_extents(box, extent, slack);
   // s: the largest power of two with s sqrt(3) / 2 <= bound, within the steps a lattice may take
   // (kMinLatticeStep..kMaxLatticeStep) and no more than the widest extent needs; per axis the
   // extent must span fewer than kLatticeMax - 1 steps (else the step doubles: coarsened).
@@ -1093,10 +1104,7 @@ bool lattice_steps(double bound, const Box3f& box, double* step) {
 bool fine_lattice_steps(double bound, const Box3f& box, double* step) {
   if (!(bound > 0) || !std::isfinite(bound) || box.empty()) return false;
   double extent[3], slack[3];
-  for (int a = 0; a < 3; ++a) {
-    extent[a] = double(box.hi[a]) - double(box.lo[a]);
-    slack[a] = std::max(std::fabs(box.lo[a]), std::fabs(box.hi[a])) * 0x1p-24;  // lattice_steps'
-  }
+  axis_extents(box, extent, slack);
   const double widest = std::max({extent[0], extent[1], extent[2]});
   const double cap = widest > 0 ? std::exp2(std::ceil(std::log2(widest))) : 1.0;
   // Per axis the candidates (8 + m) 2^e / 8 from above s / 64 to below 3.75 s, s the equal steps'
@@ -1177,17 +1185,16 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
       bool grid = false;
       if (!given) {
         std::atomic<uint32_t> any[3] = {0, 0, 0};
-        tbb::parallel_for(
-            tbb::blocked_range<size_t>(0, nv, kGrain), [&](const tbb::blocked_range<size_t>& r) {
-              uint32_t o[3] = {0, 0, 0};
-              for (size_t i = r.begin(); i < r.end(); ++i)
-                if (used[i])
-                  for (int a = 0; a < 3; ++a)
-                    o[a] |= uint32_t(std::clamp(
-                        std::nearbyint((double(vertices[i][a]) - double(box.lo[a])) / step[a]), 0.0,
-                        double(kLatticeMax)));
-              for (int a = 0; a < 3; ++a) any[a].fetch_or(o[a], std::memory_order_relaxed);
-            });
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, nv, kGrain),
+                          [&](const tbb::blocked_range<size_t>& r) {
+                            uint32_t o[3] = {0, 0, 0};
+                            for (size_t i = r.begin(); i < r.end(); ++i)
+                              if (used[i])
+                                for (int a = 0; a < 3; ++a)
+                                  o[a] |= nearest_code(vertices[i][a], box.lo[a], step[a]);
+                            for (int a = 0; a < 3; ++a)
+                              any[a].fetch_or(o[a], std::memory_order_relaxed);
+                          });
         for (int a = 0; a < 3; ++a) grid |= any[a] && (any[a] & 1) == 0;
       }
       if (!grid) std::copy(fine, fine + 3, step);
@@ -1208,9 +1215,7 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
               z.codes[3 * i + a] = float_key(vertices[i][a]);
               continue;
             }
-            const double q =
-                std::nearbyint((double(vertices[i][a]) - double(z.lattice.origin[a])) / step[a]);
-            const uint32_t qi = uint32_t(std::clamp(q, 0.0, double(kLatticeMax)));
+            const uint32_t qi = nearest_code(vertices[i][a], z.lattice.origin[a], step[a]);
             z.codes[3 * i + a] = qi;
             z.decoded[i][a] = lattice_coord(z.lattice, a, qi);
           }
@@ -1228,10 +1233,7 @@ Quantized quantize(const Vec3f* vertices, size_t nv, const uint32_t* tris, size_
   // takes (one a given box holds up to rounding).
   uint32_t top[3] = {0, 0, 0};
   if (!lossless && (ntris || given))
-    for (int a = 0; a < 3; ++a)
-      top[a] = uint32_t(
-          std::clamp(std::nearbyint((double(box.hi[a]) - double(z.lattice.origin[a])) / step[a]),
-                     0.0, double(kLatticeMax)));
+    for (int a = 0; a < 3; ++a) top[a] = nearest_code(box.hi[a], z.lattice.origin[a], step[a]);
   double sum_sq = 0, sum = 0;
   uint64_t n = 0;
   uint32_t any[3] = {0, 0, 0};  // the codes' bits, or-ed

@@ -32,16 +32,6 @@ uint32_t bits_of(float f) {
   return u;
 }
 
-// The box diagonal in doubles, as cluster::quantize takes it (the error bound's scale).
-double diagonal(const Box3f& b) {
-  double d2 = 0;
-  for (int a = 0; a < 3; ++a) {
-    const double e = double(b.hi[a]) - double(b.lo[a]);
-    d2 += e * e;
-  }
-  return std::sqrt(d2);
-}
-
 // Two scenes of the same decoded triangles: 2000 random rays hit the same face at the same t, u
 // and v bit for bit (and more than 500 of them hit).
 void expect_same_hits(const Scene& a, const Scene& b, uint64_t seed) {

@@ -498,10 +498,7 @@ TEST(LossyAccuracy, ClusterVerticesFollowClusterError) {
     BuildOptions opt = BuildOptions::from_config("cluster");
     opt.cluster_error = c.err;
     opt.lattice_box = c.lattice_box;
-    double diag = 0;  // in doubles, as cluster::quantize
-    for (int a = 0; a < 3; ++a)
-      diag += (double(box.hi[a]) - double(box.lo[a])) * (double(box.hi[a]) - double(box.lo[a]));
-    diag = std::sqrt(diag);
+    const double diag = diagonal(box);
     const double e = c.err * diag;
     const double s = std::exp2(std::floor(std::log2(2.0 * e / std::sqrt(3.0))));
     ASSERT_LE(s * std::sqrt(3.0) / 2, e);

@@ -67,6 +67,16 @@ inline bool not_applicable(const Error& e) {
 // Lossy: the format moves vertices (lossy-grid*, costa-*V*). Its hits are held to the bound its
 // specification promises (test_lossy_accuracy.cpp).
 inline bool is_lossy_config(const std::string& c) { return config_info(c).lossy; }
+
+// The box diagonal in doubles, as cluster::quantize takes it (the cluster error bound's scale).
+inline double diagonal(const Box3f& b) {
+  double d2 = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double e = double(b.hi[a]) - double(b.lo[a]);
+    d2 += e * e;
+  }
+  return std::sqrt(d2);
+}
 // Own geometry: the format intersects triangles of its own (decoded_triangles()), not the input's
 // fan triangles.
 inline bool has_own_geometry(const std::string& c) { return config_info(c).own_geometry; }

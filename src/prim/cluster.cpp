@@ -1116,15 +1116,17 @@ bool fine_lattice_steps(double bound, const Box3f& box, double* step) {
   constexpr uint32_t kMantissas = 1u << kStepMantissaBits;
   constexpr int kExponents = 7;
   const int e0 = int(std::floor(std::log2(bound * 2.0 / std::sqrt(3.0)))) - 5;
-  double cand[3][kExponents * kMantissas];
+  double cand[3][kExponents * kMantissas], sq[3][kExponents * kMantissas];  // sq: its error^2
   uint32_t n[3] = {0, 0, 0};
   for (int a = 0; a < 3; ++a)
     for (int e = e0; e < e0 + kExponents; ++e)
       for (uint32_t m = 0; m < kMantissas; ++m) {
         const double v = std::ldexp(double(kMantissas + m) / kMantissas, e);
         const double codes = m ? double(1u << kFineStepCodeBits) - 2 : double(kLatticeMax) - 1;
-        if (v >= kMinLatticeStep && v <= kMaxLatticeStep && v <= cap && extent[a] / v < codes)
+        if (v >= kMinLatticeStep && v <= kMaxLatticeStep && v <= cap && extent[a] / v < codes) {
+          sq[a][n[a]] = (v / 2 + slack[a]) * (v / 2 + slack[a]);
           cand[a][n[a]++] = v;
+        }
       }
   // The largest product within the bound (products of such steps are exact in doubles), of equal
   // products the smallest error, then the first in this order.
@@ -1134,8 +1136,7 @@ bool fine_lattice_steps(double bound, const Box3f& box, double* step) {
       for (uint32_t k = 0; k < n[2]; ++k) {
         const double v[3] = {cand[0][i], cand[1][j], cand[2][k]};
         const double p = v[0] * v[1] * v[2];
-        double e2 = 0;
-        for (int a = 0; a < 3; ++a) e2 += (v[a] / 2 + slack[a]) * (v[a] / 2 + slack[a]);
+        const double e2 = sq[0][i] + sq[1][j] + sq[2][k];
         if (std::sqrt(e2) <= bound && (p > best || (p == best && e2 < best_e2))) {
           best = p;
           best_e2 = e2;

@@ -1719,8 +1719,9 @@ TEST(ClusterScene, DecodesItsOwnTrianglesRealMesh) {
 }
 
 // The per-thread decode cache (cluster::DecodeCache) is keyed by the scene's tag as well as by the
-// child's address: a cluster at the address of one a thread traced before, in another scene (a
-// scene built or opened where a destroyed one was), is decoded, not taken from the cache.
+// child's address, and so are its clusters' views: a cluster at the address of one a thread traced
+// before, in another scene (a scene built or opened where a destroyed one was), is decoded with
+// its own view (anchors, layout), not taken from the cache. (Either key without the tag fails.)
 TEST(ClusterScene, DecodeCacheNeverAnswersForAnotherScene) {
   // One triangle across the ray's path at z = depth.
   auto one_triangle = [](float depth) {

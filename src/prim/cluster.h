@@ -1573,14 +1573,22 @@ bool write_multileaf_boxes(const ClusterLattice& lat, bool lossless, const uint8
 // decoding. Direct-mapped on the child's address; a scene's tag (Context::cache_tag, unique per
 // scene for the process) is part of the key, so a later scene at the same addresses never reads
 // another's entries. One per tracing thread, allocated at its first cluster ray: 4096 entries of
-// 384 bytes (1.5 MiB), not scene memory. A decode costs some 750-850 instructions (strip, vertex
-// gathers, the cluster's layout), a hit an entry read from L2 or L3, prefetched when the ray enters
+// 384 bytes (1.5 MiB) and 256 views (below, 128 KiB), not scene memory. A decode costs some 850
+// instructions (canyon:1024: strip 390, vertex gathers 370, ids 85) and the cluster's view, a
+// hit an entry read from L2 or L3, prefetched when the ray enters
 // the child's box (prefetch, below): diffuse bounces spread over the scene come back to children
 // decoded thousands of visits before (4096 entries decode a quarter fewer children than 1024 on
 // canyon:1024, 40% fewer on stanford_bunny; 1024 x 1024 pixels, 8 bounces). The entries start on
 // cache lines (6 lines each).
+//
+// It keeps the clusters' views too (View: header, layout, anchors, per-child vertex ranges; some
+// 600 instructions to make), direct-mapped on the cluster's address with the scene's tag: a
+// visit that decodes a child needs its cluster's view, and on canyon:1024 a visit decodes 1.3
+// children on average while the next rays through the cluster decode its others. 256 views find
+// 80% of those canyon:1024's primary rays need made already, half of them with 8 diffuse bounces
+// (docs/results.md, "The clusters' views in the decode cache").
 struct alignas(64) DecodeCache {
-  static constexpr uint32_t kLogEntries = 12;
+  static constexpr uint32_t kLogEntries = 12, kLogViews = 8;
   struct Entry {
     Decoded8 d;
     ChildIds ids;                   // of d's triangles
@@ -1588,11 +1596,22 @@ struct alignas(64) DecodeCache {
     uint64_t tag = 0;               // 0: empty (scene tags start at 1)
     int child = -1;
   };
+  struct alignas(64) ViewEntry {
+    View v;
+    const uint8_t* data = nullptr;  // the cluster's data (its header)
+    uint64_t tag = 0;               // 0: empty
+  };
   Entry e[1u << kLogEntries];
+  ViewEntry views[1u << kLogViews];
+  // Fibonacci hashing: the top bits pick the entry.
+  static SLIM_INLINE uint64_t hash(const uint8_t* bits, int child) {
+    return (uint64_t(reinterpret_cast<uintptr_t>(bits)) + uint64_t(child)) * 0x9E3779B97F4A7C15ull;
+  }
   SLIM_INLINE Entry& slot(const uint8_t* bits, int child) {
-    const uint64_t h = (uint64_t(reinterpret_cast<uintptr_t>(bits)) + uint64_t(child)) *
-                       0x9E3779B97F4A7C15ull;  // Fibonacci hashing: the top bits pick the entry
-    return e[h >> (64 - kLogEntries)];
+    return e[hash(bits, child) >> (64 - kLogEntries)];
+  }
+  SLIM_INLINE ViewEntry& view_slot(const uint8_t* bits) {
+    return views[hash(bits, 0) >> (64 - kLogViews)];
   }
   // Starts loading the entry of each child in `mask` (its 6 cache lines), ahead of the tag check
   // and the triangle test that read it (or the decoding that writes it).
@@ -1914,27 +1933,26 @@ struct ClusterLeaf {
 
   // ---- traversal side ----
   // What the children of one multi-leaf share, per visit (traverse.h, HasMultiLeafView): the
-  // thread's decode cache, and the cluster's header, layout and anchors, read at the first child
-  // the cache does not hold (or for the ids of a hit), not at all when it holds every child the
-  // ray enters.
+  // thread's decode cache, and the cluster's view (header, layout, anchors, ranges), looked up at
+  // the first child the cache does not hold (or for the ids of a hit), not at all when it holds
+  // every child the ray enters. The view is the cache's entry, made there if it holds another:
+  // nothing else writes the cache's views until the visit ends.
   struct MultiLeafView {
     const uint8_t* data;
     uint32_t children;
     cluster::DecodeCache* cache;
-    mutable bool read = false;
-    // The view, written at the first get(): left uninitialized until then, since most visits
-    // never read it (a default View would be some 30 stores per visit).
-    union Lazy {
-      Lazy() {}
-      cluster::View v;
-    };
-    mutable Lazy lazy;
-    SLIM_INLINE const cluster::View& get(const ClusterLattice& lat) const {
-      if (!read) {
-        cluster::view_into<kLossless>(lazy.v, lat, data, children);
-        read = true;
+    mutable const cluster::View* v = nullptr;
+    SLIM_INLINE const cluster::View& get(const Context& ctx) const {
+      if (!v) {
+        cluster::DecodeCache::ViewEntry& e = cache->view_slot(data);
+        if (e.data != data || e.tag != ctx.cache_tag) {
+          cluster::view_into<kLossless>(e.v, ctx.lattice, data, children);
+          e.data = data;
+          e.tag = ctx.cache_tag;
+        }
+        v = &e.v;
       }
-      return lazy.v;
+      return *v;
     }
   };
   static SLIM_INLINE MultiLeafView multileaf_view(const Context&, const uint8_t* data,
@@ -1951,7 +1969,7 @@ struct ClusterLeaf {
     using namespace simd;
     cluster::DecodeCache::Entry& en = view.cache->slot(view.data, i);
     if (en.bits != view.data || en.child != i || en.tag != ctx.cache_tag) {
-      const cluster::View& v = view.get(ctx.lattice);
+      const cluster::View& v = view.get(ctx);
       cluster::decode_child<kLossless>(ctx.lattice, v, i, en.d);
       en.ids = cluster::child_ids(v, uint32_t(en.d.first));
       en.bits = view.data;

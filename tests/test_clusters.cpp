@@ -1720,8 +1720,10 @@ TEST(ClusterScene, DecodesItsOwnTrianglesRealMesh) {
 
 // The per-thread decode cache (cluster::DecodeCache) is keyed by the scene's tag as well as by the
 // child's address, and so are its clusters' views: a cluster at the address of one a thread traced
-// before, in another scene (a scene built or opened where a destroyed one was), is decoded with
-// its own view (anchors, layout), not taken from the cache. (Either key without the tag fails.)
+// before, in another scene (a scene built or opened where a destroyed one was), is decoded, not
+// taken from the cache. Either key without the tag fails: the entries' in both halves, the views'
+// in the lossless half (its anchors hold the depth; the lossy clusters' bytes and views are the
+// same, their depth being in the lattice's origin).
 TEST(ClusterScene, DecodeCacheNeverAnswersForAnotherScene) {
   // One triangle across the ray's path at z = depth.
   auto one_triangle = [](float depth) {
@@ -1768,6 +1770,69 @@ TEST(ClusterScene, DecodeCacheNeverAnswersForAnotherScene) {
     }
     EXPECT_NEAR(t[0], 2.0f, 1e-4f);
     EXPECT_NEAR(t[1], 3.0f, 1e-4f);  // not the first scene's triangle at the same address
+  }
+}
+
+// The views of the cluster at `data` as the traversal gets them for 1 and then 8 children (one
+// scene: one tag), against views made afresh.
+template <bool kLossless>
+void expect_views_follow_the_count(const typename ClusterLeaf<kLossless>::Context& ctx,
+                                   const uint8_t* data) {
+  for (const uint32_t k : {1u, 8u}) {
+    const auto mv = ClusterLeaf<kLossless>::multileaf_view(ctx, data, k);
+    const cluster::View& got = mv.get(ctx);
+    const cluster::View fresh = cluster::view<kLossless>(ctx.lattice, data, k);
+    EXPECT_EQ(got.L.ntris, k);
+    EXPECT_EQ(got.L.ntris, fresh.L.ntris) << k;
+    EXPECT_EQ(got.L.table, fresh.L.table) << k;
+    EXPECT_EQ(got.L.verts, fresh.L.verts) << k;
+    EXPECT_EQ(got.L.topo, fresh.L.topo) << k;
+    EXPECT_EQ(got.L.end, fresh.L.end) << k;
+  }
+}
+
+// The views are keyed by the child count too: a crafted scene file's references could give one
+// cluster two counts (the structure check takes each reference's on its own), and a view made for
+// one count has another layout (another triangle count, child table and topology start). The
+// view a visit of the whole cluster gets, after a visit of its first child alone, is the whole
+// cluster's.
+TEST(ClusterScene, DecodeCacheViewsFollowTheChildCount) {
+  PolyMesh m;
+  for (int j = 0; j < 8; ++j) {  // 8 separate triangles
+    const float x = 3.0f * float(j);
+    const uint32_t b = uint32_t(m.positions.size());
+    m.positions.insert(m.positions.end(),
+                       {Vec3f(x - 1, -1, 1), Vec3f(x + 1, -1, 1), Vec3f(x, 1, 2)});
+    m.face_indices.insert(m.face_indices.end(), {b, b + 1, b + 2});
+    m.face_sizes.push_back(3);
+  }
+  const TriangleMesh tm = triangulate_fan({&m});
+  for (const bool lossless : {false, true}) {
+    SCOPED_TRACE(lossless ? "lossless" : "lossy");
+    const cluster::Quantized z = cluster::quantize(tm.vertices.data(), tm.vertices.size(),
+                                                   tm.tris.data(), tm.tri_count(), 1e-5, lossless);
+    ClusterSource src = source_of(tm, z, lossless);
+    uint32_t ids[8], counts[8];
+    const uint32_t* prims[8];
+    for (uint32_t c = 0; c < 8; ++c) {
+      ids[c] = c;
+      counts[c] = 1;
+      prims[c] = &ids[c];
+    }
+    const std::vector<uint8_t> data = cluster::encode(src, prims, counts, 8, true);
+    std::string why;
+    ASSERT_TRUE(
+        cluster::check(data.data(), data.size() - kClusterReadSlack, 8, z.lattice, lossless, &why))
+        << why;
+    if (lossless) {
+      ClusterLeaf<true>::Context ctx;
+      expect_views_follow_the_count<true>(ctx, data.data());
+    } else {
+      ClusterLeaf<false>::Context ctx;
+      ctx.lattice = z.lattice;
+      ctx.frame = cluster::lattice_frame(z.lattice);
+      expect_views_follow_the_count<false>(ctx, data.data());
+    }
   }
 }
 

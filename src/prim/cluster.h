@@ -1229,9 +1229,11 @@ SLIM_INLINE void decode_vertices_ranges_avx2(const ClusterLattice& lat, const ui
 }
 #endif
 
-// What every child of one cluster shares: its header, the stream layout, the child sizes and the
-// anchors. The traversal reads them once per multi-leaf visit (ClusterLeaf::multileaf_view) for
-// all the children it tests, not once per child.
+// What every child of one cluster shares: its header, the stream layout, the child sizes, the
+// anchors and the per-child vertex ranges, for the cluster's child count (the layout and the
+// ranges depend on it). The traversal takes them from the thread's DecodeCache
+// (ClusterLeaf::MultiLeafView::get) at most once per multi-leaf visit, and makes them there when
+// the cache holds another cluster's.
 struct View {
   const uint8_t* bits = nullptr;  // the bit stream (right behind the header)
   ClusterHeader h{};
@@ -1279,7 +1281,7 @@ SLIM_INLINE void view_into(View& v, const ClusterLattice& lat, const uint8_t* da
   }
 }
 // The view of a cluster (built in place by view_into where it is kept: the ranges make it some
-// 400 bytes).
+// 480 bytes).
 template <bool kLossless>
 SLIM_INLINE View view(const ClusterLattice& lat, const uint8_t* data, uint32_t children) {
   View v;
@@ -1574,19 +1576,21 @@ bool write_multileaf_boxes(const ClusterLattice& lat, bool lossless, const uint8
 // scene for the process) is part of the key, so a later scene at the same addresses never reads
 // another's entries. One per tracing thread, allocated at its first cluster ray: 4096 entries of
 // 384 bytes (1.5 MiB) and 256 views (below, 128 KiB), not scene memory. A decode costs some 850
-// instructions (canyon:1024: strip 390, vertex gathers 370, ids 85) and the cluster's view, a
-// hit an entry read from L2 or L3, prefetched when the ray enters
-// the child's box (prefetch, below): diffuse bounces spread over the scene come back to children
+// instructions (canyon:1024: strip 390, vertex gathers 370, ids 85) plus the cluster's view where
+// the cache lacks it; a hit costs an entry read from L2 or L3, prefetched when the ray enters the
+// child's box (prefetch, below): diffuse bounces spread over the scene come back to children
 // decoded thousands of visits before (4096 entries decode a quarter fewer children than 1024 on
 // canyon:1024, 40% fewer on stanford_bunny; 1024 x 1024 pixels, 8 bounces). The entries start on
 // cache lines (6 lines each).
 //
 // It keeps the clusters' views too (View: header, layout, anchors, per-child vertex ranges; some
-// 600 instructions to make), direct-mapped on the cluster's address with the scene's tag: a
-// visit that decodes a child needs its cluster's view, and on canyon:1024 a visit decodes 1.3
-// children on average while the next rays through the cluster decode its others. 256 views find
-// 80% of those canyon:1024's primary rays need made already, half of them with 8 diffuse bounces
-// (docs/results.md, "The clusters' views in the decode cache").
+// 600 instructions to make), direct-mapped on the cluster's address and keyed by it, the scene's
+// tag and the child count (a crafted scene file's references could give one cluster two counts,
+// each checked on its own, and a view holds one count's layout): a visit that decodes a child needs
+// its cluster's view, and on canyon:1024 a visit decodes 1.3 children on average while the next
+// rays through the cluster decode its others. 256 views already hold 81% of the views canyon:1024's
+// primary rays need (50% with 8 diffuse bounces, 33% on stanford_bunny's; docs/results.md, "The
+// clusters' views in the decode cache").
 struct alignas(64) DecodeCache {
   static constexpr uint32_t kLogEntries = 12, kLogViews = 8;
   struct Entry {
@@ -1600,6 +1604,7 @@ struct alignas(64) DecodeCache {
     View v;
     const uint8_t* data = nullptr;  // the cluster's data (its header)
     uint64_t tag = 0;               // 0: empty
+    uint32_t children = 0;          // the multi-leaf's child count v was made for
   };
   Entry e[1u << kLogEntries];
   ViewEntry views[1u << kLogViews];
@@ -1624,6 +1629,7 @@ struct alignas(64) DecodeCache {
   }
 };
 static_assert(sizeof(DecodeCache::Entry) % 64 == 0, "entries on whole cache lines");
+static_assert(sizeof(DecodeCache::ViewEntry) == 512, "256 views in 128 KiB");
 // This thread's cache, read on every multi-leaf visit a ray enters: a plain thread_local pointer
 // (constant-initialized: no guard, no call), set by allocate_decode_cache (cluster.cpp) at the
 // thread's first cluster ray, which also frees the cache at thread exit.
@@ -1934,9 +1940,9 @@ struct ClusterLeaf {
   // ---- traversal side ----
   // What the children of one multi-leaf share, per visit (traverse.h, HasMultiLeafView): the
   // thread's decode cache, and the cluster's view (header, layout, anchors, ranges), looked up at
-  // the first child the cache does not hold (or for the ids of a hit), not at all when it holds
-  // every child the ray enters. The view is the cache's entry, made there if it holds another:
-  // nothing else writes the cache's views until the visit ends.
+  // the first child the cache does not hold, not at all when it holds every child the ray enters.
+  // The view is the cache's entry, made there if it holds another cluster's (or this one's for
+  // another child count): nothing else writes the cache's views until the visit ends.
   struct MultiLeafView {
     const uint8_t* data;
     uint32_t children;
@@ -1945,10 +1951,11 @@ struct ClusterLeaf {
     SLIM_INLINE const cluster::View& get(const Context& ctx) const {
       if (!v) {
         cluster::DecodeCache::ViewEntry& e = cache->view_slot(data);
-        if (e.data != data || e.tag != ctx.cache_tag) {
+        if (e.data != data || e.tag != ctx.cache_tag || e.children != children) {
           cluster::view_into<kLossless>(e.v, ctx.lattice, data, children);
           e.data = data;
           e.tag = ctx.cache_tag;
+          e.children = children;
         }
         v = &e.v;
       }

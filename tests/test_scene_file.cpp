@@ -807,7 +807,41 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
        "bvh.nodes", "misaligned node"},
       {"cluster", "CQNode8 child naming its own node",
        [](std::string& b) { put32(b, cq_root(b, "") + offsetof(CQNode8, child), kRefCQNode8); },
-       "bvh.nodes", "more node references than a tree over the node arena can hold"},
+       "bvh.nodes", "node referenced twice"},
+      // A multi-leaf named by two children of the root: with its own child count (the traversal
+      // would take the same cluster twice) and with one child fewer (two counts for one cluster,
+      // which the walk checks each on its own, where the decode cache keeps one count's view).
+      {"cluster", "multi-leaf referenced twice",
+       [](std::string& b) {
+         const uint64_t at = cq_root(b, "") + offsetof(CQNode8, child);
+         uint32_t c0;
+         std::memcpy(&c0, b.data() + at, 4);
+         ASSERT_EQ(NodeRef::tag(c0), kRefMulti);
+         put32(b, at + 4, c0);
+       },
+       "bvh.leaves", "multi-leaf referenced twice"},
+      {"cluster-lossless", "multi-leaf referenced twice with another child count",
+       [](std::string& b) {
+         const uint64_t at = cq_root(b, "") + offsetof(CQNode8, child);
+         uint32_t c0;
+         std::memcpy(&c0, b.data() + at, 4);
+         ASSERT_EQ(NodeRef::tag(c0), kRefMulti);
+         ASSERT_GT(NodeRef::blocks(c0), 1u);
+         put32(b, at + 4, c0 - (1u << 3));  // the block count's field, one less
+       },
+       "bvh.leaves", "multi-leaf referenced twice"},
+      {"bvh8-tri4v", "leaf referenced twice",
+       [](std::string& b) {  // the first node whose first child is a leaf: its second child too
+         const uint64_t nodes = section(b, "bvh.nodes").offset;
+         uint64_t ref = get64(b, section(b, "bvh.meta").offset);
+         ASSERT_EQ(NodeRef::tag(ref), kRefNode8);
+         uint64_t at = nodes + NodeRef::offset(ref) + offsetof(Node8, child);
+         while (NodeRef::tag(get64(b, at)) == kRefNode8)
+           at = nodes + NodeRef::offset(get64(b, at)) + offsetof(Node8, child);
+         ASSERT_EQ(NodeRef::tag(get64(b, at)), kRefLeaf);
+         put64(b, at + 8, get64(b, at));
+       },
+       "bvh.leaves", "leaf referenced twice"},
       {"cluster-lossless", "CQNode8 leaf base beyond the leaf arena",
        [](std::string& b) { put32(b, cq_root(b, "") + offsetof(CQNode8, leaf_base), 0x7fffffffu); },
        "bvh.leaves", "outside the leaf arena"},

@@ -471,7 +471,29 @@ struct Walker {
   const Bvh8& b;
   const std::string& p;
   const BvhWalkHooks& h;
-  uint64_t budget;
+  // Every node and leaf is referenced once (which also bounds the walk by the arenas' sizes): one
+  // mark per offset / grain, the grain the smallest size a node (or a leaf block, a multi-leaf
+  // header) takes, so that two nodes (leaves) that do not overlap never share a mark. A leaf
+  // referenced twice could be reached with two child counts, each checked on its own, where the
+  // traversal's caches hold what one count decoded (ClusterLeaf's views).
+  uint64_t node_grain, leaf_grain;
+  std::vector<bool> node_seen, leaf_seen;
+  Walker(const Bvh8& bvh, const std::string& prefix, const BvhWalkHooks& hooks)
+      : b(bvh),
+        p(prefix),
+        h(hooks),
+        node_grain(std::min({node_size(kRefNode8), node_size(kRefQNode8), node_size(kRefCQNode8)})),
+        leaf_grain(std::max<uint64_t>(
+            1, std::min<uint64_t>(bvh.block_bytes, hooks.multileaf_header_bytes))),
+        node_seen(bvh.nodes.size() / node_grain + 1),
+        leaf_seen(bvh.leaves.size() / leaf_grain + 1) {}
+  // Marks the node or leaf at `off` (inside its arena); false if it was marked before.
+  static bool first_visit(std::vector<bool>& seen, uint64_t off, uint64_t grain) {
+    const uint64_t i = off / grain;
+    if (seen[i]) return false;
+    seen[i] = true;
+    return true;
+  }
 
   [[noreturn]] void nodes_fault(uint64_t off, const std::string& what) {
     throw SectionFault{p + "bvh.nodes", off, what};
@@ -489,10 +511,6 @@ struct Walker {
 
   // `where`: the node holding the reference (for messages).
   void visit(uint64_t ref, int depth, uint64_t where) {
-    if (budget-- == 0)
-      nodes_fault(where,
-                  "more node references than a tree over the node arena can hold (a shared "
-                  "subtree or a cycle)");
     // The traversal stack holds 7 entries per level (kTraversalStackSize = 7 * 96 + 8).
     if (depth > 96) nodes_fault(where, "BVH deeper than 96 levels");
     const uint64_t off = NodeRef::offset(ref);
@@ -512,6 +530,10 @@ struct Walker {
         if (!fits(off, node_size(tag), b.nodes.size()))
           nodes_fault(off, "node outside the node arena (referenced from offset " +
                                std::to_string(where) + ")");
+        if (!first_visit(node_seen, off, node_grain))
+          nodes_fault(off,
+                      "node referenced twice (a shared subtree or a cycle; again from offset " +
+                          std::to_string(where) + ")");
         uint64_t child[8];
         child_refs(ref, b.nodes.data() + off, child);
         for (uint64_t c : child) visit(c, depth + 1, off);
@@ -521,6 +543,9 @@ struct Walker {
         const uint32_t nb = NodeRef::blocks(ref);
         if (nb == 0) leaves_fault(off, "leaf of zero blocks");
         if (off % h.leaf_align != 0) leaves_fault(off, "misaligned leaf");
+        if (off < b.leaves.size() && !first_visit(leaf_seen, off, leaf_grain))
+          leaves_fault(
+              off, "leaf referenced twice (again from node offset " + std::to_string(where) + ")");
         for (uint32_t i = 0; i < nb; ++i) block(off + uint64_t(i) * b.block_bytes);
         return;
       }
@@ -530,6 +555,9 @@ struct Walker {
         if (off % h.leaf_align != 0) leaves_fault(off, "misaligned multi-leaf");
         if (!fits(off, h.multileaf_header_bytes, b.leaves.size()))
           leaves_fault(off, "multi-leaf outside the leaf arena");
+        if (!first_visit(leaf_seen, off, leaf_grain))
+          leaves_fault(off, "multi-leaf referenced twice (again from node offset " +
+                                std::to_string(where) + ")");
         if (h.multi) {
           if (std::string e = h.multi(off, k); !e.empty()) leaves_fault(off, e);
         } else {
@@ -547,7 +575,7 @@ struct Walker {
 }  // namespace
 
 void walk_bvh_checked(const Bvh8& bvh, const std::string& p, const BvhWalkHooks& h) {
-  Walker w{bvh, p, h, 8 * (bvh.nodes.size() / sizeof(CQNode8)) + 2};
+  Walker w(bvh, p, h);
   w.visit(bvh.root, 0, 0);
 }
 

@@ -809,8 +809,9 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
        [](std::string& b) { put32(b, cq_root(b, "") + offsetof(CQNode8, child), kRefCQNode8); },
        "bvh.nodes", "node referenced twice"},
       // A multi-leaf named by two children of the root: with its own child count (the traversal
-      // would take the same cluster twice) and with one child fewer (two counts for one cluster,
-      // which the walk checks each on its own, where the decode cache keeps one count's view).
+      // would take the same cluster twice) and with one child fewer (two counts for one cluster:
+      // the cluster check accepts each count on its own, and the decode cache keeps one count's
+      // view).
       {"cluster", "multi-leaf referenced twice",
        [](std::string& b) {
          const uint64_t at = cq_root(b, "") + offsetof(CQNode8, child);

@@ -471,7 +471,7 @@ struct Walker {
   const Bvh8& b;
   const std::string& p;
   const BvhWalkHooks& h;
-  // Every node and leaf is referenced once (which also bounds the walk by the arenas' sizes): one
+  // No node or leaf offset is named twice (which also bounds the walk by the arenas' sizes): one
   // mark per offset / grain, the grain the smallest size a node (or a leaf block, a multi-leaf
   // header) takes, so that two nodes (leaves) that do not overlap never share a mark. A leaf
   // referenced twice could be reached with two child counts, each checked on its own, where the

@@ -79,8 +79,9 @@ struct SectionFault {
 // The bounds-safe walk of Scene::open's structure check (OpenOptions::check_structure): every
 // node reference (tag, offset, block count) inside its arena and aligned as the traversal's typed
 // loads need (Node8 64 bytes, QNode8 8, CQNode8 4, leaf blocks 4), depth within the traversal
-// stack, every node and leaf referenced once (no shared subtrees, shared leaves or cycles). Leaf
-// blocks are handed to `block(offset)`, multi-leaves of layouts with data of their own to
+// stack, no node or leaf offset named twice (no shared subtrees, shared leaves or cycles; a leaf
+// at another offset that overlaps one is bounds-checked block by block like any). Leaf blocks are
+// handed to `block(offset)`, multi-leaves of layouts with data of their own to
 // `multi(offset, children)` (offsets into the leaf arena, already checked to hold the block / the
 // multi-leaf header: multileaf_header_bytes). A non-empty answer is what is wrong: the walk throws
 // it as a SectionFault at that offset of the leaf arena. `prefix` names the sections ("" or

@@ -1586,12 +1586,12 @@ bool write_multileaf_boxes(const ClusterLattice& lat, bool lossless, const uint8
 // It keeps the clusters' views too (View: header, layout, anchors, per-child vertex ranges; some
 // 600 instructions to make), direct-mapped on the cluster's address and keyed by it, the scene's
 // tag and the child count (a view holds one count's layout; the structure check refuses a scene
-// file whose references name one cluster twice, possibly with two counts, and the key keeps each
-// count to its own view all the same): a visit that decodes a child needs its cluster's view, and
-// on canyon:1024 a visit decodes 1.3 children on average while the next rays through the cluster
-// decode its others. 256 views already hold 81% of the views canyon:1024's primary rays need (50%
-// with 8 diffuse bounces, 33% on stanford_bunny's; docs/results.md, "The clusters' views in the
-// decode cache").
+// file whose references name one multi-leaf twice, possibly with two counts, and the key keeps
+// each count to its own view all the same): a visit that decodes a child needs its cluster's view,
+// and on canyon:1024 a visit decodes 1.3 children on average while the next rays through the
+// cluster decode its others. 256 views already hold 81% of the views canyon:1024's primary rays
+// need (50% with 8 diffuse bounces, 33% on stanford_bunny's; docs/results.md, "The clusters' views
+// in the decode cache").
 struct alignas(64) DecodeCache {
   static constexpr uint32_t kLogEntries = 12, kLogViews = 8;
   struct Entry {

@@ -432,12 +432,21 @@ TEST(ClusterCodec, DecodeEqualsEncodeIdRuns) {
       std::vector<ClusterHeader> headers;
       check_codec(tm, lossless, 1e-5, 5 + k.run, k.shuffle, nullptr, nullptr, &headers);
       ASSERT_FALSE(::testing::Test::HasFatalFailure());
-      size_t wide = 0, highs = 0, repeats = 0, steps = 0;
+      size_t wide = 0, highs = 0, repeats = 0, steps = 0, doubles = 0;
       for (const ClusterHeader& h : headers) {
         wide += cluster::run_count(h) > 1 && cluster::offset_bits(h) > 0;
         highs += cluster::run_count(h) > 2;
         repeats += cluster::has_repeats(h) && !cluster::has_steps(h);
         steps += cluster::has_steps(h);
+        doubles += cluster::id_flag_planes(h) == 3;
+      }
+      // Faces numbered two or three apart: the double steps take strip neighbours (with ids one
+      // apart too, where a strip takes a run's faces out of order); shuffled, almost never.
+      if (!k.shuffle && k.stride > 1 && k.share == 1) {
+        EXPECT_GT(doubles, 0u) << k.run << " " << k.stride;
+      }
+      if (k.shuffle) {
+        EXPECT_LE(doubles, headers.size() / 10) << k.run;
       }
       // Faces numbered in order one apart (stride 1): strip neighbours often differ by one, and
       // the step bits take them; shuffled, almost never.
@@ -917,16 +926,6 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, bits), 25));   // lossy axis wider than 24 bits
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ib), 9));      // index wider than 8 bits
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 33));     // run offset wider than 32 bits
-  {                                                           // Step bits without repeat bits.
-    ClusterHeader hs;
-    std::memcpy(&hs, good.data(), sizeof(hs));
-    hs.ob &= 0x7f;
-    hs.nruns |= 0x80;
-    std::vector<uint8_t> b = good;
-    std::memcpy(b.data(), &hs, sizeof(hs));
-    EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, z.lattice, false, &why));
-    EXPECT_NE(why.find("step bits without repeat bits"), std::string::npos) << why;
-  }
   // The fine-planes bit outside a multi-leaf (an isolated leaf's cluster: no boxes).
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), good[offsetof(ClusterHeader, ob)] | 0x40));
   EXPECT_NE(why.find("fine-planes bit outside a lossy multi-leaf"), std::string::npos) << why;
@@ -1061,6 +1060,34 @@ TEST(ClusterCodec, CheckRejectsMalformedBlocks) {
   const cluster::Layout ql = cluster::layout(qh, 2, z.lattice, false);
   b = qgood;
   b[sizeof(ClusterHeader) + (ql.ids >> 3)] |= uint8_t(1u << (ql.ids & 7));
+  EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, z.lattice, false, &why));
+  EXPECT_NE(why.find("repeat or step bit on triangle 0"), std::string::npos) << why;
+  // The double steps' plane: never on triangle 0 either. Ids three apart in the strips' order (the
+  // order of ids with no neighbours among them, which the strip search does not follow).
+  for (size_t i = 0; i < rtm.tri_count(); ++i) {
+    rtm.prim_ids[i] = uint32_t(i) * 100000;
+    rtm.geom_ids[i] = 0;
+  }
+  src = source_of(rtm, z, false);
+  {
+    const std::vector<uint8_t> apart = cluster::encode(src, prims, counts, 2, false);
+    const cluster::View v = cluster::view<false>(z.lattice, apart.data(), 2);
+    for (uint32_t j = 0; j < 16; ++j) {
+      uint32_t geom, prim;
+      cluster::decode_ids(v, j, geom, prim);
+      rtm.prim_ids[prim / 100000] = 5000 + 3 * j;
+    }
+  }
+  src = source_of(rtm, z, false);
+  const std::vector<uint8_t> dgood = cluster::encode(src, prims, counts, 2, false);
+  ClusterHeader dh;
+  std::memcpy(&dh, dgood.data(), sizeof(dh));
+  ASSERT_EQ(cluster::id_flag_planes(dh), 3u);
+  ASSERT_TRUE(cluster::check(dgood.data(), dgood.size(), 2, z.lattice, false, &why)) << why;
+  const cluster::Layout dl = cluster::layout(dh, 2, z.lattice, false);
+  const uint64_t d0 = dl.ids + 2 * uint64_t(dl.ntris);  // the third plane's triangle 0
+  b = dgood;
+  b[sizeof(ClusterHeader) + (d0 >> 3)] |= uint8_t(1u << (d0 & 7));
   EXPECT_FALSE(cluster::check(b.data(), b.size(), 2, z.lattice, false, &why));
   EXPECT_NE(why.find("repeat or step bit on triangle 0"), std::string::npos) << why;
   EXPECT_FALSE(corrupt(offsetof(ClusterHeader, ob), 0x40));  // fine planes, no boxes

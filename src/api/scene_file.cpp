@@ -51,10 +51,11 @@ constexpr char kMagic[8] = {'S', 'L', 'I', 'M', 'S', 'C', 'N', '\n'};
 // bit, and the clusters' primIDs may take step bits (the top bit of nruns). Version 13: a lossy
 // cluster's per-child vertex ranges hold each vertex as one mixed-radix number. Version 14: the
 // cluster lattice's steps may be (8 + m) 2^e / 8 (ClusterLattice::step), the box extents their
-// products with the scale (cluster::box_extent). Any change of a section's layout (a node, block
-// or context struct), of what its bytes decode to, or of the header needs a new version: the
-// sections are the in-memory structs byte for byte.
-constexpr uint32_t kVersion = 14;
+// products with the scale (cluster::box_extent). Version 15: a cluster's primIDs may take steps of
+// up to 3 (three flag planes). Any change of a section's layout (a node, block or context struct),
+// of what its bytes decode to, or of the header needs a new version: the sections are the
+// in-memory structs byte for byte.
+constexpr uint32_t kVersion = 15;
 constexpr uint32_t kByteOrder = 0x01020304;
 constexpr uint64_t kAlign = 64;
 // Bounds the table before it is read (the header size check then bounds it by the file size): a

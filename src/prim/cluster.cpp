@@ -583,24 +583,35 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // look-up at each use.)
   const uint32_t* ord = order.data();
   // Step bits (cluster.h): triangle i with triangle i - 1's geomID and a primID one above or one
-  // below it takes no entry either.
-  uint64_t rep_mask = 0, up_mask = 0, down_mask = 0;
+  // below it takes no entry either; with the double steps, two or three above or below.
+  // up[m] / down[m]: bit i if triangle i's primID is its predecessor's plus / minus m.
+  uint64_t rep_mask = 0, up[4] = {}, down[4] = {};
   for (uint32_t i = 1; i < ntris; ++i) {
-    const uint32_t id = s.prim_ids[ord[i]], prev = s.prim_ids[ord[i - 1]];
-    const bool geom = s.geom_ids[ord[i]] == s.geom_ids[ord[i - 1]];
-    rep_mask |= uint64_t(geom && id == prev) << i;
-    up_mask |= uint64_t(geom && id == prev + 1) << i;
-    down_mask |= uint64_t(geom && id == prev - 1) << i;
+    if (s.geom_ids[ord[i]] != s.geom_ids[ord[i - 1]]) continue;
+    const uint32_t d = s.prim_ids[ord[i]] - s.prim_ids[ord[i - 1]];  // mod 2^32
+    const uint64_t bit = uint64_t(1) << i;
+    if (d == 0)
+      rep_mask |= bit;
+    else if (d <= 3)
+      up[d] |= bit;
+    else if (0u - d <= 3)
+      down[0u - d] |= bit;
   }
   const uint32_t nrep = uint32_t(__builtin_popcountll(rep_mask));
-  const uint64_t step_mask = rep_mask | up_mask | down_mask;
-  const uint32_t nstep = uint32_t(__builtin_popcountll(step_mask));
-  // The entries' ids with step bits (the triangles without a step), sorted.
-  thread_local std::vector<uint32_t> step_ids;
-  step_ids.clear();
-  for (uint32_t i = 0; i < ntris; ++i)
-    if (!((step_mask >> i) & 1)) step_ids.push_back(s.prim_ids[ord[i]]);
-  std::sort(step_ids.begin(), step_ids.end());
+  // Triangles without an entry with the step bits (mode 1) and with the double steps (mode 2).
+  const uint64_t step_mask[3] = {rep_mask, rep_mask | up[1] | down[1],
+                                 rep_mask | up[1] | down[1] | up[2] | down[2] | up[3] | down[3]};
+  const uint32_t nstep[3] = {nrep, uint32_t(__builtin_popcountll(step_mask[1])),
+                             uint32_t(__builtin_popcountll(step_mask[2]))};
+  // The entries' ids in each step mode (the triangles without a step), sorted.
+  thread_local std::vector<uint32_t> step_ids[3];
+  for (int mode = 1; mode < 3; ++mode) {
+    step_ids[mode].clear();
+    if (nstep[mode] <= nstep[mode - 1]) continue;  // not tried (below)
+    for (uint32_t i = 0; i < ntris; ++i)
+      if (!((step_mask[mode] >> i) & 1)) step_ids[mode].push_back(s.prim_ids[ord[i]]);
+    std::sort(step_ids[mode].begin(), step_ids[mode].end());
+  }
   // Bits of the ids' entries at `entry` bits each, and whether the repeat bits make them fewer
   // (all ids; the step bits' runs are those of step_ids, below).
   auto entry_bits = [&](uint64_t entry, bool& repeats) {
@@ -612,15 +623,18 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   // takes every id, a wider ob costs more bits each entry and cannot win: the search stops there.
   uint64_t best_bits = ~uint64_t(0);
   uint32_t best_ob = 0, best_pb = 0;
-  bool repeats = false, id_steps = false;
-  // With no step but the repeats, the step bits only add their plane: not tried.
-  for (int with_steps = 0; with_steps < (nstep > nrep ? 2 : 1); ++with_steps) {
-    const std::vector<uint32_t>& set = with_steps ? step_ids : ids;
-    const uint64_t nmin = with_steps ? ntris - nstep : ntris - nrep;  // entries at least
+  bool repeats = false;
+  int id_mode = 0;  // 0: no step bits (repeat bits or none); 1: step bits; 2: double steps
+  // A mode that takes no more triangles than the one before only adds a plane: not tried. The
+  // modes with fewer entries first: their sizes end the other modes' searches sooner (below).
+  for (int mode = 2; mode >= 0; --mode) {
+    if (mode && nstep[mode] <= nstep[mode - 1]) continue;
+    const std::vector<uint32_t>& set = mode ? step_ids[mode] : ids;
+    const uint64_t nmin = ntris - nstep[mode];  // entries at least
     for (uint32_t ob = 0; ob <= 32; ++ob) {
-      // Every entry takes at least ob + gb bits (entry_bits, with or without the repeat bits): once
-      // that alone reaches the best, no wider ob can take fewer bits.
-      if (nmin * (ob + gb) >= best_bits) break;
+      // Every entry takes at least ob + gb bits (entry_bits, with or without the repeat bits), and
+      // a step mode its planes: once that alone reaches the best, no wider ob can take fewer bits.
+      if (uint64_t(mode ? 1 + mode : 0) * ntris + nmin * (ob + gb) >= best_bits) break;
       // The first id starts the first run (neither set is empty: the first triangle has no step).
       const uint32_t* ids_of = set.data();
       const size_t nids = set.size();
@@ -652,23 +666,23 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       const uint64_t entry = bit_width(uint32_t(m)) + ob + gb;
       const uint64_t bits =
           bit_width(set[0]) + ef +
-          (with_steps ? 2 * ntris + nmin * entry : entry_bits(entry, with_repeats));
-      if (bits < best_bits) {
+          (mode ? (1 + uint64_t(mode)) * ntris + nmin * entry : entry_bits(entry, with_repeats));
+      if (bits < best_bits || (bits == best_bits && mode < id_mode)) {  // ties: fewer planes
         best_bits = bits;
         best_ob = ob;
         best_pb = pb;
-        repeats = with_repeats;
-        id_steps = with_steps;
+        repeats = mode == 1 || (mode == 0 && with_repeats);
+        id_mode = mode;
       }
       if (nstarts == 1) break;
     }
   }
   thread_local std::vector<uint32_t> starts;
   starts.reserve(ntris);
-  runs_of(id_steps ? step_ids : ids, best_ob, starts);
+  runs_of(id_mode ? step_ids[id_mode] : ids, best_ob, starts);
   prim_base = starts[0];
   const uint32_t bb = bit_width(prim_base);
-  h.nruns = uint8_t(starts.size() | (id_steps ? 0x80 : 0));
+  h.nruns = uint8_t(starts.size() | (id_mode ? 0x80 : 0));
   h.ob = uint8_t(best_ob | (planes && lb.fine ? 0x40 : 0) | (repeats ? 0x80 : 0));
   set_id_widths(h, best_pb, gb, bb, hb);
   // e_i of run i (i >= 1) and the run highs' length.
@@ -676,7 +690,7 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
   const size_t nst = starts.size();
   auto run_e = [&](size_t i) { return uint64_t(st[i] - prim_base) - (uint64_t(i) << best_ob); };
   const uint64_t highs = nst > 1 ? (nst - 1) + (run_e(nst - 1) >> best_pb) : 0;
-  const uint32_t nentries = id_steps ? ntris - nstep : repeats ? ntris - nrep : ntris;
+  const uint32_t nentries = id_mode || repeats ? ntris - nstep[id_mode] : ntris;
 
   const Layout L = layout(h, uint32_t(k), s.lattice, s.lossless, vertex_bits);
   if (L.ntris != ntris) throw std::logic_error("cluster: child sizes do not give the triangles");
@@ -724,16 +738,18 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
       for (int a = 0; a < 3; ++a) w.put(codes[3 * i + a] - anchor[a], axis_bits(h, a));
   if (w.pos != L.runs) throw std::logic_error("cluster: vertex section size mismatch");
   for (size_t i = 1; i < nst; ++i) w.put(uint32_t(run_e(i)), best_pb);
-  // The repeat bits, then with step bits the second plane: (repeat, step) = (1, 0) repeat, (0, 1)
-  // one above, (1, 1) one below (cluster.h).
+  // The flag planes (cluster.h): the repeat bits, then with step bits the second plane: (repeat,
+  // step) = (1, 0) repeat, (0, 1) one above, (1, 1) one below; with double steps (r, s, d) a step
+  // of r ? -(s + 2d) : s + 2d, (1, 0, 0) a repeat.
   auto repeated = [&](uint32_t i) {
-    return id_steps ? ((step_mask >> i) & 1) : repeats && ((rep_mask >> i) & 1);
+    return (id_mode || repeats) && ((step_mask[id_mode] >> i) & 1);
   };
-  if (repeats)
+  const uint64_t planes_of[3] = {rep_mask | down[1] | down[2] | down[3],  // r: repeats, steps down
+                                 up[1] | down[1] | up[3] | down[3],       // s: steps of 1 and 3
+                                 up[2] | down[2] | up[3] | down[3]};      // d: steps of 2 and 3
+  for (uint32_t plane = 0; plane < id_flag_planes(h); ++plane)
     for (uint32_t i = 0; i < ntris; ++i)
-      w.put(id_steps ? uint32_t(((rep_mask | down_mask) >> i) & 1) : repeated(i), 1);
-  if (id_steps)
-    for (uint32_t i = 0; i < ntris; ++i) w.put(uint32_t(((up_mask | down_mask) >> i) & 1), 1);
+      w.put(uint32_t((planes_of[plane] & step_mask[id_mode]) >> i) & 1, 1);
   size_t r = 0;
   auto put_ref = [&] {
     const int32_t d = refs[r++];
@@ -939,7 +955,6 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
   const uint32_t sizes = child_sizes(h), ntris = tri_count(h, children);
   if (run_count(h) < 1 || run_count(h) > ntris)
     return fail("run count must be 1..the triangle count");
-  if (has_steps(h) && !has_repeats(h)) return fail("step bits without repeat bits");
   if (children < 8 && (sizes >> (3 * children)) != 0)
     return fail("sizes given for children beyond the child count");
   Layout L = layout(h, children, lat, lossless);  // the plain vertex section, moved below
@@ -1019,14 +1034,18 @@ bool check(const uint8_t* data, uint64_t size, uint32_t children, const ClusterL
         if (idx[q][j] >= h.nverts)
           return fail("vertex index " + std::to_string(idx[q][j]) + " >= vertex count");
   }
-  // The repeat bits (none on triangle 0), the ids' entries inside the data, their run indices.
+  // The flag planes (none set on triangle 0), the ids' entries inside the data, their run indices.
   uint32_t entries = ntris;
-  if (has_repeats(h)) {
-    const uint64_t steps = has_steps(h) ? L.ids + ntris : 0;  // the step bits, if any
-    if (get(L.ids, 1) || (steps && get(steps, 1))) return fail("repeat or step bit on triangle 0");
-    for (uint32_t t = 1; t < ntris; ++t)
-      entries -= get(L.ids + t, 1) | (steps ? get(steps + t, 1) : 0);
-  }
+  const uint32_t planes = id_flag_planes(h);
+  for (uint32_t plane = 0; plane < planes; ++plane)
+    if (get(L.ids + uint64_t(plane) * ntris, 1)) return fail("repeat or step bit on triangle 0");
+  if (planes)
+    for (uint32_t t = 1; t < ntris; ++t) {
+      uint32_t none = 0;
+      for (uint32_t plane = 0; plane < planes; ++plane)
+        none |= get(L.ids + uint64_t(plane) * ntris + t, 1);
+      entries -= none;
+    }
   if (data_bytes(h, children, lat, lossless, uint64_t(entries) * L.idbits, vertex_bits) > size)
     return fail("stream runs past the data (id entries)");
   const uint64_t avail = 8 * (size - stream_offset(h));

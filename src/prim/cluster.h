@@ -28,7 +28,9 @@
 //     run lows: for runs 1..nruns-1 (nruns = run_count(h)), the low pb bits of the run's e
 //     repeats:  if the header's repeat bit (top bit of ob) is set, ntris bits: bit t set if
 //               triangle t has triangle t - 1's ids (never triangle 0's; without step bits);
-//               with the step bit too (top bit of nruns), ntris more bits, the step bits (below)
+//               with the step bit too (top bit of nruns), ntris more bits, the step bits (below);
+//               the step bit without the repeat bit: three planes of ntris bits (the signs and
+//               repeats, the single steps, the double steps: below)
 //     topology: topology_bits(h) bits, each child a generalized strip (below)
 //     ids:      in triangle order, an entry per triangle whose repeat (and step) bit is clear
 //               (every triangle without repeat bits): rb = bit_width(nruns - 1) bits run index, ob
@@ -90,6 +92,11 @@
 // entry before it: popcounts) plus the +1 and -1 steps of triangles p + 1..t (popcounts), and the
 // runs are those of the entries' ids alone (prim_base their smallest). The encoder takes them
 // where they save more than their 2 ntris bits cost (igea: about 2 bits a triangle).
+// Three planes (the step bit without the repeat bit): meshes whose faces were numbered in two
+// interleaved passes or along rows of quads (ogre: 28% of the triangles in strip order two or three
+// from their predecessor) take steps of up to 3. Triangle t's bits (r, s, d) say (0, 0, 0) an
+// entry, else a step of r ? -(s + 2d) : s + 2d from its predecessor's primID ((1, 0, 0): the same
+// ids), summed as above by popcounts (the d plane's counted twice).
 //
 // Lossy (`cluster`): a vertex's code is its lattice integer q = round((x - origin) / step) per
 // axis, decoded as origin + float(q) * step (per axis (8 + m) 2^e / 8 with m < 8: the three of
@@ -257,6 +264,11 @@ SLIM_INLINE bool has_repeats(const ClusterHeader& h) { return h.ob >> 7; }
 // The primID runs; whether the cluster has step bits (with its repeat bits).
 SLIM_INLINE uint32_t run_count(const ClusterHeader& h) { return h.nruns & 127u; }
 SLIM_INLINE bool has_steps(const ClusterHeader& h) { return h.nruns >> 7; }
+// The ids' flag planes (ntris bits each, from Layout::ids): 0; 1, the repeat bits; 2, with the
+// step bits; 3 (the step bit without the repeat bit), with the double steps.
+SLIM_INLINE uint32_t id_flag_planes(const ClusterHeader& h) {
+  return has_repeats(h) ? 1 + uint32_t(has_steps(h)) : 3 * uint32_t(has_steps(h));
+}
 // A lossy multi-leaf's cluster whose boxes take 8-bit planes (their low bits right after the
 // header; below, "the lossy clusters' multi-leaf boxes").
 SLIM_INLINE bool has_fine_planes(const ClusterHeader& h) { return (h.ob >> 6) & 1; }
@@ -592,7 +604,7 @@ SLIM_INLINE Layout layout(const ClusterHeader& h, uint32_t k, const ClusterLatti
   l.verts = l.table + uint64_t(k ? k - 1 : 0) * (l.tb + l.vbw);
   l.runs = l.verts + uint64_t(h.nverts) * l.vbits;
   l.ids = l.runs + uint64_t(run_count(h) ? run_count(h) - 1 : 0) * run_low_bits(h);
-  l.topo = l.ids + (has_repeats(h) ? l.ntris : 0) * (has_steps(h) ? 2 : 1);
+  l.topo = l.ids + uint64_t(l.ntris) * id_flag_planes(h);
   l.end = l.topo + tbits;
   if (vertex_bits != kPlainVertexBits) with_vertex_bits(l, h, vertex_bits);
   return l;
@@ -1347,7 +1359,7 @@ struct ChildIds {
   uint32_t prim_base = 0, geom_base = 0;
   uint8_t idbits = 0, rb = 0, ob = 0, gb = 0, pb = 0;
   uint8_t first = 0, ntris = 0;  // the child's first triangle; the cluster's triangles
-  uint8_t flag_planes = 0;       // 0; 1: repeat bits; 2: repeat and step bits
+  uint8_t flag_planes = 0;       // id_flag_planes
 };
 // The ids of the triangles from triangle `first` of the cluster `v` on.
 SLIM_INLINE ChildIds child_ids(const View& v, uint32_t first) {
@@ -1359,7 +1371,7 @@ SLIM_INLINE ChildIds child_ids(const View& v, uint32_t first) {
   c.runs = L.runs;
   c.first = uint8_t(first);
   c.ntris = uint8_t(L.ntris);
-  c.flag_planes = uint8_t(has_repeats(h) ? 1 + has_steps(h) : 0);
+  c.flag_planes = uint8_t(id_flag_planes(h));
   const uint32_t bb = prim_base_bits(h);
   c.prim_base = read_bits(v.bits, L.bases, bb);
   c.geom_base = read_bits(v.bits, L.bases + bb, geom_base_bits(h));
@@ -1399,15 +1411,23 @@ SLIM_INLINE uint32_t run_start(const uint8_t* bits, const ChildIds& c, uint64_t 
 }
 // primID and geomID of triangle `first + l` (bits: the cluster's stream; l below the child's
 // triangle count: a padding lane names a triangle of the next child, or none). With repeat bits
-// (r) and step bits (s; none: 0), the triangles without an entry are those with r or s set
-// (triangle 0's bits are ignored: it always has one); triangle t takes the ids of the last
-// triangle p <= t with an entry, its entry p less the triangles without one before it, plus the
-// +1 steps (s and not r) less the -1 steps (r and s) of triangles p + 1..t; the entries are ntris
-// less all triangles without one.
+// (r), step bits (s) and double steps (d; those missing: 0), the triangles without an entry are
+// those with r, s or d set (triangle 0's bits are ignored: it always has one); triangle t takes the
+// ids of the last triangle p <= t with an entry, its entry p less the triangles without one before
+// it, plus the steps s + 2d of triangles p + 1..t without r less those with r; the entries are
+// ntris less all triangles without one.
+// The flag plane of ntris <= 64 bits from bit `pos` (bits beyond ntris as the stream has them):
+// one 64-bit load, and a second one where the plane reaches into a ninth byte (more than 56 of the
+// plane's bits then lie behind its first byte, so the load ends inside the read slack); the
+// choice without a branch (the shift's start varies from cluster to cluster).
 SLIM_INLINE uint64_t id_flag_bits(const uint8_t* bits, uint64_t pos, uint32_t ntris) {
-  uint64_t all = read_bits(bits, pos, 32);  // the second read only inside the bits
-  if (ntris > 32) all |= uint64_t(read_bits(bits, pos + 32, 32)) << 32;
-  return all & ((uint64_t(2) << ((ntris - 1) & 63)) - 1) & ~uint64_t(1);
+  const uint8_t* at = bits + (pos >> 3);
+  const uint32_t sh = uint32_t(pos & 7);
+  const bool two = sh + ntris > 64;  // then sh >= 1
+  uint64_t x, y;
+  std::memcpy(&x, at, 8);
+  std::memcpy(&y, at + (two ? 8 : 0), 8);
+  return (x >> sh) | (two ? (y << 1) << (63 - sh) : 0);
 }
 SLIM_INLINE void decode_ids(const uint8_t* bits, const ChildIds& c, uint32_t l, uint32_t& geom,
                             uint32_t& prim) {
@@ -1417,13 +1437,16 @@ SLIM_INLINE void decode_ids(const uint8_t* bits, const ChildIds& c, uint32_t l, 
   if (c.flag_planes) {
     const uint64_t r = id_flag_bits(bits, c.repeats, c.ntris);
     const uint64_t s = c.flag_planes > 1 ? id_flag_bits(bits, c.repeats + c.ntris, c.ntris) : 0;
-    const uint64_t none = r | s, upto = (uint64_t(2) << t) - 1;  // no entry; triangles 0..t
-    p = 63 - uint32_t(__builtin_clzll(~none & upto));            // triangle 0 has an entry
+    const uint64_t d =
+        c.flag_planes > 2 ? id_flag_bits(bits, c.repeats + 2 * uint64_t(c.ntris), c.ntris) : 0;
+    const uint64_t valid = (uint64_t(2) << ((c.ntris - 1) & 63)) - 2;  // triangles 1..ntris - 1
+    const uint64_t none = (r | s | d) & valid, upto = (uint64_t(2) << t) - 1;  // no entry; 0..t
+    p = 63 - uint32_t(__builtin_clzll(~none & upto));  // triangle 0 has an entry
     entry = p - uint32_t(__builtin_popcountll(none & ((uint64_t(1) << p) - 1)));
     entries -= uint32_t(__builtin_popcountll(none));
     const uint64_t after = upto & ~((uint64_t(2) << p) - 1);  // triangles p + 1..t
-    step = int32_t(__builtin_popcountll(s & ~r & after)) -
-           int32_t(__builtin_popcountll(s & r & after));
+    auto count = [after](uint64_t x) { return int32_t(__builtin_popcountll(x & after)); };
+    step = count(s & ~r) + 2 * count(d & ~r) - count(s & r) - 2 * count(d & r);
   }
   const uint64_t highs = c.entries + uint64_t(entries) * c.idbits;
   const uint64_t pos = c.entries + uint64_t(entry) * c.idbits;

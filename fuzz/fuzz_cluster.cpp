@@ -10,8 +10,10 @@
 //      axis, and of the input size's widths);
 //   2. round trip: the input bytes as vertex codes (lossless: float keys, or the keys of decimals
 //      q x 10^-k, cluster.h's decimal mode) and a topology of up to 64 triangles in up to 8
-//      children: encode(), check() accepts it, and every child decodes to its triangles (in the
-//      encoder's strip order), the codes' positions and the ids bit for bit;
+//      children (each triangle's primID the input's 32 bits, or within 3 of the previous
+//      triangle's where its geomID byte has bit 7): encode(), check() accepts it, and every child
+//      decodes to its triangles (in the encoder's strip order), the codes' positions and the ids
+//      bit for bit;
 //   3. lossy: the frame of the multi-leaf boxes on the lattice (cluster::LatticeBoxes8) made for
 //      that cluster decodes as the builder made it and encloses every child's decoded triangles;
 //   4. lossy: the input's first 39 bytes as a multi-leaf's boxes and the rest as the cluster behind
@@ -159,7 +161,10 @@ void round_trip(Reader& in, uint32_t ntris, bool lossless) {
   for (uint32_t t = 0; t < ntris; ++t) {
     for (int k = 0; k < 3; ++k) tris[3 * t + k] = in.byte() % nv;
     in.bytes(&prim[t], 4);
-    geom[t] = in.byte() & 3;
+    const uint8_t g = in.byte();
+    geom[t] = g & 3;
+    // Bit 7 of that byte: the primID within 3 of the previous triangle's (the ids' steps).
+    if (t && (g & 0x80)) prim[t] = prim[t - 1] + prim[t] % 7 - 3;
     order[t] = t;
   }
   ClusterSource src;

@@ -705,6 +705,17 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
       set_root_child(b, "", NodeRef::make(tag, (section(b, "bvh.nodes").size + 1024) & ~63ull));
     };
   };
+  // The root CQNode8's second child: its first child (a multi-leaf) with `fewer` children less.
+  auto root_multileaf_twice = [](uint32_t fewer) {
+    return [fewer](std::string& b) {
+      const uint64_t at = cq_root(b, "") + offsetof(CQNode8, child);
+      uint32_t c0;
+      std::memcpy(&c0, b.data() + at, 4);
+      ASSERT_EQ(NodeRef::tag(c0), kRefMulti);
+      ASSERT_GT(NodeRef::blocks(c0), fewer);
+      put32(b, at + 4, c0 - (fewer << 3));  // the block count's field (bits 3..7)
+    };
+  };
   auto block_field = [](uint64_t field, uint32_t value) {
     return [field, value](std::string& b) { put32(b, first_block(b, "") + field, value); };
   };
@@ -812,25 +823,10 @@ TEST(SceneFile, StructureCheckCatchesEachFormatsBadReferences) {
       // would take the same cluster twice) and with one child fewer (two counts for one cluster:
       // the cluster check accepts each count on its own, and the decode cache keeps one count's
       // view).
-      {"cluster", "multi-leaf referenced twice",
-       [](std::string& b) {
-         const uint64_t at = cq_root(b, "") + offsetof(CQNode8, child);
-         uint32_t c0;
-         std::memcpy(&c0, b.data() + at, 4);
-         ASSERT_EQ(NodeRef::tag(c0), kRefMulti);
-         put32(b, at + 4, c0);
-       },
-       "bvh.leaves", "multi-leaf referenced twice"},
+      {"cluster", "multi-leaf referenced twice", root_multileaf_twice(0), "bvh.leaves",
+       "multi-leaf referenced twice"},
       {"cluster-lossless", "multi-leaf referenced twice with another child count",
-       [](std::string& b) {
-         const uint64_t at = cq_root(b, "") + offsetof(CQNode8, child);
-         uint32_t c0;
-         std::memcpy(&c0, b.data() + at, 4);
-         ASSERT_EQ(NodeRef::tag(c0), kRefMulti);
-         ASSERT_GT(NodeRef::blocks(c0), 1u);
-         put32(b, at + 4, c0 - (1u << 3));  // the block count's field, one less
-       },
-       "bvh.leaves", "multi-leaf referenced twice"},
+       root_multileaf_twice(1), "bvh.leaves", "multi-leaf referenced twice"},
       {"bvh8-tri4v", "leaf referenced twice",
        [](std::string& b) {  // the first node whose first child is a leaf: its second child too
          const uint64_t nodes = section(b, "bvh.nodes").offset;

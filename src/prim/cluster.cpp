@@ -633,8 +633,9 @@ std::vector<uint8_t> encode(const ClusterSource& s, const uint32_t* const* prims
     const uint64_t nmin = ntris - nstep[mode];  // entries at least
     for (uint32_t ob = 0; ob <= 32; ++ob) {
       // Every entry takes at least ob + gb bits (entry_bits, with or without the repeat bits), and
-      // a step mode its planes: once that alone reaches the best, no wider ob can take fewer bits.
-      if (uint64_t(mode ? 1 + mode : 0) * ntris + nmin * (ob + gb) >= best_bits) break;
+      // a step mode its planes: once that alone exceeds the best, no wider ob can take as few bits
+      // (a tie goes on: a mode with fewer planes takes it).
+      if (uint64_t(mode ? 1 + mode : 0) * ntris + nmin * (ob + gb) > best_bits) break;
       // The first id starts the first run (neither set is empty: the first triangle has no step).
       const uint32_t* ids_of = set.data();
       const size_t nids = set.size();

@@ -32,8 +32,8 @@
 //               the step bit without the repeat bit: three planes of ntris bits (the signs and
 //               repeats, the single steps, the double steps: below)
 //     topology: topology_bits(h) bits, each child a generalized strip (below)
-//     ids:      in triangle order, an entry per triangle whose repeat (and step) bit is clear
-//               (every triangle without repeat bits): rb = bit_width(nruns - 1) bits run index, ob
+//     ids:      in triangle order, an entry per triangle whose flag bits are all clear (every
+//               triangle without flag planes): rb = bit_width(nruns - 1) bits run index, ob
 //               (the low 6 bits of the header's ob) bits offset in the run (primID = prim_base +
 //               start + offset), gb bits geomID - geom_base
 //     run highs: for runs 1..nruns-1 in order, e >> pb in unary (that many 0 bits, then a 1);
@@ -261,7 +261,8 @@ SLIM_INLINE void set_id_widths(ClusterHeader& h, uint32_t pb, uint32_t gb, uint3
 // Bits of a primID's offset in its run; whether the cluster has repeat bits.
 SLIM_INLINE uint32_t offset_bits(const ClusterHeader& h) { return h.ob & 63u; }
 SLIM_INLINE bool has_repeats(const ClusterHeader& h) { return h.ob >> 7; }
-// The primID runs; whether the cluster has step bits (with its repeat bits).
+// The primID runs; whether the cluster has step bits (with its repeat bits; without them, the
+// three planes of the double steps: id_flag_planes).
 SLIM_INLINE uint32_t run_count(const ClusterHeader& h) { return h.nruns & 127u; }
 SLIM_INLINE bool has_steps(const ClusterHeader& h) { return h.nruns >> 7; }
 // The ids' flag planes (ntris bits each, from Layout::ids): 0; 1, the repeat bits; 2, with the
@@ -555,10 +556,10 @@ SLIM_INLINE uint32_t anchor_bits(const ClusterLattice& lat, bool lossless, int a
 }
 
 // Bit positions of the streams of a cluster of k children.
-// ids: the repeat bits; end: the topology's end, where the ids' entries begin (as many as
-// triangles without their repeat bit: one popcount), then the run highs (they end after their
-// nruns - 1 one bits). The stream's length depends on both, so check() and the encoder find it,
-// not the layout.
+// ids: the flag planes (id_flag_planes); end: the topology's end, where the ids' entries begin
+// (as many as triangles whose flag bits are all clear: popcounts), then the run highs (they end
+// after their nruns - 1 one bits). The stream's length depends on both, so check() and the
+// encoder find it, not the layout.
 struct Layout {
   uint64_t table = 0, verts = 0, runs = 0, ids = 0, topo = 0, end = 0;  // from the stream start
   uint32_t aw[3] = {};                                                  // bits per anchor, per axis
@@ -1353,7 +1354,7 @@ SLIM_INLINE void decode_child(const ClusterLattice& lat, const uint8_t* data, ui
 // What the ids of a child's triangles take from the cluster's view (kept with a decoded child in
 // the DecodeCache, so that a hit in a cached child needs no view).
 struct ChildIds {
-  uint64_t repeats = 0;  // bit of the repeat bits
+  uint64_t repeats = 0;  // bit of the flag planes (the first: the repeat bits)
   uint64_t entries = 0;  // bit of the ids' entries
   uint64_t runs = 0;     // bit of the run starts' low parts
   uint32_t prim_base = 0, geom_base = 0;
@@ -1417,9 +1418,10 @@ SLIM_INLINE uint32_t run_start(const uint8_t* bits, const ChildIds& c, uint64_t 
 // it, plus the steps s + 2d of triangles p + 1..t without r less those with r; the entries are
 // ntris less all triangles without one.
 // The flag plane of ntris <= 64 bits from bit `pos` (bits beyond ntris as the stream has them):
-// one 64-bit load, and a second one where the plane reaches into a ninth byte (more than 56 of the
-// plane's bits then lie behind its first byte, so the load ends inside the read slack); the
-// choice without a branch (the shift's start varies from cluster to cluster).
+// two 64-bit loads, the second from the next word where the plane reaches into a ninth byte (more
+// than 56 of the plane's bits then lie behind its first byte, so the load ends inside the read
+// slack), else from the same word; the choice without a branch (the shift's start varies from
+// cluster to cluster).
 SLIM_INLINE uint64_t id_flag_bits(const uint8_t* bits, uint64_t pos, uint32_t ntris) {
   const uint8_t* at = bits + (pos >> 3);
   const uint32_t sh = uint32_t(pos & 7);

@@ -544,10 +544,10 @@ struct Walker {
         const uint32_t nb = NodeRef::blocks(ref);
         if (nb == 0) leaves_fault(off, "leaf of zero blocks");
         if (off % h.leaf_align != 0) leaves_fault(off, "misaligned leaf");
-        if (off < b.leaves.size() && !first_visit(leaf_seen, off, leaf_grain))
+        for (uint32_t i = 0; i < nb; ++i) block(off + uint64_t(i) * b.block_bytes);
+        if (!first_visit(leaf_seen, off, leaf_grain))  // off inside the arena: block() checked it
           leaves_fault(
               off, "leaf referenced twice (again from node offset " + std::to_string(where) + ")");
-        for (uint32_t i = 0; i < nb; ++i) block(off + uint64_t(i) * b.block_bytes);
         return;
       }
       case kRefMulti: {

@@ -1746,6 +1746,73 @@ TEST(ClusterScene, DecodesItsOwnTrianglesRealMesh) {
   EXPECT_FALSE(Scene::build(m, BuildOptions::from_config("cluster-lossless")).decoded_triangles());
 }
 
+// cluster_face_order on a mesh whose faces are shuffled (a sphere's and torus:128's quads): the
+// order is a permutation; the reordered mesh's scene holds the same triangles, each face mapped
+// through the order, hits the same (t bit for bit, the face through the order unless two faces
+// meet at that t), and stores its primIDs in fewer bytes, for both configurations.
+TEST(ClusterScene, FacesInClusterOrderTakeFewerBytes) {
+  std::vector<PolyMesh> meshes = {icosphere(5), load("torus:128")};
+  for (PolyMesh& m : meshes) {
+    std::vector<uint32_t> shuffle(m.face_count());
+    std::iota(shuffle.begin(), shuffle.end(), 0u);
+    std::mt19937 rng(5);
+    std::shuffle(shuffle.begin(), shuffle.end(), rng);
+    m = reorder_faces(m, shuffle);
+  }
+  for (const PolyMesh& m : meshes)
+    for (const char* config : {"cluster", "cluster-lossless"}) {
+      SCOPED_TRACE(m.name + " " + config);
+      const BuildOptions opt = BuildOptions::from_config(config);
+      const std::vector<uint32_t> order = cluster_face_order(m, opt);
+      ASSERT_EQ(order.size(), m.face_count());
+      std::vector<uint32_t> sorted = order;
+      std::sort(sorted.begin(), sorted.end());
+      for (uint32_t i = 0; i < sorted.size(); ++i) ASSERT_EQ(sorted[i], i);
+      const PolyMesh r = reorder_faces(m, order);
+      const Scene a = Scene::build(m, opt), b = Scene::build(r, opt);
+      std::string why;
+      ASSERT_TRUE(b.validate(&why)) << why;
+      // Random order: about log2(faces) bits a face for the ids (14-15 here; a quad's two
+      // triangles share theirs), the clusters' order: a few.
+      const double tris = double(m.fan_triangle_count());
+      EXPECT_LT(double(b.memory().total()) / tris, double(a.memory().total()) / tris - 0.5)
+          << a.memory().total() << " -> " << b.memory().total();
+      if (std::string(config) == "cluster") {
+        DecodedTriangles tb = *b.decoded_triangles();
+        for (uint32_t& f : tb.face) f = order[f];
+        EXPECT_EQ(rows(*a.decoded_triangles()), rows(tb));
+      }
+      Rng rays(11);
+      int hits = 0, ties = 0;
+      for (int i = 0; i < 20000; ++i) {
+        const Ray ray = random_ray(rays, a.bounds());
+        const Hit ha = a.intersect(ray), hb = b.intersect(ray);
+        ASSERT_EQ(ha.valid(), hb.valid()) << "ray " << i;
+        if (!ha.valid()) continue;
+        ++hits;
+        ASSERT_EQ(bits_of(ha.t), bits_of(hb.t)) << "ray " << i;
+        ties += ha.primID != order[hb.primID];
+      }
+      EXPECT_GT(hits, 5000);
+      EXPECT_LE(ties, 1 + hits / 1000);
+    }
+  EXPECT_THROW(cluster_face_order(meshes[0], BuildOptions::from_config("bvh8-tri4v")), Error);
+}
+
+// The four meshes of ../shared/data over 6 B/tri in `cluster` come within it with their faces in
+// the clusters' order (docs/results.md, "Faces in cluster order"): stanford_bunny here.
+TEST(ClusterScene, FacesInClusterOrderRealMesh) {
+  const std::string path = shared_data_dir() + "/stanford_bunny.obj.xz";
+  SLIM_REQUIRE_SHARED_FILE(path);
+  const PolyMesh m = load(path);
+  const BuildOptions opt = BuildOptions::from_config("cluster");
+  const PolyMesh r = reorder_faces(m, cluster_face_order(m, opt));
+  const double before = Scene::build(m, opt).memory().bytes_per_triangle();
+  const double after = Scene::build(r, opt).memory().bytes_per_triangle();
+  EXPECT_GT(before, 6.0);
+  EXPECT_LT(after, 6.0);
+}
+
 // The per-thread decode cache (cluster::DecodeCache) is keyed by the scene's tag as well as by the
 // child's address, and so are its clusters' views: a cluster at the address of one a thread traced
 // before, in another scene (a scene built or opened where a destroyed one was), is decoded, not

@@ -283,6 +283,62 @@ TEST(IoObj, PolygonWith300CornersAndNoNewlineAtEnd) {
   EXPECT_EQ(m.object_names, (std::vector<std::string>{"default"}));
 }
 
+// save_obj writes what load reads back: positions bit for bit (9 digits; values no short
+// decimal holds), polygons, per-corner normals and uvs, objects.
+TEST(IoObj, SaveObjReadsBackTheSameMesh) {
+  TempDir d{"slimrt_io"};
+  PolyMesh m = slim::load(d.write("mixed.obj",
+                                  "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 1.5 0\n"
+                                  "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\nvn 0 0 -1\n"
+                                  "f 1/1/1 2/2/1 3/3/1\no second\nf 1/1/2 2/2/2 3/3/2 4/4/2\n"
+                                  "g third\nf 5/1/1 4/2/1 3/3/1 2/4/1 1/1/1\n"));
+  m.positions[4] = slim::Vec3f(0.1f, 1.0f / 3.0f, -2.5e-7f);
+  m.uvs[1].y = 0.7f;
+  const std::string path = d.dir() + "/saved.obj";
+  slim::save_obj(m, path);
+  const PolyMesh r = slim::load(path);
+  EXPECT_EQ(r.positions, m.positions);
+  EXPECT_EQ(r.face_sizes, m.face_sizes);
+  EXPECT_EQ(r.face_indices, m.face_indices);
+  EXPECT_EQ(r.normals, m.normals);
+  EXPECT_EQ(r.normal_indices, m.normal_indices);
+  ASSERT_EQ(r.uvs.size(), m.uvs.size());
+  for (size_t i = 0; i < m.uvs.size(); ++i) {
+    EXPECT_EQ(r.uvs[i].x, m.uvs[i].x);
+    EXPECT_EQ(r.uvs[i].y, m.uvs[i].y);
+  }
+  EXPECT_EQ(r.uv_indices, m.uv_indices);
+  EXPECT_EQ(r.object_names, m.object_names);
+  EXPECT_EQ(r.face_object, m.face_object);
+  // A folder that does not exist: an error naming the path, nothing written.
+  EXPECT_THROW(slim::save_obj(m, d.dir() + "/no/such/dir/x.obj"), slim::Error);
+}
+
+// reorder_faces moves each face with its corners, attribute indices and object; anything but a
+// permutation of the faces is an error.
+TEST(MeshReorder, FacesMoveWithTheirAttributes) {
+  TempDir d{"slimrt_io"};
+  const PolyMesh m = slim::load(d.write("mixed.obj",
+                                        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 1.5 0\n"
+                                        "vt 0 0\nvt 1 0\nvt 1 1\nvn 0 0 1\nvn 0 0 -1\n"
+                                        "f 1/1/1 2/2/1 3/3/1\no second\nf 1/1/2 2/2/2 3/3/2 4/1/2\n"
+                                        "g third\nf 5/3/1 4/2/1 3/1/1\n"));
+  const std::vector<uint32_t> order = {2, 0, 1};
+  const PolyMesh r = slim::reorder_faces(m, order);
+  EXPECT_EQ(r.positions, m.positions);
+  EXPECT_EQ(r.face_sizes, (std::vector<uint32_t>{3, 3, 4}));
+  EXPECT_EQ(face(r, 0), face(m, 2));
+  EXPECT_EQ(face(r, 1), face(m, 0));
+  EXPECT_EQ(face(r, 2), face(m, 1));
+  EXPECT_EQ(r.normal_indices, (std::vector<uint32_t>{0, 0, 0, 0, 0, 0, 1, 1, 1, 1}));
+  EXPECT_EQ(r.uv_indices, (std::vector<uint32_t>{2, 1, 0, 0, 1, 2, 0, 1, 2, 0}));
+  EXPECT_EQ(r.face_object, (std::vector<uint32_t>{2, 0, 1}));
+  EXPECT_EQ(r.object_names, m.object_names);
+  const std::vector<std::vector<uint32_t>> bad = {{0, 1}, {0, 1, 1}, {0, 1, 3}};
+  for (const std::vector<uint32_t>& b : bad)
+    EXPECT_THROW(slim::reorder_faces(m, b), slim::Error) << b.size() << " " << b.back();
+}
+
 TEST(IoObj, TruncatedFile) {
   TempDir d{"slimrt_io"};
   std::string good = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1/1/1 2/1/1 3/1/1\nf 2 4 3\n";

@@ -1,4 +1,4 @@
-// slimrt command-line tool: info, render, bench, verify, build.
+// slimrt command-line tool: info, render, bench, verify, build, reorder.
 #include <cerrno>
 #include <csignal>
 #include <cstdio>
@@ -26,6 +26,7 @@ void usage() {
                "[--plot FILE]\n"
                "  build SCENE --config NAME -o FILE.slim [--threads N]\n"
                "  verify SCENE [--config NAME...] [--rays N]\n"
+               "  reorder SCENE OUT.obj [--config cluster|cluster-lossless] [--order FILE]\n"
                "every command that builds also takes the build options (--threads, --collapse, "
                "--sah-bins, ...: slimrt COMMAND --help)\n"
                "SCENE is a mesh file (.obj .ply .gltf .glb, optionally .xz) or terrain:N, "
@@ -54,6 +55,7 @@ int main(int argc, char** argv) {
     if (cmd == "bench") rc = slim::cli::cmd_bench(argc - 1, argv + 1);
     if (cmd == "verify") rc = slim::cli::cmd_verify(argc - 1, argv + 1);
     if (cmd == "build") rc = slim::cli::cmd_build(argc - 1, argv + 1);
+    if (cmd == "reorder") rc = slim::cli::cmd_reorder(argc - 1, argv + 1);
   } catch (const slim::Error& e) {
     std::fprintf(stderr, "slimrt: error: %s\n", e.what());
     return 1;

@@ -22,4 +22,16 @@ struct ClusterTriangles : DecodedTriangles {
 ClusterTriangles cluster_triangles(const std::vector<const PolyMesh*>& meshes,
                                    const BuildOptions& opt);
 
+// The faces of `mesh` in the order a scene of configuration `opt` (`cluster` or
+// `cluster-lossless`) stores them: order[i] is the input face that comes i-th (the clusters in the
+// BVH's depth-first leaf order, each cluster's triangles in their strip order; the faces the build
+// drops, degenerate or with a NaN/Inf vertex, last, in input order). Builds the scene once.
+// A primID is the input face, so every cluster stores its triangles' faces: in the order of a scan
+// or a modelling tool that takes up to log2(faces) bits a triangle, in this order some 3.
+// reorder_faces(mesh, order) (slimrt/mesh.h) gives the mesh whose faces come in this order; its
+// cluster scenes are smaller and have the same clusters (docs/results.md, "Faces in cluster
+// order"). A user who keeps data per face permutes it the same way: the reordered mesh's face i
+// is the input's face order[i]. Throws slim::Error for other configurations.
+std::vector<uint32_t> cluster_face_order(const PolyMesh& mesh, const BuildOptions& opt);
+
 }  // namespace slim

@@ -145,6 +145,17 @@ MeshSummary summarize(const PolyMesh& mesh);
 // the reason on malformed input; the result passes check_mesh().
 PolyMesh load(const std::string& path_or_scene);
 
+// `mesh` with its faces in `order`: face i of the result is face order[i] of `mesh`, with its
+// corners, normal and uv indices and object; positions, normals, uvs and object names unchanged.
+// Throws slim::Error unless `order` holds each face of `mesh` once (cluster_face_order in
+// slimrt/clusters.h gives an order that makes the cluster configurations smaller).
+PolyMesh reorder_faces(const PolyMesh& mesh, std::span<const uint32_t> order);
+
+// Writes `mesh` to `path` as a Wavefront OBJ: positions (and normals, uvs) with 9 significant
+// digits, so that load() reads back the same floats; objects as `o` lines; faces with their
+// corners, as v, v/t, v//n or v/t/n. Written atomically (slimrt/output.h): complete or absent.
+void save_obj(const PolyMesh& mesh, const std::string& path);
+
 // True if the name is a procedural scene name (kind:N).
 bool is_procedural(const std::string& name);
 // Procedural scenes (the benchmark's): deterministic in (n, seed), all quads.

@@ -747,6 +747,28 @@ ClusterTriangles cluster_triangles(const std::vector<const PolyMesh*>& meshes,
   return t;
 }
 
+std::vector<uint32_t> cluster_face_order(const PolyMesh& mesh, const BuildOptions& opt) {
+  if (opt.leaf != Leaf::Clusters && opt.leaf != Leaf::LosslessClusters)
+    throw Error("cluster_face_order: " + opt.config_name() + " is not a cluster configuration");
+  const Scene scene = Scene::build(mesh, opt);
+  // The scene's own decode (Scene::decoded_triangles gives none for cluster-lossless, which
+  // intersects the input's triangles).
+  const std::optional<DecodedTriangles> t = scene.impl_->decoded_triangles();
+  if (!t) throw Error("cluster_face_order: the scene does not decode its triangles");
+  const size_t nf = mesh.face_count();
+  std::vector<uint32_t> order;
+  order.reserve(nf);
+  std::vector<bool> seen(nf);
+  for (const uint32_t f : t->face) {
+    if (f >= nf) throw Error("cluster_face_order: the scene decodes face " + std::to_string(f));
+    if (!seen[f]) order.push_back(f);
+    seen[f] = true;
+  }
+  for (uint32_t f = 0; f < nf; ++f)
+    if (!seen[f]) order.push_back(f);
+  return order;
+}
+
 std::unique_ptr<Scene::Impl> empty_cluster_scene(const BuildOptions& opt) {
   if (opt.leaf == Leaf::LosslessClusters) return std::make_unique<ClusterScene<true>>();
   return std::make_unique<ClusterScene<false>>();

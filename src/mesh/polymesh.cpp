@@ -222,4 +222,45 @@ MeshSummary summarize(const PolyMesh& m) {
   return s;
 }
 
+PolyMesh reorder_faces(const PolyMesh& m, std::span<const uint32_t> order) {
+  check_mesh(m);
+  const size_t nf = m.face_count();
+  const std::string name = m.name.empty() ? std::string("mesh") : m.name;
+  if (order.size() != nf)
+    throw Error("reorder_faces: " + name + " has " + std::to_string(nf) + " faces, the order " +
+                std::to_string(order.size()));
+  std::vector<bool> seen(nf);
+  for (size_t i = 0; i < nf; ++i) {
+    const uint32_t f = order[i];
+    if (f >= nf || seen[f])
+      throw Error("reorder_faces: order[" + std::to_string(i) + "] = " + std::to_string(f) +
+                  (f >= nf ? " is not a face of " : " comes twice for ") + name);
+    seen[f] = true;
+  }
+  const std::vector<uint64_t> off = m.face_offsets();
+  PolyMesh r;
+  r.name = m.name;
+  r.positions = m.positions;
+  r.normals = m.normals;
+  r.uvs = m.uvs;
+  r.object_names = m.object_names;
+  r.face_sizes.reserve(nf);
+  r.face_indices.reserve(m.face_indices.size());
+  const bool normals = !m.normal_indices.empty(), uvs = !m.uv_indices.empty();
+  if (normals) r.normal_indices.reserve(m.normal_indices.size());
+  if (uvs) r.uv_indices.reserve(m.uv_indices.size());
+  if (!m.face_object.empty()) r.face_object.reserve(nf);
+  for (const uint32_t f : order) {
+    r.face_sizes.push_back(m.face_sizes[f]);
+    auto copy = [&](const std::vector<uint32_t>& from, std::vector<uint32_t>& to) {
+      to.insert(to.end(), from.begin() + ptrdiff_t(off[f]), from.begin() + ptrdiff_t(off[f + 1]));
+    };
+    copy(m.face_indices, r.face_indices);
+    if (normals) copy(m.normal_indices, r.normal_indices);
+    if (uvs) copy(m.uv_indices, r.uv_indices);
+    if (!m.face_object.empty()) r.face_object.push_back(m.face_object[f]);
+  }
+  return r;
+}
+
 }  // namespace slim

@@ -35,6 +35,7 @@
 #include <vector>
 
 #include "slimrt/analysis.h"
+#include "slimrt/clusters.h"
 #include "slimrt/slimrt.h"
 
 namespace py = pybind11;
@@ -186,6 +187,19 @@ struct LoadedMesh {
 };
 
 class RaycastingScene {
+  // One geometry: a mesh file (owned) or the arrays of add_triangles (referenced, or owned when
+  // they were converted). Python objects are only touched with the GIL; the raw pointers are
+  // what the build reads without it.
+  struct Geometry {
+    std::shared_ptr<const slim::PolyMesh> mesh;  // add_mesh
+    bool mesh_owned = false;        // loaded by add_mesh(path), not shared with a slimrt.Mesh
+    py::array vertices, triangles;  // add_triangles: float32 [N, 3], (u)int32 [M, 3]
+    bool vertices_owned = false, triangles_owned = false;
+    const float* positions = nullptr;
+    const uint32_t* indices = nullptr;
+    size_t vertex_count = 0, triangle_count = 0;
+  };
+
  public:
   RaycastingScene(const std::string& config, int threads, py::object progress)
       : threads_(threads), progress_(std::move(progress)) {
@@ -208,6 +222,41 @@ class RaycastingScene {
   // an array the scene owns.
   uint32_t add_triangles(py::handle vertices_obj, py::handle triangles_obj) {
     check_not_in_own_callback();
+    return add(triangle_geometry(vertices_obj, triangles_obj));
+  }
+
+  // slimrt.cluster_face_order: the arrays checked as add_triangles checks them, the order of
+  // slim::cluster_face_order (slimrt/clusters.h) as a uint32 array.
+  static py::array_t<uint32_t> cluster_face_order(py::handle vertices, py::handle triangles,
+                                                  const std::string& config, int threads) {
+    if (threads < 0)
+      throw py::value_error("threads: expected 0 (all cores) or more, got " +
+                            std::to_string(threads));
+    slim::BuildOptions opt;
+    try {
+      opt = slim::BuildOptions::from_config(config);
+    } catch (const slim::Error& e) {
+      throw py::value_error(std::string("config: ") + e.what());
+    }
+    opt.threads = threads;
+    const Geometry g = triangle_geometry(vertices, triangles);
+    std::vector<uint32_t> order;
+    {
+      py::gil_scoped_release release;
+      order = slim::cluster_face_order(
+          slim::MeshView::triangles(reinterpret_cast<const slim::Vec3f*>(g.positions),
+                                    g.vertex_count, g.indices, g.triangle_count),
+          opt);
+    }
+    py::array_t<uint32_t> out = output<uint32_t>({py::ssize_t(order.size())});
+    std::copy(order.begin(), order.end(), out.mutable_data());
+    return out;
+  }
+
+ private:
+  // The arrays of add_triangles as a Geometry: checked (dtype, shape, indices in range, finite
+  // vertices), referenced where they can be, else converted into arrays the Geometry owns.
+  static Geometry triangle_geometry(py::handle vertices_obj, py::handle triangles_obj) {
     Geometry g;
     py::array v = as_array(vertices_obj);
     if (v.dtype().kind() != 'f')
@@ -280,9 +329,10 @@ class RaycastingScene {
         }
     }
     if (!bad.empty()) throw py::value_error(bad);
-    return add(std::move(g));
+    return g;
   }
 
+ public:
   uint32_t add_mesh(const std::string& path) {
     check_not_in_own_callback();
     Geometry g;
@@ -492,19 +542,6 @@ class RaycastingScene {
   }
 
  private:
-  // One geometry: a mesh file (owned) or the arrays of add_triangles (referenced, or owned when
-  // they were converted). Python objects are only touched with the GIL; the raw pointers are
-  // what the build reads without it.
-  struct Geometry {
-    std::shared_ptr<const slim::PolyMesh> mesh;  // add_mesh
-    bool mesh_owned = false;        // loaded by add_mesh(path), not shared with a slimrt.Mesh
-    py::array vertices, triangles;  // add_triangles: float32 [N, 3], (u)int32 [M, 3]
-    bool vertices_owned = false, triangles_owned = false;
-    const float* positions = nullptr;
-    const uint32_t* indices = nullptr;
-    size_t vertex_count = 0, triangle_count = 0;
-  };
-
   // A scene opened from a file: its options as saved (any combination, with or without a
   // registry name), all cores.
   explicit RaycastingScene(slim::Scene opened)
@@ -839,6 +876,13 @@ Array.__module__ = "slimrt"
   m.def(
       "simd_isa", [] { return std::string(slim::simd_isa()); },
       "The SIMD path slimrt was compiled for.");
+  m.def("cluster_face_order", &RaycastingScene::cluster_face_order, py::arg("vertex_positions"),
+        py::arg("triangle_indices"), py::arg("config") = "cluster", py::arg("threads") = 0,
+        "The triangles' order in a cluster configuration's scene (config 'cluster' or "
+        "'cluster-lossless'): a uint32 array, order[i] the input triangle that comes i-th. "
+        "Triangles in that order (triangle_indices[order]) take fewer bytes in the cluster "
+        "configurations: their primIDs come in the clusters' order. Builds the scene once. "
+        "Arrays as add_triangles takes them; raises slimrt.Error for other configurations.");
   m.def("load_triangles", &load_triangles, py::arg("path"),
         "Loads a mesh file (.obj .ply .gltf .glb, optionally .xz) or a procedural scene "
         "(terrain:N, torus:N, canyon:N) as (vertices [N,3] float32, triangles [M,3] uint32, "

@@ -10,7 +10,9 @@
 #include <vector>
 
 #include "build_flags.h"
+#include "slimrt/mesh.h"
 #include "slimrt/scene.h"
+#include "temp_dir.h"
 
 using namespace slim;
 
@@ -162,11 +164,9 @@ TEST(BuildFlags, ConfigNamePlusTuningGivesTheOptions) {
 // Every command that builds a scene offers the flags and refuses a bad value naming the flag.
 TEST(BuildFlags, EveryCommandTakesThem) {
   const std::string cli = SLIM_CLI_PATH;
-  const std::vector<std::pair<std::string, std::string>> commands = {{"render", " -o never.png"},
-                                                                     {"bench", ""},
-                                                                     {"verify", ""},
-                                                                     {"build", " -o never.slim"},
-                                                                     {"info", ""}};
+  const std::vector<std::pair<std::string, std::string>> commands = {
+      {"render", " -o never.png"}, {"bench", ""}, {"verify", ""},
+      {"build", " -o never.slim"}, {"info", ""},  {"reorder", " never.obj"}};
   for (const auto& [cmd, out] : commands) {
     SCOPED_TRACE(cmd);
     const std::string help = run(cli + " " + cmd + " --help");
@@ -177,4 +177,40 @@ TEST(BuildFlags, EveryCommandTakesThem) {
     const std::string bad = run(cli + " " + cmd + " terrain:4 --sah-bins 99" + out);
     EXPECT_NE(bad.find("--sah-bins"), std::string::npos) << bad;
   }
+}
+
+// `slimrt reorder`: the mesh with its faces in the clusters' order and the order file, whose line
+// i is the input face that became face i; the input is never the output.
+TEST(ReorderCli, WritesTheMeshAndTheOrder) {
+  const std::string cli = SLIM_CLI_PATH;
+  slim::test::TempDir d{"slimrt_reorder"};
+  const std::string obj = d.dir() + "/t.obj", order = d.dir() + "/t.order";
+  const std::string out = run(cli + " reorder torus:16 " + obj + " --order " + order);
+  EXPECT_NE(out.find("128 faces"), std::string::npos) << out;
+  const slim::PolyMesh in = slim::load("torus:16"), r = slim::load(obj);
+  ASSERT_EQ(r.face_count(), in.face_count());
+  EXPECT_EQ(r.positions, in.positions);
+  std::vector<uint32_t> o;
+  FILE* f = std::fopen(order.c_str(), "r");
+  ASSERT_TRUE(f);
+  for (unsigned x; std::fscanf(f, "%u", &x) == 1;) o.push_back(x);
+  std::fclose(f);
+  ASSERT_EQ(o.size(), in.face_count());
+  const std::vector<uint64_t> ri = r.face_offsets(), ii = in.face_offsets();
+  for (size_t i = 0; i < o.size(); ++i) {
+    ASSERT_LT(o[i], in.face_count());
+    ASSERT_EQ(r.face_sizes[i], in.face_sizes[o[i]]);
+    for (uint32_t k = 0; k < r.face_sizes[i]; ++k)
+      ASSERT_EQ(r.face_indices[ri[i] + k], in.face_indices[ii[o[i]] + k]) << i;
+  }
+  // The input as the output, the order as the output, another format, another configuration.
+  const std::string before = run("cat " + obj);
+  EXPECT_NE(run(cli + " reorder " + obj + " " + obj).find("is the input"), std::string::npos);
+  EXPECT_EQ(run("cat " + obj), before);
+  EXPECT_NE(run(cli + " reorder torus:16 " + obj + " --order " + obj).find("is the output"),
+            std::string::npos);
+  EXPECT_NE(run(cli + " reorder torus:16 " + d.dir() + "/t.ply").find("FILE.obj"),
+            std::string::npos);
+  EXPECT_NE(run(cli + " reorder torus:16 " + obj + " --config bvh8-tri4v").find("cluster"),
+            std::string::npos);
 }

@@ -6,6 +6,7 @@
 // the clusters' order.
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <filesystem>
 #include <string>
 
 #include "build_flags.h"
@@ -38,6 +39,16 @@ int cmd_reorder(int argc, char** argv) {
   const BuildOptions opt = build_options(config, tuning);  // throws on an unknown name
   if (opt.leaf != Leaf::Clusters && opt.leaf != Leaf::LosslessClusters)
     throw Error("--config " + config + ": reorder takes cluster or cluster-lossless");
+  // The input is never written over (nor by the order).
+  auto same_file = [](const std::string& a, const std::string& b) {
+    std::error_code ec;
+    return std::filesystem::equivalent(a, b, ec) && !ec;
+  };
+  for (const std::string& out : {output, order_file})
+    if (!out.empty() && same_file(scene_name, out))
+      throw Error(out + ": is the input " + scene_name + "; write to another file");
+  if (!order_file.empty() && (order_file == output || same_file(output, order_file)))
+    throw Error("--order " + order_file + ": is the output mesh; write to another file");
   check_output_path(output);
   if (!order_file.empty()) check_output_path(order_file);
   const PolyMesh mesh =

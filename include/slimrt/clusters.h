@@ -32,6 +32,7 @@ ClusterTriangles cluster_triangles(const std::vector<const PolyMesh*>& meshes,
 // cluster scenes are smaller and have the same clusters (docs/results.md, "Faces in cluster
 // order"). A user who keeps data per face permutes it the same way: the reordered mesh's face i
 // is the input's face order[i]. Throws slim::Error for other configurations.
+std::vector<uint32_t> cluster_face_order(const MeshView& mesh, const BuildOptions& opt);
 std::vector<uint32_t> cluster_face_order(const PolyMesh& mesh, const BuildOptions& opt);
 
 }  // namespace slim

@@ -324,7 +324,7 @@ class Scene {
   friend Hit intersect_counted(const Scene& scene, const Ray& ray, TraversalCounters& counters);
   friend const std::vector<std::pair<std::string, double>>& stat_details(const Scene& scene);
   // slimrt/clusters.h: reads the clusters' faces in leaf order, cluster-lossless's too.
-  friend std::vector<uint32_t> cluster_face_order(const PolyMesh& mesh, const BuildOptions& opt);
+  friend std::vector<uint32_t> cluster_face_order(const MeshView& mesh, const BuildOptions& opt);
   std::unique_ptr<Impl> impl_;
 };
 

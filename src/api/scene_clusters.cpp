@@ -747,7 +747,7 @@ ClusterTriangles cluster_triangles(const std::vector<const PolyMesh*>& meshes,
   return t;
 }
 
-std::vector<uint32_t> cluster_face_order(const PolyMesh& mesh, const BuildOptions& opt) {
+std::vector<uint32_t> cluster_face_order(const MeshView& mesh, const BuildOptions& opt) {
   if (opt.leaf != Leaf::Clusters && opt.leaf != Leaf::LosslessClusters)
     throw Error("cluster_face_order: " + opt.config_name() + " is not a cluster configuration");
   const Scene scene = Scene::build(mesh, opt);
@@ -767,6 +767,10 @@ std::vector<uint32_t> cluster_face_order(const PolyMesh& mesh, const BuildOption
   for (uint32_t f = 0; f < nf; ++f)
     if (!seen[f]) order.push_back(f);
   return order;
+}
+
+std::vector<uint32_t> cluster_face_order(const PolyMesh& mesh, const BuildOptions& opt) {
+  return cluster_face_order(MeshView(mesh), opt);
 }
 
 std::unique_ptr<Scene::Impl> empty_cluster_scene(const BuildOptions& opt) {

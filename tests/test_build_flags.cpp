@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "build_flags.h"
+#include "slimrt/clusters.h"
 #include "slimrt/mesh.h"
 #include "slimrt/scene.h"
 #include "temp_dir.h"
@@ -195,6 +196,7 @@ TEST(ReorderCli, WritesTheMeshAndTheOrder) {
   ASSERT_TRUE(f);
   for (unsigned x; std::fscanf(f, "%u", &x) == 1;) o.push_back(x);
   std::fclose(f);
+  EXPECT_EQ(o, slim::cluster_face_order(in, slim::BuildOptions::from_config("cluster")));
   ASSERT_EQ(o.size(), in.face_count());
   const std::vector<uint64_t> ri = r.face_offsets(), ii = in.face_offsets();
   for (size_t i = 0; i < o.size(); ++i) {
@@ -209,8 +211,13 @@ TEST(ReorderCli, WritesTheMeshAndTheOrder) {
   EXPECT_EQ(run("cat " + obj), before);
   EXPECT_NE(run(cli + " reorder torus:16 " + obj + " --order " + obj).find("is the output"),
             std::string::npos);
+  const std::string fresh = d.dir() + "/fresh.obj";
+  EXPECT_NE(run(cli + " reorder torus:16 " + fresh + " --order " + d.dir() + "/./fresh.obj")
+                .find("is the output"),
+            std::string::npos);
   EXPECT_NE(run(cli + " reorder torus:16 " + d.dir() + "/t.ply").find("FILE.obj"),
             std::string::npos);
-  EXPECT_NE(run(cli + " reorder torus:16 " + obj + " --config bvh8-tri4v").find("cluster"),
+  EXPECT_NE(run(cli + " reorder torus:16 " + obj + " --config bvh8-tri4v")
+                .find("reorder takes cluster or cluster-lossless"),
             std::string::npos);
 }

@@ -1,9 +1,9 @@
 // slimrt reorder SCENE OUT.obj [--config cluster|cluster-lossless] [--order FILE] [build options]:
 // writes SCENE's mesh with its faces in the order the cluster configuration stores them
 // (cluster_face_order, slimrt/clusters.h), as an OBJ, and optionally that order (one input face
-// number a line: line i holds the input face that became face i), so that data kept per face can
-// follow. The cluster scenes of the written mesh are smaller: their primIDs (the faces) come in
-// the clusters' order.
+// number a line: line i, counting from 0, holds the input face that became face i), so that data
+// kept per face can follow. The cluster scenes of the written mesh are smaller: their primIDs (the
+// faces) come in the clusters' order.
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <filesystem>
@@ -25,29 +25,34 @@ int cmd_reorder(int argc, char** argv) {
   app.add_option("output", output, "the mesh to write (FILE.obj)")->required();
   app.add_option("--config,--accel", config, "cluster or cluster-lossless")->capture_default_str();
   app.add_option("--order", order_file,
-                 "also write the order: line i holds the input face that became face i");
+                 "also write the order: line i (from 0) holds the input face that became face i");
   add_build_options(app, tuning);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
-  if (output.size() < 4 || output.compare(output.size() - 4, 4, ".obj") != 0)
-    throw Error(output + ": expected a FILE.obj name");
+  const std::string suffix = output.size() < 4 ? "" : output.substr(output.size() - 4);
+  if (suffix != ".obj" && suffix != ".OBJ") throw Error(output + ": expected a FILE.obj name");
   if (is_scene_file(scene_name))
     throw Error(scene_name + ": a scene file; reorder takes the mesh it was built from");
   const BuildOptions opt = build_options(config, tuning);  // throws on an unknown name
   if (opt.leaf != Leaf::Clusters && opt.leaf != Leaf::LosslessClusters)
     throw Error("--config " + config + ": reorder takes cluster or cluster-lossless");
   // The input is never written over (nor by the order).
+  // The same file, also for names of files not yet written (x.obj and ./x.obj).
   auto same_file = [](const std::string& a, const std::string& b) {
     std::error_code ec;
-    return std::filesystem::equivalent(a, b, ec) && !ec;
+    if (std::filesystem::equivalent(a, b, ec) && !ec) return true;
+    const auto pa = std::filesystem::weakly_canonical(a, ec);
+    if (ec) return false;
+    const auto pb = std::filesystem::weakly_canonical(b, ec);
+    return !ec && pa == pb;
   };
   for (const std::string& out : {output, order_file})
     if (!out.empty() && same_file(scene_name, out))
       throw Error(out + ": is the input " + scene_name + "; write to another file");
-  if (!order_file.empty() && (order_file == output || same_file(output, order_file)))
+  if (!order_file.empty() && same_file(output, order_file))
     throw Error("--order " + order_file + ": is the output mesh; write to another file");
   check_output_path(output);
   if (!order_file.empty()) check_output_path(order_file);

@@ -152,8 +152,12 @@ PolyMesh load(const std::string& path_or_scene);
 PolyMesh reorder_faces(const PolyMesh& mesh, std::span<const uint32_t> order);
 
 // Writes `mesh` to `path` as a Wavefront OBJ: positions (and normals, uvs) with 9 significant
-// digits, so that load() reads back the same floats; objects as `o` lines; faces with their
-// corners, as v, v/t, v//n or v/t/n. Written atomically (slimrt/output.h): complete or absent.
+// digits, so that load() reads back the same floats; faces with their corners, as v, v/t, v//n or
+// v/t/n; objects as `o` lines by name. load() then gives the same positions, faces and attribute
+// values, with two differences: per-vertex normals and uvs come back per corner, and objects are
+// numbered in order of first appearance (one object per name; a name's control characters become
+// '_', an empty or missing name `objectN`). Throws slim::Error for a NaN or Inf coordinate (OBJ
+// holds finite numbers). Written atomically (slimrt/output.h): complete or absent.
 void save_obj(const PolyMesh& mesh, const std::string& path);
 
 // True if the name is a procedural scene name (kind:N).

@@ -16,8 +16,8 @@ namespace slim::cli {
 int cmd_info(int argc, char** argv);
 int cmd_render(int argc, char** argv);
 int cmd_bench(int argc, char** argv);
-int cmd_verify(int argc, char** argv);  // cmd_verify.cpp
-int cmd_build(int argc, char** argv);   // cmd_build.cpp
+int cmd_verify(int argc, char** argv);   // cmd_verify.cpp
+int cmd_build(int argc, char** argv);    // cmd_build.cpp
 int cmd_reorder(int argc, char** argv);  // cmd_reorder.cpp
 
 // Scene files (cmd_build.cpp): a SCENE argument ending in .slim is a scene file (Scene::open),

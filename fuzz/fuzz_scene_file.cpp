@@ -95,5 +95,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                       std::string("error without the file name: ") + e.what());
     }
   }
+  std::remove(path().c_str());  // none left in /tmp when the fuzzer stops between inputs
   return 0;
 }

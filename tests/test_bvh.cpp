@@ -110,12 +110,13 @@ TEST(Bvh, EmptyAndSingleTriangle) {
   }
 }
 
-// A leaf format of one axis-aligned box per 4 KiB block (id, box), for the collapse test below:
-// big blocks make a leaf arena beyond a CQNode8's reach from a few thousand primitives.
+// A leaf format of one axis-aligned box per block (id, box), for the collapse tests below: 16 KiB
+// blocks (kBlockBytes) make a leaf arena beyond a CQNode8's reach from a few thousand primitives;
+// a tree may also take smaller blocks (its block_bytes; Block is what intersect reads).
 struct BigBoxLeaf {
   struct Context {};
   static constexpr uint32_t kBlockPrims = 1;
-  static constexpr uint32_t kBlockBytes = 4096;
+  static constexpr uint32_t kBlockBytes = 16384;
   struct Block {
     uint32_t id;
     Box3f box;
@@ -143,72 +144,97 @@ struct BigBoxLeaf {
   }
 };
 
-// The clusters' kind of tree (QCompressedLeaf) over a leaf arena larger than a CQNode8 reaches
-// (16 MiB): the top nodes are wide QNode8 at multiples of 8 bytes, everything below them CQNode8,
-// and traversal finds the same nearest box as a loop over all boxes.
-TEST(Bvh, CompactNodesBelowWideOnes) {
-  Rng rng(5);
-  const uint32_t n = 6000;  // 6000 x 4 KiB of leaves: 24 MB
-  std::vector<PrimRef> refs(n);
-  for (uint32_t i = 0; i < n; ++i) {
-    const Vec3f c(rng.uniform(), rng.uniform(), rng.uniform());
-    const Vec3f h(0.001f + 0.004f * rng.uniform(), 0.001f + 0.004f * rng.uniform(),
-                  0.001f + 0.004f * rng.uniform());
-    refs[i] = {Box3f(c - h, c + h), i};
+// n random small boxes in the unit cube, collapsed as the clusters' kind of tree
+// (QCompressedLeaf) over BigBoxLeaf blocks of block_bytes each.
+struct BoxTree {
+  std::vector<PrimRef> refs;
+  Bvh8 bvh;
+  BoxTree(Rng& rng, uint32_t n, uint32_t block_bytes) : refs(n) {
+    for (uint32_t i = 0; i < n; ++i) {
+      const Vec3f c(rng.uniform(), rng.uniform(), rng.uniform());
+      const Vec3f h(0.001f + 0.004f * rng.uniform(), 0.001f + 0.004f * rng.uniform(),
+                    0.001f + 0.004f * rng.uniform());
+      refs[i] = {Box3f(c - h, c + h), i};
+    }
+    Bvh2BuildConfig cfg;
+    cfg.max_leaf_size = 1;
+    cfg.block_prims = 1;
+    const Bvh2 b2 = build_bvh2(refs, cfg);
+    LeafEncoder enc;
+    enc.block_prims = 1;
+    enc.block_bytes = block_bytes;
+    enc.encode = [&](const uint32_t* prims, uint32_t, uint8_t* out) {
+      const BigBoxLeaf::Block blk{prims[0], refs[prims[0]].box};
+      std::memcpy(out, &blk, sizeof blk);
+    };
+    bvh = collapse_bvh8(b2, NodeKind::QCompressedLeaf, enc, CollapseRule::Optimal);
   }
-  Bvh2BuildConfig cfg;
-  cfg.max_leaf_size = 1;
-  cfg.block_prims = 1;
-  const Bvh2 b2 = build_bvh2(refs, cfg);
-  LeafEncoder enc;
-  enc.block_prims = 1;
-  enc.block_bytes = BigBoxLeaf::kBlockBytes;
-  enc.encode = [&](const uint32_t* prims, uint32_t, uint8_t* out) {
-    const BigBoxLeaf::Block blk{prims[0], refs[prims[0]].box};
-    std::memcpy(out, &blk, sizeof blk);
-  };
-  const Bvh8 bvh = collapse_bvh8(b2, NodeKind::QCompressedLeaf, enc, CollapseRule::Optimal);
-  ASSERT_GT(bvh.leaves.size(), kCQOffsetLimit);
-  EXPECT_GT(bvh.stats.cqnode8, 0u);
-  EXPECT_LT(bvh.stats.cqnode8, bvh.stats.qnode8);
-  EXPECT_EQ(bvh.node_bytes, bvh.stats.cqnode8 * sizeof(CQNode8) +
-                                (bvh.stats.qnode8 - bvh.stats.cqnode8) * sizeof(QNode8));
-  EXPECT_EQ(NodeRef::tag(bvh.root), kRefQNode8);
+};
 
-  // Every node aligned for its loads, no wide node below a compact one, every ref counted once,
-  // the padding between nodes zero (scene files store the arena as it is).
-  uint64_t wide = 0, compact = 0;
+// What every clusters' tree keeps to: each node aligned for its loads (Node8 64, QNode8 8,
+// CQNode8 4 bytes), no Node8 below a quantized node and no QNode8 below a CQNode8, the nodes of
+// each kind as counted in the stats, every ref counted once, the padding between nodes zero (scene
+// files store the arena as it is), validate_bvh8, and traversal finding the same nearest box as a
+// loop over all boxes (3000 random rays). Returns the node counts of each kind (Node8, QNode8,
+// CQNode8) and the rays that hit a box.
+struct BoxTreeCounts {
+  uint64_t nodes[3] = {};
+  int hits = 0;
+};
+BoxTreeCounts check_box_tree(const BoxTree& t, Rng& rng) {
+  BoxTreeCounts out;
+  const Bvh8& bvh = t.bvh;
+  EXPECT_EQ(bvh.node_bytes, bvh.stats.node8 * sizeof(Node8) + bvh.stats.cqnode8 * sizeof(CQNode8) +
+                                (bvh.stats.qnode8 - bvh.stats.cqnode8) * sizeof(QNode8));
+  uint64_t floats = 0, wide = 0, compact = 0;
   std::vector<uint8_t> is_node(bvh.nodes.size(), 0);
-  std::function<void(uint64_t, bool)> walk = [&](uint64_t ref, bool below_compact) {
+  // below: 0 under Node8 only, 1 under a QNode8, 2 under a CQNode8. Returns the primitives under
+  // ref (one a block).
+  std::function<uint64_t(uint64_t, int)> walk = [&](uint64_t ref, int below) -> uint64_t {
     const uint64_t off = NodeRef::offset(ref);
     const uint32_t tag = NodeRef::tag(ref);
-    if (tag != kRefQNode8 && tag != kRefCQNode8) return;
-    if (tag == kRefQNode8) {
+    if (!is_node_tag(tag)) return NodeRef::blocks(ref);
+    if (tag == kRefNode8) {
+      ++floats;
+      EXPECT_EQ(below, 0);
+      EXPECT_EQ(off % 64, 0u);
+    } else if (tag == kRefQNode8) {
       ++wide;
-      EXPECT_FALSE(below_compact);
+      EXPECT_LT(below, 2);
       EXPECT_EQ(off % 8, 0u);
     } else {
       ++compact;
       EXPECT_EQ(off % 4, 0u);
     }
-    ASSERT_LE(off + node_size(tag), bvh.nodes.size());
+    EXPECT_LE(off + node_size(tag), bvh.nodes.size());
+    if (off + node_size(tag) > bvh.nodes.size()) return 0;
     std::fill_n(is_node.begin() + off, node_size(tag), 1);
     uint64_t child[8];
     child_refs(ref, bvh.nodes.data() + off, child);
+    uint64_t prims = 0;
     for (uint64_t c : child)
-      if (c) walk(c, tag == kRefCQNode8);
+      if (c) prims += walk(c, tag == kRefNode8 ? 0 : tag == kRefQNode8 ? 1 : 2);
+    // A Node8 exactly where the node spans kFloatNodePrims primitives or more.
+    EXPECT_EQ(tag == kRefNode8, prims >= kFloatNodePrims) << "node at " << off << ": " << prims;
+    return prims;
   };
-  walk(bvh.root, false);
+  EXPECT_EQ(walk(bvh.root, 0), t.refs.size());
+  EXPECT_EQ(floats, bvh.stats.node8);
   EXPECT_EQ(compact, bvh.stats.cqnode8);
   EXPECT_EQ(wide + compact, bvh.stats.qnode8);
+  out.nodes[0] = floats;
+  out.nodes[1] = wide;
+  out.nodes[2] = compact;
   uint64_t padding = 0;
   for (uint64_t i = 0; i < bvh.nodes.size(); ++i) {
     if (is_node[i]) continue;
     ++padding;
-    ASSERT_EQ(bvh.nodes.data()[i], 0) << "padding byte " << i;
+    if (bvh.nodes.data()[i] != 0) {
+      ADD_FAILURE() << "padding byte " << i << " is not zero";
+      break;
+    }
   }
   EXPECT_EQ(padding, bvh.nodes.size() - bvh.node_bytes);
-  EXPECT_GT(padding, 0u);
 
   std::string why;
   const LeafValidator leaf = [](const uint8_t* block, Box3f& bounds, std::string*) {
@@ -217,39 +243,72 @@ TEST(Bvh, CompactNodesBelowWideOnes) {
     bounds = blk.box;
     return true;
   };
-  ASSERT_TRUE(validate_bvh8(bvh, leaf, &why)) << why;
+  EXPECT_TRUE(validate_bvh8(bvh, leaf, &why)) << why;
 
   const Box3f all(Vec3f(0, 0, 0), Vec3f(1, 1, 1));
   const RaySetupBounds sb(bvh.bounds);
-  int hits = 0;
   for (int r = 0; r < 3000; ++r) {
     const Ray ray = random_ray(rng, all);
     TravRay tr;
-    ASSERT_TRUE(make_trav_ray(ray, sb, tr));
+    EXPECT_TRUE(make_trav_ray(ray, sb, tr));
     float best = kInf;
     uint32_t best_id = kInvalidID;
-    for (const PrimRef& p : refs) {
-      const float t = BigBoxLeaf::entry(p.box, tr.org, tr.rdir, tr.tnear, tr.tfar);
-      if (t < best) {
-        best = t;
+    for (const PrimRef& p : t.refs) {
+      const float d = BigBoxLeaf::entry(p.box, tr.org, tr.rdir, tr.tnear, tr.tfar);
+      if (d < best) {
+        best = d;
         best_id = p.id;
       }
     }
     Hit hit;
     NoStats st;
     const bool found = traverse_bvh8<BigBoxLeaf, false>(bvh, {}, tr, hit, st);
-    ASSERT_EQ(found, best_id != kInvalidID) << "ray " << r;
+    EXPECT_EQ(found, best_id != kInvalidID) << "ray " << r;
     if (found) {
-      ++hits;
+      ++out.hits;
       EXPECT_EQ(hit.primID, best_id) << "ray " << r;
       EXPECT_EQ(hit.t, best) << "ray " << r;
     }
     TravRay any;
-    ASSERT_TRUE(make_trav_ray(ray, sb, any));
+    EXPECT_TRUE(make_trav_ray(ray, sb, any));
     Hit ah;
     EXPECT_EQ((traverse_bvh8<BigBoxLeaf, true>(bvh, {}, any, ah, st)), found) << "ray " << r;
   }
-  EXPECT_GT(hits, 500);
+  return out;
+}
+
+// The clusters' kind of tree over a leaf arena larger than a CQNode8 reaches (16 MiB) from fewer
+// primitives than a float node spans (kFloatNodePrims): the top nodes are wide QNode8 at multiples
+// of 8 bytes, everything below them CQNode8.
+TEST(Bvh, CompactNodesBelowWideOnes) {
+  static_assert(1500 < kFloatNodePrims);
+  Rng rng(5);
+  const BoxTree t(rng, 1500, BigBoxLeaf::kBlockBytes);  // 1500 x 16 KiB of leaves: 24 MB
+  ASSERT_GT(t.bvh.leaves.size(), kCQOffsetLimit);
+  EXPECT_EQ(NodeRef::tag(t.bvh.root), kRefQNode8);
+  const BoxTreeCounts c = check_box_tree(t, rng);
+  EXPECT_EQ(c.nodes[0], 0u);
+  EXPECT_GT(c.nodes[1], 0u);
+  EXPECT_GT(c.nodes[2], c.nodes[1]);
+  EXPECT_GT(c.hits, 100);
+  EXPECT_GT(t.bvh.nodes.size(), t.bvh.node_bytes);  // the wide nodes' children padded to 8
+}
+
+// Over more primitives the top nodes are Node8: the root and every node over kFloatNodePrims
+// primitives or more, at multiples of 64 bytes; the nodes below them CQNode8 (the leaves, 32-byte
+// blocks, within a CQNode8's reach).
+TEST(Bvh, FloatNodesAtTheTop) {
+  Rng rng(6);
+  const uint32_t n = 8 * kFloatNodePrims + 1000;
+  const BoxTree t(rng, n, 32);
+  ASSERT_LT(t.bvh.leaves.size(), kCQOffsetLimit);
+  EXPECT_EQ(NodeRef::tag(t.bvh.root), kRefNode8);
+  const BoxTreeCounts c = check_box_tree(t, rng);
+  // At least the root and, of its at most 8 children, one over n / 8 > kFloatNodePrims.
+  EXPECT_GE(c.nodes[0], 2u);
+  EXPECT_EQ(c.nodes[1], 0u);
+  EXPECT_GT(c.nodes[2], 8 * c.nodes[0]);
+  EXPECT_GT(c.hits, 1500);
 }
 
 // cq_child_ref: the tag and block count as stored, the offset after the node (inner nodes) or

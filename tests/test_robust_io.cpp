@@ -180,7 +180,10 @@ std::string small_binary_body() {
 // Runs `fn` in a child process whose address space may grow by at most 512 MiB: a reader that
 // allocated what a header claims (gigabytes) fails there. Skipped under sanitizers (their shadow
 // memory does not fit an address-space limit); the error messages are checked in any build.
-[[noreturn]] void run_with_address_space_limit(const std::function<bool()>& fn) {
+// The child ends with _Exit (no destructors): it removes `dir` itself, the temporary directory
+// its own run of the test made (a "threadsafe" death test runs the test again in the child).
+[[noreturn]] void run_with_address_space_limit(const std::function<bool()>& fn,
+                                               const std::string& dir) {
   long pages = 0;
   if (FILE* f = std::fopen("/proc/self/statm", "r")) {
     if (std::fscanf(f, "%ld", &pages) != 1) pages = 0;
@@ -190,13 +193,16 @@ std::string small_binary_body() {
   struct rlimit rl;
   rl.rlim_cur = rl.rlim_max = limit;
   setrlimit(RLIMIT_AS, &rl);
-  std::_Exit(fn() ? 0 : 1);
+  const bool ok = fn();
+  std::error_code ec;
+  std::filesystem::remove_all(dir, ec);
+  std::_Exit(ok ? 0 : 1);
 }
 
-void expect_refused_without_allocating(const std::function<bool()>& fn) {
+void expect_refused_without_allocating(const std::function<bool()>& fn, const TempDir& d) {
   if (kSanitized) return;
   GTEST_FLAG_SET(death_test_style, "threadsafe");
-  EXPECT_EXIT(run_with_address_space_limit(fn), ::testing::ExitedWithCode(0), "");
+  EXPECT_EXIT(run_with_address_space_limit(fn, d.dir()), ::testing::ExitedWithCode(0), "");
 }
 
 }  // namespace
@@ -240,15 +246,17 @@ TEST(RobustLimits, HeaderClaimingTwoToThe31FacesIsAnErrorNotAnAllocation) {
     EXPECT_NE(msg.find(c.expect), std::string::npos) << msg;
     EXPECT_EQ(msg.find("out of memory"), std::string::npos) << msg;
     EXPECT_EQ(msg.find("too large to hold"), std::string::npos) << msg;
-    expect_refused_without_allocating([path, expect = c.expect] {
-      try {
-        slim::load(path);
-      } catch (const slim::Error& e) {
-        return std::string(e.what()).find(expect) != std::string::npos &&
-               std::string(e.what()).find("out of memory") == std::string::npos;
-      }
-      return false;
-    });
+    expect_refused_without_allocating(
+        [path, expect = c.expect] {
+          try {
+            slim::load(path);
+          } catch (const slim::Error& e) {
+            return std::string(e.what()).find(expect) != std::string::npos &&
+                   std::string(e.what()).find("out of memory") == std::string::npos;
+          }
+          return false;
+        },
+        d);
   }
 }
 

@@ -175,12 +175,17 @@ class Collapser {
   bool quantized_nodes() const {
     return kind_ == NodeKind::QBvh8 || kind_ == NodeKind::QCompressedLeaf;
   }
-  // The bytes of the inner node over kids[0..k): a CQNode8 in the clusters' trees where its
-  // children's offsets fit (all but the top of a tree of millions of triangles), else a QNode8
-  // or Node8. Children of a wide node start at multiples of 8 (a QNode8's refs are 8 bytes; the
-  // CQNode8 of a subtree are multiples of 4 bytes).
-  bool compact(const uint32_t* kids, int k) const {
-    if (kind_ != NodeKind::QCompressedLeaf) return false;
+  // Inner node i of the clusters' trees is a Node8 when it spans kFloatNodePrims primitives or
+  // more (bvh8.h).
+  bool float_node(uint32_t i) const {
+    return kind_ == NodeKind::QCompressedLeaf && prims_[i] >= kFloatNodePrims;
+  }
+  bool quantized_node(uint32_t i) const { return quantized_nodes() && !float_node(i); }
+  // Whether inner node i over kids[0..k) is a CQNode8: in the clusters' trees where it is not a
+  // float node and its children's offsets fit (all but the top of a tree of millions of
+  // triangles); else a QNode8 (quantized_node) or Node8.
+  bool compact(uint32_t i, const uint32_t* kids, int k) const {
+    if (kind_ != NodeKind::QCompressedLeaf || float_node(i)) return false;
     uint64_t nb = 0, lb = 0;
     for (int c = 0; c < k; ++c) {
       nb += node_size_[kids[c]];
@@ -188,10 +193,16 @@ class Collapser {
     }
     return cq_fits(nb, lb);
   }
-  uint32_t node_bytes(bool compact) const {
-    return compact ? sizeof(CQNode8) : quantized_nodes() ? sizeof(QNode8) : sizeof(Node8);
+  uint32_t node_bytes(bool compact, uint32_t i) const {
+    return compact ? sizeof(CQNode8) : quantized_node(i) ? sizeof(QNode8) : sizeof(Node8);
   }
-  static uint64_t child_node_off(uint64_t off, bool compact) {
+  // The offset of the subtree of child `kid` at or after `off` (its parent compact or not): a
+  // float node of the clusters' trees on a multiple of 64 (Node8's alignment: its siblings'
+  // CQNode8 subtrees end on multiples of 4); a wide node's other children on multiples of 8 (a
+  // QNode8's refs are 8 bytes; the CQNode8 of a subtree are multiples of 4 bytes). A Node8 tree's
+  // nodes are 256 bytes each: always on multiples of 64.
+  uint64_t child_node_off(uint64_t off, bool compact, uint32_t kid) const {
+    if (float_node(kid) && node_size_[kid] > 0) return (off + 63) & ~uint64_t(63);
     return compact ? off : (off + 7) & ~uint64_t(7);
   }
 
@@ -450,17 +461,17 @@ class Collapser {
     for_children(
         i, k, [&](int c) { sub[c] = measure(kids[c], depth + 1); }, !enc_.encode_multileaf);
     report_small_children(i, kids, k);
-    const bool cq = compact(kids, k);
+    const bool cq = compact(i, kids, k);
     if (cq) s.st.cqnode8++;
-    if (quantized_nodes())
+    if (quantized_node(i))
       s.st.qnode8++;
     else
       s.st.node8++;
-    s.node_bytes += node_bytes(cq);
-    uint64_t nb = node_bytes(cq), lb = 0;
+    s.node_bytes += node_bytes(cq, i);
+    uint64_t nb = node_bytes(cq, i), lb = 0;
     for (int c = 0; c < k; ++c) {
       s.add(sub[c]);
-      nb = child_node_off(nb, cq) + node_size_[kids[c]];
+      nb = child_node_off(nb, cq, kids[c]) + node_size_[kids[c]];
       lb += leaf_size_[kids[c]];
     }
     node_size_[i] = nb;
@@ -518,13 +529,13 @@ class Collapser {
     }
     uint32_t kids[8];
     int k = gather(i, kids);
-    const bool cq = compact(kids, k);
-    std::memset(out_.nodes.data() + node_off, 0, node_bytes(cq));
+    const bool cq = compact(i, kids, k);
+    std::memset(out_.nodes.data() + node_off, 0, node_bytes(cq, i));
     uint64_t refs[8] = {};
     uint64_t noff[8], loff[8];
-    uint64_t no = node_off + node_bytes(cq), lo = leaf_off;
+    uint64_t no = node_off + node_bytes(cq, i), lo = leaf_off;
     for (int c = 0; c < k; ++c) {
-      const uint64_t at = child_node_off(no, cq);
+      const uint64_t at = child_node_off(no, cq, kids[c]);
       std::memset(out_.nodes.data() + no, 0, at - no);  // the padding ahead of a wide node's child
       noff[c] = no = at;
       loff[c] = lo;
@@ -549,7 +560,7 @@ class Collapser {
       }
       return NodeRef::make(kRefCQNode8, node_off);
     }
-    if (quantized_nodes()) {
+    if (quantized_node(i)) {
       auto* q = reinterpret_cast<QNode8*>(out_.nodes.data() + node_off);
       Box3f boxes[8];
       for (int c = 0; c < k; ++c) boxes[c] = b2_.nodes[kids[c]].box;

@@ -9,7 +9,8 @@
 //                      Listing 1).
 //   CQNode8     108 B  a QNode8 with 32-bit child refs relative to its own offset (inner nodes)
 //                      and to a leaf base (leaves): the clusters' inner nodes below the top of
-//                      a large tree (QCompressedLeaf; wide QNode8 where an offset does not fit).
+//                      the tree (QCompressedLeaf: Node8 over kFloatNodePrims primitives or more,
+//                      wide QNode8 where an offset does not fit).
 //   MultiLeaf8   72 B  start/extent + 8 quantized boxes, no refs: the leaf blocks of its (up to)
 //                      8 children follow it in memory (section 4.2 "Introducing Compressed
 //                      Multi-Leaf Nodes"). A leaf layout may store its multi-leaf boxes its own
@@ -198,9 +199,9 @@ enum class NodeKind : uint8_t {
   Bvh8,            // Node8 everywhere
   QBvh8,           // QNode8 everywhere
   CompressedLeaf,  // Node8 inner nodes, MultiLeaf8 for small subtrees (Benthin et al. 2018)
-  // QNode8 inner nodes (CQNode8 where the offsets fit), MultiLeaf8 for small subtrees: the
-  // cluster formats, whose inner nodes are the largest part of the BVH (108 B per node instead
-  // of 256 B).
+  // QNode8 inner nodes (CQNode8 where the offsets fit, Node8 over kFloatNodePrims primitives
+  // or more), MultiLeaf8 for small subtrees: the cluster formats, whose inner nodes are the
+  // largest part of the BVH (108 B per node instead of 256 B).
   QCompressedLeaf,
 };
 
@@ -279,6 +280,14 @@ enum class CollapseRule : uint8_t {
 // close. On canyon:1024 6861 QNode8 (Slots, SAH cost 20.5) become 6052 (18.7); without the memory
 // term 6752 (18.5).
 constexpr float kClusterNodeCost = 16;
+
+// In the clusters' trees (QCompressedLeaf), the inner nodes over at least this many primitives
+// are Node8 (float boxes), the others CQNode8 (or QNode8). Every ray crosses the top of the tree,
+// and a node's box test lies on the traversal's chain of dependent loads (it picks the next
+// node): a float box test skips the quantized planes' conversion and product. The top nodes are
+// few (one per some thousands of primitives), so their 148 bytes more each add a few hundredths
+// of a byte a primitive (docs/results.md, "Float nodes at the top of the clusters' trees").
+constexpr uint32_t kFloatNodePrims = 4096;
 
 // The rule each node kind is best served by (the figures above).
 inline CollapseRule default_collapse_rule(NodeKind kind) {

@@ -19,6 +19,7 @@
 #include "prim/lossy_subgrid.h"
 #include "prim/subgrid.h"
 #include "prim/triangles.h"
+#include "slimrt/analysis.h"
 #include "slimrt/render.h"
 #include "slimrt/slimrt.h"
 #include "test_util.h"
@@ -434,6 +435,15 @@ TEST(SceneFile, StructureCheckPassesEveryConfiguration) {
   EXPECT_EQ(tested, int(all_config_names().size()));
   for (const char* config : kJoinedConfigs)
     check(joined_scene(config, 64), "joined " + std::string(config));
+  // The clusters' trees over kFloatNodePrims triangles or more: Node8 at the top, CQNode8 below.
+  for (const char* config : {"cluster", "cluster-lossless"}) {
+    const Scene s = Scene::build(load("torus:128"), BuildOptions::from_config(config));
+    double node8 = 0;
+    for (const auto& [k, v] : stat_details(s))
+      if (k == "node8_count") node8 = v;
+    EXPECT_GT(node8, 0) << config;
+    check(s, std::string(config) + " over torus:128");
+  }
   std::filesystem::remove(path);
 }
 

@@ -223,7 +223,8 @@ class BvhScene : public Scene::Impl {
   struct Bvh2Hooks {
     uint32_t max_leaf_size = 0, block_prims = 0;  // override the BVH2 config when nonzero
     uint32_t full_blocks_below = 0;               // Bvh2BuildConfig::full_blocks_below
-    // CompressedLeaf with QNode8 / CQNode8 inner nodes (QCompressedLeaf).
+    // CompressedLeaf with quantized inner nodes (QCompressedLeaf: CQNode8 / QNode8, Node8 at the
+    // top of the tree).
     bool quantized_inner = false;
     std::function<void(Bvh2&)> reshape;
     // Bvh2BuildConfig::thin_stack, for leaves whose primitives hold several triangles.

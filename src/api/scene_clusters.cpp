@@ -14,8 +14,8 @@
 // leaves of at most 8 triangles (left sizes multiples of 8, so that ceil(n / 8) leaves suffice),
 // and the collapse turns each such subtree into one multi-leaf whose data is the cluster
 // (LeafEncoder::encode_multileaf). The inner nodes above the clusters are QBVH8 nodes with 32-bit
-// child refs (bvh8.h CQNode8, 108 B instead of a Node8's 256 B; wide QNode8 at the top of trees
-// whose leaves exceed a CQNode8's 16 MiB reach).
+// child refs (bvh8.h CQNode8, 108 B instead of a Node8's 256 B), but for Node8 at the top of the
+// tree, over kFloatNodePrims triangles or more.
 #include <algorithm>
 #include <array>
 #include <cmath>

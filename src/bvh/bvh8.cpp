@@ -182,8 +182,8 @@ class Collapser {
   }
   bool quantized_node(uint32_t i) const { return quantized_nodes() && !float_node(i); }
   // Whether inner node i over kids[0..k) is a CQNode8: in the clusters' trees where it is not a
-  // float node and its children's offsets fit (all but the top of a tree of millions of
-  // triangles); else a QNode8 (quantized_node) or Node8.
+  // float node and its children's offsets fit (a subtree under kFloatNodePrims clusters' triangles
+  // holds far less than a CQNode8 reaches); else a QNode8 (quantized_node) or Node8.
   bool compact(uint32_t i, const uint32_t* kids, int k) const {
     if (kind_ != NodeKind::QCompressedLeaf || float_node(i)) return false;
     uint64_t nb = 0, lb = 0;
@@ -542,6 +542,10 @@ class Collapser {
       no += node_size_[kids[c]];
       lo += leaf_size_[kids[c]];
     }
+    // The subtree takes the bytes measure() gave it (its float children's padding depends on
+    // node_off: a float node starts on a multiple of 64, as the root and every Node8's float
+    // children do).
+    SLIM_ASSERT(no == node_off + node_size_[i]);
     for_children(i, k, [&](int c) { refs[c] = emit(kids[c], noff[c], loff[c]); });
     report_small_children(i, kids, k);
     if (cq) {

@@ -274,19 +274,20 @@ enum class CollapseRule : uint8_t {
   Slots,
 };
 
-// The clusters' optimal collapse: a QNode8 costs, beyond its SAH visit, this many times the mean
-// area of the collapse's terminals (the clusters and the rare isolated leaves, relative to the
-// root's), which trades a little SAH for fuller nodes (CQNode8, 108 B each) where the two are
-// close. On canyon:1024 6861 QNode8 (Slots, SAH cost 20.5) become 6052 (18.7); without the memory
-// term 6752 (18.5).
+// The clusters' optimal collapse: a wide node costs, beyond its SAH visit, this many times the
+// mean area of the collapse's terminals (the clusters and the rare isolated leaves, relative to
+// the root's), which trades a little SAH for fuller nodes (nearly all CQNode8, 108 B each) where
+// the two are close. On canyon:1024 6861 inner nodes (Slots, SAH cost 20.5) become 6052 (18.7);
+// without the memory term 6752 (18.5).
 constexpr float kClusterNodeCost = 16;
 
 // In the clusters' trees (QCompressedLeaf), the inner nodes over at least this many primitives
-// are Node8 (float boxes), the others CQNode8 (or QNode8). Every ray crosses the top of the tree,
-// and a node's box test lies on the traversal's chain of dependent loads (it picks the next
-// node): a float box test skips the quantized planes' conversion and product. The top nodes are
-// few (one per some thousands of primitives), so their 148 bytes more each add a few hundredths
-// of a byte a primitive (docs/results.md, "Float nodes at the top of the clusters' trees").
+// are Node8 (float boxes), the others CQNode8 (or QNode8). Every ray crosses the top of the tree;
+// a float box test skips the quantized planes' conversion and product (fewer instructions on the
+// traversal's chain from a node to the next), and its exact boxes let rays into fewer children.
+// The top nodes are few (one per some thousands of primitives), so their 148 bytes more each and
+// their padding to 64 bytes add a few hundredths of a byte a primitive (docs/results.md, "Float
+// nodes at the top of the clusters' trees").
 constexpr uint32_t kFloatNodePrims = 4096;
 
 // The rule each node kind is best served by (the figures above).

@@ -186,6 +186,22 @@ struct LoadedMesh {
   std::string path;
 };
 
+// The options of a registry configuration with `threads` build threads (0: all cores); ValueError
+// for a negative count or an unknown name (the message lists the names).
+slim::BuildOptions build_options(const std::string& config, int threads) {
+  if (threads < 0)
+    throw py::value_error("threads: expected 0 (all cores) or more, got " +
+                          std::to_string(threads));
+  slim::BuildOptions opt;
+  try {
+    opt = slim::BuildOptions::from_config(config);
+  } catch (const slim::Error& e) {
+    throw py::value_error(std::string("config: ") + e.what());
+  }
+  opt.threads = threads;
+  return opt;
+}
+
 class RaycastingScene {
   // One geometry: a mesh file (owned) or the arrays of add_triangles (referenced, or owned when
   // they were converted). Python objects are only touched with the GIL; the raw pointers are
@@ -205,15 +221,7 @@ class RaycastingScene {
       : threads_(threads), progress_(std::move(progress)) {
     if (!progress_.is_none() && !PyCallable_Check(progress_.ptr()))
       throw py::type_error("progress: expected a callable progress(phase, done, total) or None");
-    if (threads < 0)
-      throw py::value_error("threads: expected 0 (all cores) or more, got " +
-                            std::to_string(threads));
-    try {
-      options_ = slim::BuildOptions::from_config(config);
-    } catch (const slim::Error& e) {
-      throw py::value_error(std::string("config: ") + e.what());  // the message lists the names
-    }
-    options_.threads = threads;
+    options_ = build_options(config, threads);
   }
 
   // Vertices and triangles are referenced, not copied, when they are float32 and uint32 (or
@@ -229,16 +237,7 @@ class RaycastingScene {
   // slim::cluster_face_order (slimrt/clusters.h) as a uint32 array.
   static py::array_t<uint32_t> cluster_face_order(py::handle vertices, py::handle triangles,
                                                   const std::string& config, int threads) {
-    if (threads < 0)
-      throw py::value_error("threads: expected 0 (all cores) or more, got " +
-                            std::to_string(threads));
-    slim::BuildOptions opt;
-    try {
-      opt = slim::BuildOptions::from_config(config);
-    } catch (const slim::Error& e) {
-      throw py::value_error(std::string("config: ") + e.what());
-    }
-    opt.threads = threads;
+    const slim::BuildOptions opt = build_options(config, threads);
     const Geometry g = triangle_geometry(vertices, triangles);
     std::vector<uint32_t> order;
     {

@@ -369,6 +369,87 @@ TEST(Bvh, QuantizedBoxesAreConservative) {
   }
 }
 
+// The box tests never cull a box by rounding (core/ray.h's margin): rays aimed at corners and edges
+// of child boxes (the grazing cases), from near and far, against a double-precision slab test
+// of the same boxes. The quantized test and the float test of the dequantized boxes both report
+// every box the ray meets, at an entry distance no later than the exact one.
+TEST(Bvh, BoxTestsNeverCullByRounding) {
+  Rng rng(23);
+  int grazing = 0;
+  for (int iter = 0; iter < 3000; ++iter) {
+    const float scale = std::pow(10.0f, float(int(rng.next() % 10) - 4));
+    const float offset = (rng.uniform() - 0.5f) * scale * float(rng.next() % 2 ? 1e4 : 1);
+    Box3f boxes[8];
+    Box3f parent;
+    const int n = 1 + rng.next() % 8;
+    for (int i = 0; i < n; ++i) {
+      Vec3f a(offset + rng.uniform() * scale, offset + rng.uniform() * scale,
+              offset + rng.uniform() * scale);
+      Vec3f b = a + Vec3f(rng.uniform(), rng.uniform(), rng.next() % 3 ? rng.uniform() : 0.0f) *
+                        (scale * 0.3f);
+      boxes[i] = Box3f(min(a, b), max(a, b));
+      parent.extend(boxes[i]);
+    }
+    QuantBoxes8 q;
+    quantize_boxes(parent, boxes, n, q);
+    Node8 f;
+    Box3f deq[8];
+    for (int i = 0; i < 8; ++i) {
+      deq[i] = dequantize_box(q, i);
+      for (int a = 0; a < 3; ++a) {
+        f.bounds[2 * a][i] = i < n ? deq[i].lo[a] : kInf;
+        f.bounds[2 * a + 1][i] = i < n ? deq[i].hi[a] : -kInf;
+      }
+    }
+    const RaySetupBounds sb(parent);
+    for (int r = 0; r < 20; ++r) {
+      // A target on an edge of a child box: two coordinates on its planes, one anywhere along it.
+      const Box3f& c = deq[rng.next() % n];
+      Vec3f target;
+      const int along = rng.next() % 3;
+      for (int a = 0; a < 3; ++a)
+        target[a] = a == along ? c.lo[a] + rng.uniform() * (c.hi[a] - c.lo[a])
+                               : (rng.next() % 2 ? c.lo[a] : c.hi[a]);
+      const float reach = scale * (rng.next() % 4 ? 2.0f : 100.0f);
+      Ray ray;
+      ray.org = target + Vec3f(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f) *
+                             (2.0f * reach);
+      ray.dir = target - ray.org;
+      if (rng.next() % 4 == 0) ray.dir[rng.next() % 3] = 0.0f;  // parallel to one slab
+      ray.tnear = 0.0f;
+      ray.tfar = kInf;
+      TravRay tr;
+      if (!make_box_ray(ray, sb, tr)) continue;
+      simd::vfloat8 dq, df;
+      const uint32_t mq = detail::intersect_quant8(&q, tr, dq);
+      const uint32_t mf = detail::intersect_node8(&f, tr, df);
+      alignas(32) float tq[8], tf[8];
+      dq.store(tq);
+      df.store(tf);
+      for (int i = 0; i < n; ++i) {
+        double t0 = 0.0, t1 = double(kInf);
+        for (int a = 0; a < 3; ++a) {
+          const double o = ray.org[a], d = ray.dir[a];
+          if (d == 0.0) {
+            if (o < deq[i].lo[a] || o > deq[i].hi[a]) t0 = 1.0, t1 = 0.0;
+            continue;
+          }
+          const double ta = (double(deq[i].lo[a]) - o) / d, tb = (double(deq[i].hi[a]) - o) / d;
+          t0 = std::max(t0, std::min(ta, tb));
+          t1 = std::min(t1, std::max(ta, tb));
+        }
+        if (!(t0 <= t1)) continue;
+        grazing += t0 == t1;
+        ASSERT_TRUE(mq >> i & 1) << "quantized box " << i << " culled, iter " << iter;
+        ASSERT_TRUE(mf >> i & 1) << "float box " << i << " culled, iter " << iter;
+        ASSERT_LE(tq[i], t0) << "quantized entry after the exact one, iter " << iter;
+        ASSERT_LE(tf[i], t0) << "float entry after the exact one, iter " << iter;
+      }
+    }
+  }
+  EXPECT_GT(grazing, 0) << "no ray met a box in a single point";
+}
+
 TEST(Bvh, DuplicateAndDegenerateTriangles) {
   // Many identical triangles (no SAH split possible) and zero-area ones.
   PolyMesh m;

@@ -369,12 +369,17 @@ TEST(Bvh, QuantizedBoxesAreConservative) {
   }
 }
 
-// The box tests never cull a box by rounding (core/ray.h's margin): rays aimed at corners and edges
-// of child boxes (the grazing cases), from near and far, against a double-precision slab test
-// of the same boxes. The quantized test and the float test of the dequantized boxes both report
-// every box the ray meets, at an entry distance no later than the exact one.
+// The box tests never cull a box by rounding (core/ray.h's margin): rays aimed at edges of child
+// boxes (the grazing cases), from near and far, with segments of several kinds, against a
+// double-precision slab test of the same boxes. The quantized test and the float test of the
+// dequantized boxes both report every box the ray meets, at an entry distance no later than the
+// exact one.
 TEST(Bvh, BoxTestsNeverCullByRounding) {
   Rng rng(23);
+  auto uniform3 = [&] {  // x, y, z drawn in this order
+    const float x = rng.uniform(), y = rng.uniform(), z = rng.uniform();
+    return Vec3f(x, y, z);
+  };
   int grazing = 0;
   for (int iter = 0; iter < 3000; ++iter) {
     const float scale = std::pow(10.0f, float(int(rng.next() % 10) - 4));
@@ -383,10 +388,10 @@ TEST(Bvh, BoxTestsNeverCullByRounding) {
     Box3f parent;
     const int n = 1 + rng.next() % 8;
     for (int i = 0; i < n; ++i) {
-      Vec3f a(offset + rng.uniform() * scale, offset + rng.uniform() * scale,
-              offset + rng.uniform() * scale);
-      Vec3f b = a + Vec3f(rng.uniform(), rng.uniform(), rng.next() % 3 ? rng.uniform() : 0.0f) *
-                        (scale * 0.3f);
+      const Vec3f a = Vec3f(offset, offset, offset) + uniform3() * scale;
+      Vec3f extent = uniform3();
+      if (rng.next() % 3 == 0) extent.z = 0.0f;  // flat in z
+      const Vec3f b = a + extent * (scale * 0.3f);
       boxes[i] = Box3f(min(a, b), max(a, b));
       parent.extend(boxes[i]);
     }
@@ -412,12 +417,14 @@ TEST(Bvh, BoxTestsNeverCullByRounding) {
                                : (rng.next() % 2 ? c.lo[a] : c.hi[a]);
       const float reach = scale * (rng.next() % 4 ? 2.0f : 100.0f);
       Ray ray;
-      ray.org = target + Vec3f(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f) *
-                             (2.0f * reach);
+      ray.org = target + (uniform3() - Vec3f(0.5f, 0.5f, 0.5f)) * (2.0f * reach);
       ray.dir = target - ray.org;
       if (rng.next() % 4 == 0) ray.dir[rng.next() % 3] = 0.0f;  // parallel to one slab
-      ray.tnear = 0.0f;
-      ray.tfar = kInf;
+      // The target lies at t = 1: segments from 0, from behind the origin (clamped to 0), from
+      // ahead of it, and ending near the target.
+      const uint32_t segment = rng.next() % 4;
+      ray.tnear = segment == 1 ? -rng.uniform() : segment == 2 ? rng.uniform() : 0.0f;
+      ray.tfar = segment == 3 ? 0.5f + rng.uniform() : kInf;
       TravRay tr;
       if (!make_box_ray(ray, sb, tr)) continue;
       simd::vfloat8 dq, df;
@@ -427,7 +434,7 @@ TEST(Bvh, BoxTestsNeverCullByRounding) {
       dq.store(tq);
       df.store(tf);
       for (int i = 0; i < n; ++i) {
-        double t0 = 0.0, t1 = double(kInf);
+        double t0 = std::max(0.0, double(ray.tnear)), t1 = ray.tfar;
         for (int a = 0; a < 3; ++a) {
           const double o = ray.org[a], d = ray.dir[a];
           if (d == 0.0) {
@@ -442,8 +449,9 @@ TEST(Bvh, BoxTestsNeverCullByRounding) {
         grazing += t0 == t1;
         ASSERT_TRUE(mq >> i & 1) << "quantized box " << i << " culled, iter " << iter;
         ASSERT_TRUE(mf >> i & 1) << "float box " << i << " culled, iter " << iter;
-        ASSERT_LE(tq[i], t0) << "quantized entry after the exact one, iter " << iter;
-        ASSERT_LE(tf[i], t0) << "float entry after the exact one, iter " << iter;
+        ASSERT_LE(tq[i], t0) << "quantized box " << i << ": entry after the exact one, iter "
+                             << iter;
+        ASSERT_LE(tf[i], t0) << "float box " << i << ": entry after the exact one, iter " << iter;
       }
     }
   }

@@ -83,13 +83,6 @@ void expect_same_t(const Scene& a, const Scene& b, uint64_t seed,
   EXPECT_LE(ties, 1 + hits / 1000);
 }
 
-double detail(const Scene& s, const std::string& key) {
-  for (const auto& [k, v] : stat_details(s))
-    if (k == key) return v;
-  ADD_FAILURE() << "no detail " << key;
-  return -1;
-}
-
 // `m` with every coordinate printed with `digits` decimals and parsed back (as an OBJ file written
 // with %.6f and read again): the nearest floats to decimals q x 10^-digits.
 PolyMesh printed(PolyMesh m, int digits) {
@@ -1192,8 +1185,8 @@ TEST(ClusterScene, LosslessHitsEqualTri4v) {
   Built b = test_scene();
   lossless_hits_equal_tri4v(b);
   // Computed floats: few clusters in the decimal mode.
-  EXPECT_LT(detail(Scene::build(b.ptrs(), BuildOptions::from_config("cluster-lossless")),
-                   "decimal_cluster_fraction"),
+  EXPECT_LT(detail_value(Scene::build(b.ptrs(), BuildOptions::from_config("cluster-lossless")),
+                         "decimal_cluster_fraction"),
             0.05);
 }
 
@@ -1204,7 +1197,7 @@ TEST(ClusterScene, LosslessHitsEqualTri4vDecimalCoordinates) {
   for (PolyMesh& m : b.meshes) m = printed(std::move(m), 5);
   lossless_hits_equal_tri4v(b);
   const Scene s = Scene::build(b.ptrs(), BuildOptions::from_config("cluster-lossless"));
-  EXPECT_GT(detail(s, "decimal_cluster_fraction"), 0.9);
+  EXPECT_GT(detail_value(s, "decimal_cluster_fraction"), 0.9);
 }
 
 // The lossy scene against a double-precision brute force over its own decoded triangles
@@ -1228,7 +1221,7 @@ TEST(ClusterScene, LossyHitsEqualBruteForceOnDecodedTriangles) {
     ClusterTriangles ct = cluster_triangles(b.ptrs(), opt);
     const double diag = length(s.bounds().size());
     EXPECT_LE(ct.max_error, err * diag);
-    EXPECT_LE(detail(s, "max_error_diag_pct"), 100 * err);
+    EXPECT_LE(detail_value(s, "max_error_diag_pct"), 100 * err);
     std::vector<RefTri> ref(ct.size());
     for (size_t i = 0; i < ct.size(); ++i) {
       for (int k = 0; k < 3; ++k)
@@ -1302,7 +1295,7 @@ TEST(ClusterScene, WatertightAcrossClusterBorders) {
       BuildOptions opt = BuildOptions::from_config(config);
       opt.cluster_error = err;
       Scene s = Scene::build(sphere, opt);
-      EXPECT_GT(detail(s, "clusters"), 1000);
+      EXPECT_GT(detail_value(s, "clusters"), 1000);
       Rng rng(7);
       int leaks = 0;
       for (int i = 0; i < 100000; ++i) {
@@ -1333,37 +1326,40 @@ TEST(ClusterScene, StatisticsAndSizes) {
   Scene s = Scene::build(torus, BuildOptions::from_config("cluster"));
   EXPECT_EQ(s.options().config_name(), "cluster");
   const double tris = double(s.stats().triangles);
-  EXPECT_NEAR(detail(s, "avg_triangles_per_cluster") * detail(s, "clusters"), tris, 0.5);
-  EXPECT_GT(detail(s, "avg_triangles_per_cluster"), 16);
-  EXPECT_GT(detail(s, "position_bits_avg"), 0);
-  EXPECT_LE(detail(s, "position_bits_avg"), 24);
-  EXPECT_NEAR(detail(s, "geometry_bytes_per_triangle") + detail(s, "bvh_bytes_per_triangle"),
-              s.memory().bytes_per_triangle(), 1e-9);
-  EXPECT_EQ(detail(s, "lattice_coarsened"), 0);
+  EXPECT_NEAR(detail_value(s, "avg_triangles_per_cluster") * detail_value(s, "clusters"), tris,
+              0.5);
+  EXPECT_GT(detail_value(s, "avg_triangles_per_cluster"), 16);
+  EXPECT_GT(detail_value(s, "position_bits_avg"), 0);
+  EXPECT_LE(detail_value(s, "position_bits_avg"), 24);
+  EXPECT_NEAR(
+      detail_value(s, "geometry_bytes_per_triangle") + detail_value(s, "bvh_bytes_per_triangle"),
+      s.memory().bytes_per_triangle(), 1e-9);
+  EXPECT_EQ(detail_value(s, "lattice_coarsened"), 0);
   Scene l = Scene::build(torus, BuildOptions::from_config("cluster-lossless"));
-  EXPECT_EQ(detail(l, "max_error"), 0);
+  EXPECT_EQ(detail_value(l, "max_error"), 0);
   EXPECT_GT(l.memory().total(), s.memory().total());
   // Multi-leaf headers: the lossy clusters' boxes on the lattice (51 B), the lossless clusters'
   // boxes from their start floats (54 B), a MultiLeaf8 (72 B) for the other compressed-leaf
   // formats.
-  EXPECT_GT(detail(s, "multileaf_count"), 0);
-  EXPECT_EQ(detail(s, "multileaf_bytes"),
-            double(sizeof(cluster::LatticeBoxes8)) * detail(s, "multileaf_count"));
-  EXPECT_GT(detail(l, "multileaf_count"), 0);
-  EXPECT_EQ(detail(l, "multileaf_bytes"),
-            double(sizeof(cluster::ExactBoxes8)) * detail(l, "multileaf_count"));
+  EXPECT_GT(detail_value(s, "multileaf_count"), 0);
+  EXPECT_EQ(detail_value(s, "multileaf_bytes"),
+            double(sizeof(cluster::LatticeBoxes8)) * detail_value(s, "multileaf_count"));
+  EXPECT_GT(detail_value(l, "multileaf_count"), 0);
+  EXPECT_EQ(detail_value(l, "multileaf_bytes"),
+            double(sizeof(cluster::ExactBoxes8)) * detail_value(l, "multileaf_count"));
   // The clusters lie in the leaf arena without padding (ClusterLeaf::kLeafAlign = 1), and the
   // memory counts the arenas as kept: the clusters' data, then the read slack of the leaf arena and
   // of the (here empty) side arena.
   for (const Scene* c : {&s, &l}) {
-    ASSERT_EQ(detail(*c, "leaf_count"), detail(*c, "leaves_in_multileaf"));
+    ASSERT_EQ(detail_value(*c, "leaf_count"), detail_value(*c, "leaves_in_multileaf"));
     EXPECT_EQ(double(c->memory().geometry_bytes),
-              detail(*c, "leaf_data_bytes") + 2 * kClusterReadSlack);
+              detail_value(*c, "leaf_data_bytes") + 2 * kClusterReadSlack);
   }
   for (const char* config : {"clbvh-tri4v", "clbvh-compact"}) {
     Scene o = Scene::build(torus, BuildOptions::from_config(config));
-    EXPECT_GT(detail(o, "multileaf_count"), 0) << config;
-    EXPECT_EQ(detail(o, "multileaf_bytes"), 72.0 * detail(o, "multileaf_count")) << config;
+    EXPECT_GT(detail_value(o, "multileaf_count"), 0) << config;
+    EXPECT_EQ(detail_value(o, "multileaf_bytes"), 72.0 * detail_value(o, "multileaf_count"))
+        << config;
   }
 }
 
@@ -1376,9 +1372,9 @@ TEST(ClusterScene, ClustersAreNearlyFull) {
     for (const char* config : {"cluster", "cluster-lossless"}) {
       Scene s = Scene::build(m, BuildOptions::from_config(config));
       const double tris = double(s.stats().triangles);
-      EXPECT_GE(detail(s, "avg_triangles_per_cluster"), 58.0) << scene << " " << config;
-      EXPECT_LE(detail(s, "avg_triangles_per_cluster"), 64.0) << scene << " " << config;
-      EXPECT_GE(detail(s, "clusters"), std::ceil(tris / 64)) << scene << " " << config;
+      EXPECT_GE(detail_value(s, "avg_triangles_per_cluster"), 58.0) << scene << " " << config;
+      EXPECT_LE(detail_value(s, "avg_triangles_per_cluster"), 64.0) << scene << " " << config;
+      EXPECT_GE(detail_value(s, "clusters"), std::ceil(tris / 64)) << scene << " " << config;
     }
   }
 }
@@ -1395,11 +1391,11 @@ TEST(ClusterScene, CollapseSpendsFewerNodesThanSlots) {
       BuildOptions slots = def;
       slots.collapse = Collapse::Slots;
       const Scene a = Scene::build(m, def), b = Scene::build(m, slots);
-      EXPECT_LT(detail(a, "node8_count") + detail(a, "qnode8_count"),
-                0.95 * (detail(b, "node8_count") + detail(b, "qnode8_count")));
-      EXPECT_LT(detail(a, "sah_cost"), detail(b, "sah_cost"));
-      EXPECT_EQ(detail(a, "leaf_data_bytes"), detail(b, "leaf_data_bytes"));
-      EXPECT_EQ(detail(a, "clusters"), detail(b, "clusters"));
+      EXPECT_LT(detail_value(a, "node8_count") + detail_value(a, "qnode8_count"),
+                0.95 * (detail_value(b, "node8_count") + detail_value(b, "qnode8_count")));
+      EXPECT_LT(detail_value(a, "sah_cost"), detail_value(b, "sah_cost"));
+      EXPECT_EQ(detail_value(a, "leaf_data_bytes"), detail_value(b, "leaf_data_bytes"));
+      EXPECT_EQ(detail_value(a, "clusters"), detail_value(b, "clusters"));
       expect_same_t(a, b, 11);
     }
   }
@@ -1417,9 +1413,10 @@ TEST(ClusterScene, SiblingsDividedAnewStoreFewerVertices) {
     const Scene sah = Scene::build(m, opt);
     opt.cluster_redivide = true;
     const Scene s = Scene::build(m, opt);
-    EXPECT_LT(detail(s, "vertices_per_triangle"), detail(sah, "vertices_per_triangle") - 0.003);
+    EXPECT_LT(detail_value(s, "vertices_per_triangle"),
+              detail_value(sah, "vertices_per_triangle") - 0.003);
     EXPECT_LT(s.memory().total(), sah.memory().total());
-    EXPECT_EQ(detail(s, "clusters"), detail(sah, "clusters"));
+    EXPECT_EQ(detail_value(s, "clusters"), detail_value(sah, "clusters"));
     const std::string path = ::testing::TempDir() + "slimrt_cluster_redivide.slim";
     s.save(path);
     EXPECT_TRUE(Scene::open(path).options().cluster_redivide);  // the scene file keeps it
@@ -1466,7 +1463,7 @@ TEST(ClusterScene, MultiLeafBoxesContainTheirTrianglesRealMesh) {
     const Scene s = Scene::build(m, BuildOptions::from_config(config));
     std::string why;
     EXPECT_TRUE(s.validate(&why)) << config << ": " << why;
-    EXPECT_GT(detail(s, "multileaf_count"), 100) << config;
+    EXPECT_GT(detail_value(s, "multileaf_count"), 100) << config;
   }
 }
 
@@ -1509,7 +1506,8 @@ TEST(ClusterScene, AnchorWidthsFollowTheLattice) {
   std::string why;
   ASSERT_TRUE(s.validate(&why)) << why;
   ASSERT_TRUE(sw.validate(&why)) << why;
-  EXPECT_GT(detail(sw, "header_bits_per_triangle"), detail(s, "header_bits_per_triangle"));
+  EXPECT_GT(detail_value(sw, "header_bits_per_triangle"),
+            detail_value(s, "header_bits_per_triangle"));
   expect_same_hits(s, sw, 11);
 }
 
@@ -1519,9 +1517,9 @@ TEST(ClusterScene, CoarserStepWhenTheLatticeNeedsMoreBits) {
   BuildOptions opt = BuildOptions::from_config("cluster");
   opt.cluster_error = 1e-9;
   Scene s = Scene::build(sphere, opt);
-  EXPECT_EQ(detail(s, "lattice_coarsened"), 1);
-  EXPECT_GT(detail(s, "max_error_diag_pct"), 1e-7);
-  EXPECT_LT(detail(s, "max_error_diag_pct"), 1e-5);
+  EXPECT_EQ(detail_value(s, "lattice_coarsened"), 1);
+  EXPECT_GT(detail_value(s, "max_error_diag_pct"), 1e-7);
+  EXPECT_LT(detail_value(s, "max_error_diag_pct"), 1e-5);
   std::string why;
   EXPECT_TRUE(s.validate(&why)) << why;
   opt.cluster_error = 0;
@@ -1568,7 +1566,7 @@ TEST(ClusterCodec, LatticeStepsPerAxis) {
   const Scene coarse = Scene::build(sphere, opt);
   std::string why;
   EXPECT_TRUE(coarse.validate(&why)) << why;
-  EXPECT_LE(detail(coarse, "lattice_step_x"), 4.0);
+  EXPECT_LE(detail_value(coarse, "lattice_step_x"), 4.0);
 }
 
 // The finer steps (8 + m) 2^e / 8: for bounds across an octave, three of them within the bound
@@ -1645,10 +1643,10 @@ TEST(ClusterScene, FinerStepsWhereTheBoundAllows) {
     double fine[3];
     ASSERT_TRUE(cluster::fine_lattice_steps(opt.cluster_error * diag, box, fine));
     for (int a = 0; a < 3; ++a)
-      EXPECT_EQ(detail(sc, std::string("lattice_step_") + "xyz"[a]), fine[a]) << a;
-    EXPECT_EQ(detail(sc, "lattice_coarsened"), 0);
-    EXPECT_LE(detail(sc, "max_error_diag_pct"), 100 * opt.cluster_error);
-    bits[i] = detail(sc, "position_bits_avg");
+      EXPECT_EQ(detail_value(sc, std::string("lattice_step_") + "xyz"[a]), fine[a]) << a;
+    EXPECT_EQ(detail_value(sc, "lattice_coarsened"), 0);
+    EXPECT_LE(detail_value(sc, "max_error_diag_pct"), 100 * opt.cluster_error);
+    bits[i] = detail_value(sc, "position_bits_avg");
   }
   EXPECT_LT(bits[1], bits[0] - 0.4);  // log2(3.2 / 2.2) = 0.54 bits a coordinate
 }
@@ -1665,8 +1663,8 @@ TEST(ClusterScene, CoarsePlanesWhereTheBoxesGrowLittle) {
   std::string why;
   ASSERT_TRUE(st.validate(&why)) << why;
   ASSERT_TRUE(sg.validate(&why)) << why;
-  EXPECT_LT(detail(st, "fine_plane_fraction"), 0.2);
-  EXPECT_GT(detail(sg, "fine_plane_fraction"), 0.5);
+  EXPECT_LT(detail_value(st, "fine_plane_fraction"), 0.2);
+  EXPECT_GT(detail_value(sg, "fine_plane_fraction"), 0.5);
   // A lossless scene has no such figure.
   const Scene sl = Scene::build(torus, BuildOptions::from_config("cluster-lossless"));
   for (const auto& [k, v] : stat_details(sl)) EXPECT_NE(k, "fine_plane_fraction");
@@ -1689,17 +1687,17 @@ TEST(ClusterScene, ExactAxesTakeTheirCoarserLattice) {
   double pow2[3], fine[3];
   ASSERT_TRUE(cluster::lattice_steps(bound, box, pow2));
   ASSERT_TRUE(cluster::fine_lattice_steps(bound, box, fine));
-  EXPECT_EQ(detail(s, "lattice_step_z"), pow2[2]);
+  EXPECT_EQ(detail_value(s, "lattice_step_z"), pow2[2]);
   for (int a = 0; a < 2; ++a) {
-    const double ratio = detail(s, std::string("lattice_step_") + "xy"[a]) / pow2[a];
+    const double ratio = detail_value(s, std::string("lattice_step_") + "xy"[a]) / pow2[a];
     EXPECT_GE(ratio, 16) << a;
     EXPECT_EQ(ratio, std::exp2(std::round(std::log2(ratio)))) << a;  // a power of two
   }
   for (int a = 0; a < 3; ++a)
-    EXPECT_EQ(detail(sb, std::string("lattice_step_") + "xyz"[a]), fine[a]) << a;
-  EXPECT_LT(detail(s, "position_bits_avg"), detail(sb, "position_bits_avg") - 2);
+    EXPECT_EQ(detail_value(sb, std::string("lattice_step_") + "xyz"[a]), fine[a]) << a;
+  EXPECT_LT(detail_value(s, "position_bits_avg"), detail_value(sb, "position_bits_avg") - 2);
   EXPECT_LT(s.memory().total(), sb.memory().total());
-  for (const Scene* x : {&s, &sb}) EXPECT_LE(detail(*x, "max_error"), bound);
+  for (const Scene* x : {&s, &sb}) EXPECT_LE(detail_value(*x, "max_error"), bound);
 }
 
 TEST(ClusterScene, BadInput) {

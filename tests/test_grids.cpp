@@ -717,26 +717,21 @@ TEST(GridHits, SharedLayoutFindsTheGridOfEveryBlock) {
 TEST(GridHits, SubGridPartChildrenMatchWholeSubGrids) {
   std::vector<PolyMesh> meshes{make_terrain(19),
                                add_uv_seams(rotate_some_faces(make_torus(64), 64, 6, 5), 64, 7, 3)};
-  auto detail = [](const Scene& s, const std::string& key) {
-    for (const auto& [k, v] : stat_details(s))
-      if (k == key) return v;
-    return -1.0;
-  };
   for (const PolyMesh& m : meshes) {
     for (const char* config : {"lossy-grid", "lossy-grid-e2", "lossy-grid-shared"}) {
       BuildOptions opt = BuildOptions::from_config(config);
       opt.grid_parts = 1;
       Scene whole = Scene::build(m, opt);
-      ASSERT_EQ(detail(whole, "subgrid_parts"), 1.0) << config;
+      ASSERT_EQ(detail_value(whole, "subgrid_parts"), 1.0) << config;
       for (int parts : {2, 4}) {
         opt.grid_parts = parts;
         Scene parted = Scene::build(m, opt);
-        ASSERT_EQ(detail(parted, "subgrid_parts"), double(parts)) << config;
+        ASSERT_EQ(detail_value(parted, "subgrid_parts"), double(parts)) << config;
         std::string why;
         EXPECT_TRUE(parted.validate(&why)) << config << " " << parts << ": " << why;
-        const double ml = detail(parted, "multileaf_count");
+        const double ml = detail_value(parted, "multileaf_count");
         ASSERT_GT(ml, 0.0) << config;
-        EXPECT_LE(detail(parted, "leaves_in_multileaf"), 8.0 / parts * ml) << config;
+        EXPECT_LE(detail_value(parted, "leaves_in_multileaf"), 8.0 / parts * ml) << config;
         const Box3f box = parted.bounds();
         Rng rng(77);
         int hits = 0;

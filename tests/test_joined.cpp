@@ -24,12 +24,6 @@ std::string read_all(const std::string& p) {
   return std::string(std::istreambuf_iterator<char>(f), {});
 }
 
-double detail_of(const Scene& s, const std::string& key) {
-  for (const auto& [k, v] : stat_details(s))
-    if (k == key) return v;
-  return -1;
-}
-
 // Rays from outside the torus's box towards random points near its surface, and rays from its
 // core circle (inside the tube) in random directions.
 std::vector<Ray> torus_rays(int n, uint64_t seed) {
@@ -117,7 +111,7 @@ TEST(JoinedScene, TorusIn16ChunksMatchesTheInMemoryBuild) {
     const BuildOptions opt = row.options;
     const Scene whole = Scene::build(torus, opt);
     const Scene joined = Scene::build_chunked("torus:256", opt, chunking);
-    EXPECT_GE(detail_of(joined, "chunks"), 16) << row.name;
+    EXPECT_GE(test::detail_value(joined, "chunks"), 16) << row.name;
     EXPECT_EQ(joined.stats().input_faces, whole.stats().input_faces) << row.name;
     EXPECT_EQ(joined.stats().triangles, whole.stats().triangles) << row.name;
     EXPECT_EQ(joined.memory().triangles, whole.memory().triangles) << row.name;
@@ -159,7 +153,7 @@ TEST(JoinedScene, StreamedObjMatchesTheInMemoryBuild) {
   for (const char* config : {"bvh8-tri4v", "clbvh-compact", "bvh8-pairs"}) {
     const BuildOptions opt = BuildOptions::from_config(config);
     const Scene joined = Scene::build_chunked(path, opt, chunking);
-    EXPECT_GE(detail_of(joined, "chunks"), 8) << config;
+    EXPECT_GE(test::detail_value(joined, "chunks"), 8) << config;
     EXPECT_EQ(joined.stats().input_faces, torus.face_count()) << config;
     expect_same_hits(Scene::build(from_file, opt), joined, tris, torus_rays(3000, 9), config);
     EXPECT_EQ(leaks(joined, 3000, 13), 0) << config;
@@ -174,7 +168,7 @@ TEST(JoinedScene, SubdividedTorusIsClosed) {
   const Scene s =
       Scene::build_chunked("subdiv:2:torus:32", BuildOptions::from_config("bvh8-tri4v"), chunking);
   EXPECT_EQ(s.stats().triangles, uint64_t(32 * 16 * 2) * 16);
-  EXPECT_GE(detail_of(s, "chunks"), 8);
+  EXPECT_GE(test::detail_value(s, "chunks"), 8);
   EXPECT_EQ(leaks(s, 5000, 17), 0);
 }
 
@@ -187,7 +181,7 @@ TEST(JoinedScene, RoundTripsThroughASceneFile) {
   for (const char* config : {"bvh8-tri4v", "clbvh-compact"}) {
     const Scene built =
         Scene::build_chunked("torus:128", BuildOptions::from_config(config), chunking);
-    EXPECT_GE(detail_of(built, "chunks"), 8) << config;
+    EXPECT_GE(test::detail_value(built, "chunks"), 8) << config;
     const std::string path = dir.path(std::string(config) + ".slim");
     built.save(path);
     OpenOptions deep;
@@ -195,7 +189,7 @@ TEST(JoinedScene, RoundTripsThroughASceneFile) {
     const Scene opened = Scene::open(path, deep);
     EXPECT_EQ(opened.memory().total(), built.memory().total()) << config;
     EXPECT_EQ(opened.stats().triangles, built.stats().triangles) << config;
-    EXPECT_EQ(detail_of(opened, "chunks"), detail_of(built, "chunks")) << config;
+    EXPECT_EQ(test::detail_value(opened, "chunks"), test::detail_value(built, "chunks")) << config;
     std::string why;
     EXPECT_TRUE(opened.validate(&why)) << config << ": " << why;
     for (const Ray& r : rays) {
@@ -233,8 +227,8 @@ TEST(JoinedScene, PrimitiveIdsAreTheInputFaces) {
   const BuildOptions opt = BuildOptions::from_config("bvh8-tri4v");
   const Scene joined = Scene::build_chunked("terrain:96", opt, chunking);
   const Scene whole = Scene::build(terrain, opt);
-  EXPECT_GE(detail_of(joined, "chunks"), 18);
-  EXPECT_LT(detail_of(joined, "id_runs"), double(terrain.face_count()) / 4);
+  EXPECT_GE(test::detail_value(joined, "chunks"), 18);
+  EXPECT_LT(test::detail_value(joined, "id_runs"), double(terrain.face_count()) / 4);
   // Straight down onto every face's centre: the face itself.
   int checked = 0;
   const std::vector<uint64_t> offsets = terrain.face_offsets();

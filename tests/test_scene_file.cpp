@@ -438,10 +438,7 @@ TEST(SceneFile, StructureCheckPassesEveryConfiguration) {
   // The clusters' trees over kFloatNodePrims triangles or more: Node8 at the top, CQNode8 below.
   for (const char* config : {"cluster", "cluster-lossless"}) {
     const Scene s = Scene::build(load("torus:128"), BuildOptions::from_config(config));
-    double node8 = 0;
-    for (const auto& [k, v] : stat_details(s))
-      if (k == "node8_count") node8 = v;
-    EXPECT_GT(node8, 0) << config;
+    EXPECT_GT(test::detail_value(s, "node8_count"), 0) << config;
     check(s, std::string(config) + " over torus:128");
   }
   std::filesystem::remove(path);

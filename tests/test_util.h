@@ -9,7 +9,9 @@
 #include <cstdlib>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -26,6 +28,14 @@ std::string error_of(Fn&& fn) {
     return e.what();
   }
   return "";
+}
+
+// slim::stat_detail's value (slimrt/analysis.h); a test failure, and -1, when the scene has no
+// such detail.
+inline double detail_value(const Scene& s, std::string_view key) {
+  if (const std::optional<double> v = stat_detail(s, key)) return *v;
+  ADD_FAILURE() << "no detail " << key;
+  return -1;
 }
 
 inline std::string shared_data_dir() { return SLIM_SHARED_DATA; }

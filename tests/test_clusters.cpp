@@ -13,6 +13,8 @@
 #include <numeric>
 #include <optional>
 #include <random>
+#include <string>
+#include <string_view>
 
 #include "bvh/bvh8.h"
 #include "mesh/triangulate.h"
@@ -1137,9 +1139,31 @@ Built test_scene() {
   return b;
 }
 
-// `coincident_faces`: the mesh may hold faces in one plane (CAD models), whose ties are not
-// bounded.
-void lossless_hits_equal_tri4v(const Built& b, bool coincident_faces = false) {
+// Whether (u, v) and Ng of hit h describe the point p on input triangle t: p = v0 + u (v1 - v0) +
+// v (v2 - v0) within `tol` plus a relative 1e-5 of the triangle's size, and Ng parallel to t's
+// normal.
+bool hit_on_triangle(const RefTri& t, const Hit& h, const double p[3], double tol) {
+  double e1[3], e2[3], q[3], n[3], size = 0, d2 = 0;
+  for (int k = 0; k < 3; ++k) {
+    e1[k] = t.v[1][k] - t.v[0][k];
+    e2[k] = t.v[2][k] - t.v[0][k];
+    q[k] = t.v[0][k] + double(h.u) * e1[k] + double(h.v) * e2[k];
+    size = std::max({size, std::fabs(e1[k]), std::fabs(e2[k])});
+    d2 += (q[k] - p[k]) * (q[k] - p[k]);
+  }
+  n[0] = e1[1] * e2[2] - e1[2] * e2[1];
+  n[1] = e1[2] * e2[0] - e1[0] * e2[2];
+  n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+  const double g[3] = {h.Ng.x, h.Ng.y, h.Ng.z};
+  const double dot = n[0] * g[0] + n[1] * g[1] + n[2] * g[2];
+  const double nn = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+  const double gg = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+  return std::sqrt(d2) <= tol + 1e-5 * size && std::fabs(dot) >= 0.999 * nn * gg;
+}
+
+// `cad`: the mesh may hold faces in one plane and non-convex polygons (CAD models): their ties
+// (coincident faces, overlapping fan triangles of one polygon) are not bounded.
+void lossless_hits_equal_tri4v(const Built& b, const char* label, bool cad = false) {
   Scene ref = Scene::build(b.ptrs(), BuildOptions::from_config("bvh8-tri4v"));
   Scene s = Scene::build(b.ptrs(), BuildOptions::from_config("cluster-lossless"));
   std::string why;
@@ -1157,7 +1181,8 @@ void lossless_hits_equal_tri4v(const Built& b, bool coincident_faces = false) {
     hits++;
     ASSERT_EQ(bits_of(a.t), bits_of(h.t)) << "ray " << i;
     // Equal t on two faces: a tie only where the hit point lies on an edge or vertex the two
-    // faces share (or on both faces: crossing soup triangles), checked on the input triangles.
+    // faces share (or on both faces: crossing soup triangles, or faces in one plane), checked on
+    // the input triangles.
     if (a.primID != h.primID || a.geomID != h.geomID) {
       RefHit at;
       at.t = a.t;
@@ -1172,52 +1197,61 @@ void lossless_hits_equal_tri4v(const Built& b, bool coincident_faces = false) {
       continue;
     }
     if (bits_of(a.u) != bits_of(h.u) || bits_of(a.v) != bits_of(h.v) ||
-        bits_of(a.Ng.x) != bits_of(h.Ng.x)) {
+        bits_of(a.Ng.x) != bits_of(h.Ng.x) || bits_of(a.Ng.y) != bits_of(h.Ng.y) ||
+        bits_of(a.Ng.z) != bits_of(h.Ng.z)) {
       // Another triangle of the same polygon at the same t: on the fan's diagonal, or where the
-      // fan triangles of a non-convex polygon overlap. A tie where the point lies on two of them.
+      // fan triangles of a non-convex polygon overlap. A tie where the point lies on two of them
+      // and h's u, v and Ng are those of one of them.
       double p[3];
       point_on_ray(r, a.t, p);
+      const double delta = tie_delta(r, a.t);
       int on = 0;
-      for (const RefTri& t : tris)
-        on += t.geom == a.geomID && t.prim == a.primID &&
-              triangle_distance(t, p) <= tie_delta(r, a.t);
-      fan_ties += on >= 2;
-      if (on < 2 && wrong++ < 3)
+      bool hs = false;
+      for (const RefTri& t : tris) {
+        if (t.geom != a.geomID || t.prim != a.primID || triangle_distance(t, p) > delta) continue;
+        on++;
+        hs = hs || hit_on_triangle(t, h, p, delta);
+      }
+      const bool tie = on >= 2 && hs;
+      fan_ties += tie;
+      if (!tie && wrong++ < 3)
         ADD_FAILURE() << "ray " << i << ": another triangle of face " << a.geomID << "/" << a.primID
-                      << " at t " << a.t << " (u " << a.u << " / " << h.u << ")";
+                      << " at t " << a.t << " (u " << a.u << " / " << h.u << ", on " << on
+                      << " of its triangles)";
     }
   }
-  std::printf("  cluster-lossless: %d hits, %d edge/vertex ties, %d coincident, %d in one face\n",
-              hits, edge_ties, coincident, fan_ties);
+  std::printf(
+      "  %s, cluster-lossless: %d hits, %d edge/vertex ties, %d coincident, %d in one face\n",
+      label, hits, edge_ties, coincident, fan_ties);
   EXPECT_GT(hits, n / 4);
   EXPECT_EQ(wrong, 0);
   EXPECT_LE(edge_ties, 1 + hits / 1000);
-  if (!coincident_faces) {
+  if (!cad) {
     EXPECT_LE(coincident, 1 + hits / 1000);
-    EXPECT_LE(fan_ties, 1 + hits / 1000);
+    EXPECT_EQ(fan_ties, 0);
   }
 }
 
 TEST(ClusterScene, LosslessHitsEqualTri4v) {
   Built b = test_scene();
-  lossless_hits_equal_tri4v(b);
+  lossless_hits_equal_tri4v(b, "synthetic");
   // Computed floats: few clusters in the decimal mode.
   EXPECT_LT(detail_value(Scene::build(b.ptrs(), BuildOptions::from_config("cluster-lossless")),
                          "decimal_cluster_fraction"),
             0.05);
 }
 
-// Real meshes: a scan and two CAD models (open, non-manifold, quads, faces in one plane).
+// Real meshes: a scan, and two CAD models (open, non-manifold, quads and polygons, faces in one
+// plane).
 TEST(ClusterScene, LosslessHitsEqualTri4vRealMeshes) {
-  for (const char* name :
-       {"stanford_bunny.obj.xz", "fg_c172p_aircraft.obj.xz", "fg_cg57_cruiser.obj.xz"}) {
-    std::string path = shared_data_dir();
-    path.append("/").append(name);
-    SLIM_REQUIRE_SHARED_FILE(path);
+  const char* names[] = {"stanford_bunny.obj.xz", "fg_c172p_aircraft.obj.xz",
+                         "fg_cg57_cruiser.obj.xz"};
+  for (const char* name : names) SLIM_REQUIRE_SHARED_FILE(shared_data_dir() + "/" + name);
+  for (const char* name : names) {
     Built b;
-    b.meshes.push_back(load(path));
+    b.meshes.push_back(load(shared_data_dir() + "/" + name));
     SCOPED_TRACE(name);
-    lossless_hits_equal_tri4v(b, true);
+    lossless_hits_equal_tri4v(b, name, std::string_view(name) != "stanford_bunny.obj.xz");
   }
 }
 
@@ -1226,7 +1260,7 @@ TEST(ClusterScene, LosslessHitsEqualTri4vRealMeshes) {
 TEST(ClusterScene, LosslessHitsEqualTri4vDecimalCoordinates) {
   Built b = test_scene();
   for (PolyMesh& m : b.meshes) m = printed(std::move(m), 5);
-  lossless_hits_equal_tri4v(b);
+  lossless_hits_equal_tri4v(b, "decimal coordinates");
   const Scene s = Scene::build(b.ptrs(), BuildOptions::from_config("cluster-lossless"));
   EXPECT_GT(detail_value(s, "decimal_cluster_fraction"), 0.9);
 }

@@ -1143,13 +1143,12 @@ Built test_scene() {
 // v (v2 - v0) within `tol` plus a relative 1e-5 of the triangle's size, and Ng parallel to t's
 // normal.
 bool hit_on_triangle(const RefTri& t, const Hit& h, const double p[3], double tol) {
-  double e1[3], e2[3], q[3], n[3], size = 0, d2 = 0;
+  double e1[3], e2[3], q[3], n[3], size = 0;
   for (int k = 0; k < 3; ++k) {
     e1[k] = t.v[1][k] - t.v[0][k];
     e2[k] = t.v[2][k] - t.v[0][k];
     q[k] = t.v[0][k] + double(h.u) * e1[k] + double(h.v) * e2[k];
     size = std::max({size, std::fabs(e1[k]), std::fabs(e2[k])});
-    d2 += (q[k] - p[k]) * (q[k] - p[k]);
   }
   n[0] = e1[1] * e2[2] - e1[2] * e2[1];
   n[1] = e1[2] * e2[0] - e1[0] * e2[2];
@@ -1158,7 +1157,7 @@ bool hit_on_triangle(const RefTri& t, const Hit& h, const double p[3], double to
   const double dot = n[0] * g[0] + n[1] * g[1] + n[2] * g[2];
   const double nn = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
   const double gg = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
-  return std::sqrt(d2) <= tol + 1e-5 * size && std::fabs(dot) >= 0.999 * nn * gg;
+  return dist3(q, p) <= tol + 1e-5 * size && std::fabs(dot) >= 0.999 * nn * gg;
 }
 
 // `cad`: the mesh may hold faces in one plane and non-convex polygons (CAD models): their ties
